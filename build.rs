@@ -1,0 +1,92 @@
+//! Generates the `neptunus` MAVLink dialect from `dialect/*.xml`.
+//!
+//! The upstream definitions (development.xml, common.xml, standard.xml,
+//! minimal.xml) are taken from the `mavlink` crate's own package, so the
+//! repository never carries a copy of them. Both are staged into OUT_DIR
+//! because `<include>` paths resolve relative to the including file.
+
+use std::env;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const MAVLINK_VERSION: &str = "0.21.0";
+
+fn main() {
+    let manifest_dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
+    let dialect_dir = manifest_dir.join("dialect");
+    println!("cargo:rerun-if-changed={}", dialect_dir.display());
+    println!("cargo:rerun-if-env-changed=NEPTUNUS_MAVLINK_XML_DIR");
+
+    let upstream = upstream_definitions_dir().unwrap_or_else(|| {
+        panic!(
+            "cannot find the MAVLink XML definitions of the mavlink {MAVLINK_VERSION} crate package; \
+             set NEPTUNUS_MAVLINK_XML_DIR to its mavlink/message_definitions/v1.0 folder"
+        )
+    });
+
+    let staging = out_dir.join("definitions");
+    let _ = fs::remove_dir_all(&staging);
+    fs::create_dir_all(&staging).expect("create staging dir for MAVLink XML");
+    for name in ["minimal.xml", "standard.xml", "common.xml", "development.xml"] {
+        fs::copy(upstream.join(name), staging.join(name))
+            .unwrap_or_else(|e| panic!("copy upstream {name} from {}: {e}", upstream.display()));
+    }
+    let mut ours = Vec::new();
+    for entry in fs::read_dir(&dialect_dir).expect("read dialect/") {
+        let path = entry.expect("dialect/ entry").path();
+        if path.extension().is_some_and(|e| e == "xml") {
+            println!("cargo:rerun-if-changed={}", path.display());
+            let target = staging.join(path.file_name().expect("file name"));
+            fs::copy(&path, &target).expect("stage dialect xml");
+            if path.file_stem().is_some_and(|s| s == "neptunus") {
+                ours.push(target);
+            }
+        }
+    }
+    assert!(!ours.is_empty(), "dialect/neptunus.xml is missing");
+
+    let generated = out_dir.join("dialect");
+    fs::create_dir_all(&generated).expect("create generated dialect dir");
+    let result = mavlink_bindgen::generate(mavlink_bindgen::XmlDefinitions::Files(ours), &generated)
+        .unwrap_or_else(|e| panic!("mavlink-bindgen failed on dialect/neptunus.xml: {e}"));
+    mavlink_bindgen::format_generated_code(&result);
+}
+
+/// The `mavlink/message_definitions/v1.0` folder of the mavlink crate package.
+fn upstream_definitions_dir() -> Option<PathBuf> {
+    if let Ok(dir) = env::var("NEPTUNUS_MAVLINK_XML_DIR") {
+        return Some(PathBuf::from(dir));
+    }
+    let rel = Path::new("mavlink").join("message_definitions").join("v1.0");
+    // The registry cache first: no subprocess, works offline.
+    let cargo_home = env::var("CARGO_HOME")
+        .map(PathBuf::from)
+        .ok()
+        .or_else(|| env::var("HOME").ok().map(|h| PathBuf::from(h).join(".cargo")));
+    if let Some(home) = cargo_home
+        && let Ok(registries) = fs::read_dir(home.join("registry").join("src"))
+    {
+        for reg in registries.flatten() {
+            let candidate = reg.path().join(format!("mavlink-{MAVLINK_VERSION}")).join(&rel);
+            if candidate.join("development.xml").is_file() {
+                return Some(candidate);
+            }
+        }
+    }
+    // Otherwise ask cargo where the package lives (vendored sources, custom registries).
+    let cargo = env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let manifest = env::var("CARGO_MANIFEST_DIR").ok()?;
+    let out = Command::new(cargo)
+        .args(["metadata", "--format-version", "1", "--offline", "--manifest-path"])
+        .arg(Path::new(&manifest).join("Cargo.toml"))
+        .output()
+        .ok()?;
+    let text = String::from_utf8_lossy(&out.stdout);
+    let needle = format!("mavlink-{MAVLINK_VERSION}");
+    text.split('"')
+        .filter(|s| s.contains(&needle) && s.ends_with("Cargo.toml"))
+        .map(|s| Path::new(s).parent().map(|p| p.join(&rel)))
+        .find_map(|p| p.filter(|p| p.join("development.xml").is_file()))
+}

@@ -1,0 +1,15 @@
+//! Neptunus: onboard software for an OpenROV 2.x based ROV.
+//!
+//! The crate is organised by concern (see DESIGN.md):
+//! - [`firmware`]: the OpenROV board's serial protocol (sans-IO codec), the
+//!   serial link task and the board emulator.
+//! - [`sim`]: the vehicle simulator (pure physics and sensor model).
+//! - [`dialect`]: the generated `neptunus` MAVLink dialect.
+//! - [`config`]: command line and configuration file.
+//! - [`app`]: wiring of tasks and shutdown.
+
+pub mod app;
+pub mod config;
+pub mod dialect;
+pub mod firmware;
+pub mod sim;

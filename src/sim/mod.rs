@@ -1,0 +1,1 @@
+//! Vehicle simulator (in progress).
