@@ -277,6 +277,20 @@ fn framing_parses_prints_and_serializes() {
     for f in [Framing::Crc8, Framing::Plain] {
         assert_eq!(f.to_string().parse::<Framing>().unwrap(), f);
     }
+    // Config files spell it in lowercase, like the command line.
+    #[derive(serde::Serialize, serde::Deserialize)]
+    struct Link {
+        framing: Framing,
+    }
+    let toml_text = toml::to_string(&Link {
+        framing: Framing::Plain,
+    })
+    .unwrap();
+    assert_eq!(toml_text.trim(), r#"framing = "plain""#);
+    let back: Link = toml::from_str(r#"framing = "crc8""#).unwrap();
+    assert_eq!(back.framing, Framing::Crc8);
+    assert!(toml::from_str::<Link>(r#"framing = "Crc8""#).is_err());
+
     let err = "CRC".parse::<Framing>().unwrap_err().to_string();
     assert!(
         err.contains("\"CRC\"") && err.contains("crc8") && err.contains("plain"),

@@ -10,7 +10,10 @@ fn check(key: &str, value: f64) {
     let Some((lo, hi)) = physical_range(key) else {
         panic!("{key} has no range");
     };
-    assert!(value.is_finite() && (lo..=hi).contains(&value), "{key}={value}");
+    assert!(
+        value.is_finite() && (lo..=hi).contains(&value),
+        "{key}={value}"
+    );
 }
 
 fn check_events(events: &[Event]) {
@@ -43,7 +46,10 @@ fn check_events(events: &[Event]) {
                     v.into_iter().for_each(|v| check(key, v));
                 }
                 for (key, triple) in [("mtarg", s.mtarg_us), ("motors", s.motors_us)] {
-                    triple.into_iter().flatten().for_each(|v| check(key, f64::from(v)));
+                    triple
+                        .into_iter()
+                        .flatten()
+                        .for_each(|v| check(key, f64::from(v)));
                 }
             }
             Event::Capabilities(c) => check("CAPA", f64::from(*c)),

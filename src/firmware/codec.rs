@@ -51,8 +51,9 @@
 //!   [`Event::Capabilities`], `crc` → `pass` / `fail,<calc>/<got>` (decimal,
 //!   each 0..=255), `cmd` → [`Event::CmdEcho`], `rawcmd` → [`Event::RawCmd`],
 //!   `pong` → [`Event::Pong`], `log` → [`Event::Log`] (text values verbatim),
-//!   `LIGT` → [`Event::Lights`] with the fraction from a `LIGP` on the same
-//!   line (a `LIGP` without `LIGT` is range-checked and otherwise ignored),
+//!   `LIGT` → [`Event::Lights`] with the fraction from a `LIGP` anywhere on
+//!   the same line (a `LIGP` without `LIGT` is range-checked and otherwise
+//!   ignored),
 //!   `claser` → [`Event::Laser`].
 //! - An accepted line emits, in order: [`Event::Nav`] if any nav key is
 //!   present, [`Event::Status`] if any status key is present, then the event
