@@ -55,7 +55,7 @@ fn check_events(events: &[Event]) {
             Event::Capabilities(c) => check("CAPA", f64::from(*c)),
             Event::Lights { level, fraction } => {
                 check("LIGT", f64::from(*level));
-                fraction.into_iter().for_each(|f| check("LIGP", f));
+                fraction.iter().for_each(|&f| check("LIGP", f));
             }
             _ => {}
         }
