@@ -584,3 +584,58 @@ fn readings_carry_the_demand_and_fixed_attitude() {
     assert_eq!((r.pitch_deg, r.roll_deg), (0.0, 0.0));
     assert_eq!(r.temp_c, 18.0);
 }
+
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn direction() -> impl Strategy<Value = i8> {
+        prop_oneof![Just(-1i8), Just(1i8)]
+    }
+
+    proptest! {
+        #[test]
+        fn demand_round_trips_through_pulses(
+            x in -1.0f64..=1.0,
+            share in 0.0f64..=1.0,
+            z in -1.0f64..=1.0,
+            dirs in [direction(), direction(), direction()],
+        ) {
+            // |X| + |M| ≤ 1: the allocation does not saturate.
+            let yaw = (1.0 - x.abs()) * (2.0 * share - 1.0);
+            let d = Demand { surge: x, heave: z, yaw };
+            let back = demand_from_thrusters(thrusters_from_demand(&d, dirs), dirs);
+            prop_assert!((back.surge - d.surge).abs() <= 0.002);
+            prop_assert!((back.heave - d.heave).abs() <= 0.002);
+            prop_assert!((back.yaw - d.yaw).abs() <= 0.002);
+        }
+
+        #[test]
+        fn pulses_round_trip_exactly(
+            pwm in [1000u16..=2000, 1000u16..=2000, 1000u16..=2000],
+            dirs in [direction(), direction(), direction()],
+        ) {
+            let d = demand_from_thrusters(pwm, dirs);
+            prop_assert_eq!(thrusters_from_demand(&d, dirs), pwm);
+        }
+
+        #[test]
+        fn any_pulses_give_a_bounded_demand(pwm in any::<[u16; 3]>(), dirs in any::<[i8; 3]>()) {
+            let d = demand_from_thrusters(pwm, dirs);
+            prop_assert!(d.surge.abs() + d.yaw.abs() <= 1.0);
+            prop_assert!(d.heave.abs() <= 1.0);
+            let back = thrusters_from_demand(&d, dirs);
+            prop_assert!(back.iter().all(|p| (1000..=2000).contains(p)));
+        }
+
+        #[test]
+        fn step_stays_finite_for_any_demand(
+            x in any::<f64>(), z in any::<f64>(), m in any::<f64>(),
+        ) {
+            let model = model();
+            let d = Demand { surge: x, heave: z, yaw: m };
+            let s = run(&model, SimState::default(), &d, 0.01, 100);
+            prop_assert!(s.eta.iter().chain(s.nu.iter()).all(|v| v.is_finite()));
+        }
+    }
+}
