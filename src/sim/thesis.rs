@@ -324,10 +324,16 @@ fn dir_f64(dir: i8) -> f64 {
     f64::from(dir.signum())
 }
 
-/// Inverse of the thesis allocation. `pwm_us` = [port, vertical, starboard] as sent in go();
-/// `directions` = [port, vertical, starboard] ±1 motor direction (Neptunus: [-1, 1, 1], port wired reversed).
-/// u_i = directions[i] * (pwm_us[i] - 1500) / 500 clamped to [-1,1]; then X = (u_port + u_starboard)/2,
-/// M = (u_port - u_starboard)/2, Z = u_vertical.  (forward allocation: u_port = sat(X+M), u_vert = Z, u_star = sat(X-M))
+/// Inverse of the thesis allocation: the demand a `go()` produces.
+///
+/// `pwm_us` is `[port, vertical, starboard]` as sent in `go()`; `directions`
+/// is the ±1 motor direction of each (Neptunus: `[-1, 1, 1]`, the port motor
+/// is wired reversed). Each thruster's output is
+/// `u_i = directions_i · (pwm_i − 1500) / 500` clamped to `[-1, 1]`, then
+/// `X = (u_port + u_starboard) / 2`, `M = (u_port − u_starboard) / 2`,
+/// `Z = u_vertical` — the inverse of `u_port = sat(X+M)`, `u_vertical = Z`,
+/// `u_starboard = sat(X−M)`. A direction other than ±1 counts by its sign
+/// (0 disables the thruster).
 ///
 /// Where the forward allocation saturated (|X| + |M| > 1) the original demand
 /// is not recoverable; this returns the demand the thrusters actually
@@ -345,7 +351,9 @@ pub fn demand_from_thrusters(pwm_us: [u16; 3], directions: [i8; 3]) -> Demand {
     }
 }
 
-/// The thesis allocation forward (for tests and the emulator's own checks): returns pwm µs [port, vertical, starboard].
+/// The thesis allocation forward (for tests and the emulator's own checks):
+/// pulse widths `[port, vertical, starboard]` in µs, 1000..=2000, rounded to
+/// the nearest µs. Demands are saturated to `[-1, 1]` and NaN counts as 0.
 pub fn thrusters_from_demand(d: &Demand, directions: [i8; 3]) -> [u16; 3] {
     let u = thruster_outputs(d);
     let mut pwm_us = [PWM_NEUTRAL_US; 3];
