@@ -13,7 +13,8 @@ use std::process::Command;
 const MAVLINK_VERSION: &str = "0.21.0";
 
 fn main() {
-    let manifest_dir = PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    let manifest_dir =
+        PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     let dialect_dir = manifest_dir.join("dialect");
     println!("cargo:rerun-if-changed={}", dialect_dir.display());
@@ -29,7 +30,12 @@ fn main() {
     let staging = out_dir.join("definitions");
     let _ = fs::remove_dir_all(&staging);
     fs::create_dir_all(&staging).expect("create staging dir for MAVLink XML");
-    for name in ["minimal.xml", "standard.xml", "common.xml", "development.xml"] {
+    for name in [
+        "minimal.xml",
+        "standard.xml",
+        "common.xml",
+        "development.xml",
+    ] {
         fs::copy(upstream.join(name), staging.join(name))
             .unwrap_or_else(|e| panic!("copy upstream {name} from {}: {e}", upstream.display()));
     }
@@ -49,8 +55,9 @@ fn main() {
 
     let generated = out_dir.join("dialect");
     fs::create_dir_all(&generated).expect("create generated dialect dir");
-    let result = mavlink_bindgen::generate(mavlink_bindgen::XmlDefinitions::Files(ours), &generated)
-        .unwrap_or_else(|e| panic!("mavlink-bindgen failed on dialect/neptunus.xml: {e}"));
+    let result =
+        mavlink_bindgen::generate(mavlink_bindgen::XmlDefinitions::Files(ours), &generated)
+            .unwrap_or_else(|e| panic!("mavlink-bindgen failed on dialect/neptunus.xml: {e}"));
     mavlink_bindgen::format_generated_code(&result);
 }
 
@@ -59,17 +66,23 @@ fn upstream_definitions_dir() -> Option<PathBuf> {
     if let Ok(dir) = env::var("NEPTUNUS_MAVLINK_XML_DIR") {
         return Some(PathBuf::from(dir));
     }
-    let rel = Path::new("mavlink").join("message_definitions").join("v1.0");
+    let rel = Path::new("mavlink")
+        .join("message_definitions")
+        .join("v1.0");
     // The registry cache first: no subprocess, works offline.
-    let cargo_home = env::var("CARGO_HOME")
-        .map(PathBuf::from)
-        .ok()
-        .or_else(|| env::var("HOME").ok().map(|h| PathBuf::from(h).join(".cargo")));
+    let cargo_home = env::var("CARGO_HOME").map(PathBuf::from).ok().or_else(|| {
+        env::var("HOME")
+            .ok()
+            .map(|h| PathBuf::from(h).join(".cargo"))
+    });
     if let Some(home) = cargo_home
         && let Ok(registries) = fs::read_dir(home.join("registry").join("src"))
     {
         for reg in registries.flatten() {
-            let candidate = reg.path().join(format!("mavlink-{MAVLINK_VERSION}")).join(&rel);
+            let candidate = reg
+                .path()
+                .join(format!("mavlink-{MAVLINK_VERSION}"))
+                .join(&rel);
             if candidate.join("development.xml").is_file() {
                 return Some(candidate);
             }
@@ -79,7 +92,13 @@ fn upstream_definitions_dir() -> Option<PathBuf> {
     let cargo = env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     let manifest = env::var("CARGO_MANIFEST_DIR").ok()?;
     let out = Command::new(cargo)
-        .args(["metadata", "--format-version", "1", "--offline", "--manifest-path"])
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--offline",
+            "--manifest-path",
+        ])
         .arg(Path::new(&manifest).join("Cargo.toml"))
         .output()
         .ok()?;

@@ -1,1 +1,266 @@
-//! Configuration (in progress).
+//! Command line and configuration file.
+//!
+//! Precedence: command-line flags, then the TOML file given by `--config`,
+//! then built-in defaults. Unknown keys in the file are errors (with line and
+//! column), so a misspelt setting never silently falls back to a default.
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Parser, Subcommand};
+use serde::{Deserialize, Serialize};
+
+use crate::firmware::codec::Framing;
+use crate::firmware::emulator::{EmulatorOptions, FaultOptions};
+use crate::firmware::link::LinkConfig;
+
+/// The BeagleBone UART wired to the OpenROV board.
+pub const DEFAULT_SERIAL: &str = "/dev/ttyO1";
+pub const DEFAULT_BAUD: u32 = 115_200;
+
+/// Neptunus: onboard software for an OpenROV-based ROV.
+#[derive(Debug, Parser)]
+#[command(name = "neptunus", version, about, long_about = None)]
+pub struct Cli {
+    #[command(flatten)]
+    pub run: RunArgs,
+    #[command(subcommand)]
+    pub command: Option<CliCommand>,
+}
+
+/// Options of the vehicle (the default command).
+#[derive(Debug, Args, Default)]
+pub struct RunArgs {
+    /// Run with no hardware: the board emulator and simulator behind an
+    /// internal pseudo-terminal (the real serial code path runs).
+    #[arg(long, conflicts_with = "serial")]
+    pub sim: bool,
+    /// Serial device of the OpenROV board [default: /dev/ttyO1].
+    #[arg(long, value_name = "PATH")]
+    pub serial: Option<PathBuf>,
+    /// Baud rate of the board's serial line [default: 115200].
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Command framing: crc8 (2015+ firmware) or plain (December 2014 firmware) [default: crc8].
+    #[arg(long, value_name = "crc8|plain")]
+    pub framing: Option<Framing>,
+    /// TOML configuration file.
+    #[arg(long, value_name = "FILE", global = true)]
+    pub config: Option<PathBuf>,
+    /// Where logs, parameters and telemetry logs go [default: the user's data directory].
+    #[arg(long, value_name = "DIR", global = true)]
+    pub data_dir: Option<PathBuf>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CliCommand {
+    /// Run the OpenROV board emulator on a new pseudo-terminal and print its path.
+    EmulateBoard(EmulateArgs),
+}
+
+/// Options of `emulate-board`.
+#[derive(Debug, Args, Default)]
+pub struct EmulateArgs {
+    /// Also make a symlink at PATH pointing to the pseudo-terminal (stable across restarts).
+    #[arg(long, value_name = "PATH")]
+    pub link: Option<PathBuf>,
+    /// Command framing the emulated board expects.
+    #[arg(long, value_name = "crc8|plain")]
+    pub framing: Option<Framing>,
+    /// Probability per telemetry line of garbage bytes in front of it.
+    #[arg(long, value_name = "P")]
+    pub garbage: Option<f64>,
+    /// Probability per telemetry line of a torn line.
+    #[arg(long, value_name = "P")]
+    pub torn: Option<f64>,
+    /// Probability per telemetry line of a wild point (0.1×, 10×, 100×).
+    #[arg(long, value_name = "P")]
+    pub wild: Option<f64>,
+    /// Probability per telemetry line of the line being dropped.
+    #[arg(long, value_name = "P")]
+    pub dropped: Option<f64>,
+    /// Seed of the fault generator.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
+
+/// The configuration file.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FileConfig {
+    pub data_dir: Option<PathBuf>,
+    pub sim: bool,
+    pub board: BoardFileConfig,
+    pub emulator: EmulatorOptions,
+}
+
+/// `[board]` section.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BoardFileConfig {
+    pub serial: Option<PathBuf>,
+    pub baud: Option<u32>,
+    pub framing: Option<Framing>,
+}
+
+/// Configuration errors, each naming the file, the place and the fix.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("cannot read configuration file {path}: {source}")]
+    Read {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("configuration file {path} is invalid: {message}")]
+    Parse { path: PathBuf, message: String },
+    #[error("configuration: {0}")]
+    Invalid(String),
+    #[error("no data directory: the user's home could not be determined — pass --data-dir DIR")]
+    NoDataDir,
+}
+
+/// Where the vehicle's board is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum BoardSource {
+    /// The emulator behind an internal pseudo-terminal.
+    Simulated(EmulatorOptions),
+    /// A real board on a serial device.
+    Serial,
+}
+
+/// Everything the vehicle needs, resolved.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    pub board: BoardSource,
+    /// For `Serial`, the device; for `Simulated`, filled in once the pty exists.
+    pub link: LinkConfig,
+    pub data_dir: PathBuf,
+}
+
+impl FileConfig {
+    /// Reads and validates a configuration file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.into(),
+            source,
+        })?;
+        Self::parse(&text).map_err(|message| ConfigError::Parse {
+            path: path.into(),
+            message,
+        })
+    }
+
+    /// Parses TOML text; the error text carries line and column.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let cfg: Self = toml::from_str(text).map_err(|e| e.to_string().trim_end().to_owned())?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        let f = &self.emulator.faults;
+        for (name, p) in [
+            ("garbage", f.garbage),
+            ("torn", f.torn),
+            ("wild", f.wild),
+            ("dropped", f.dropped),
+        ] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(format!(
+                    "emulator.faults.{name} = {p} is not a probability — use a value in 0..1"
+                ));
+            }
+        }
+        if self.board.baud == Some(0) {
+            return Err("board.baud = 0 — use the board's baud rate, 115200".into());
+        }
+        for d in self.emulator.wiring_directions {
+            if d != 1 && d != -1 {
+                return Err(format!(
+                    "emulator.wiring_directions contains {d} — each must be 1 or -1"
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The default data directory (`~/.local/share/neptunus` on Linux).
+pub fn default_data_dir() -> Result<PathBuf, ConfigError> {
+    directories::ProjectDirs::from("", "", "neptunus")
+        .map(|d| d.data_dir().to_path_buf())
+        .ok_or(ConfigError::NoDataDir)
+}
+
+/// Resolves flags over the file over defaults.
+pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
+    let file = match &args.config {
+        Some(p) => FileConfig::load(p)?,
+        None => FileConfig::default(),
+    };
+    let data_dir = match args.data_dir.clone().or(file.data_dir.clone()) {
+        Some(d) => d,
+        None => default_data_dir()?,
+    };
+    let device = args
+        .serial
+        .clone()
+        .or(file.board.serial.clone())
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_SERIAL));
+    let mut link = LinkConfig::new(device);
+    link.baud = args.baud.or(file.board.baud).unwrap_or(DEFAULT_BAUD);
+    if link.baud == 0 {
+        return Err(ConfigError::Invalid(
+            "--baud 0 — use the board's baud rate, 115200".into(),
+        ));
+    }
+    link.framing = args.framing.or(file.board.framing).unwrap_or_default();
+    // --serial on the command line wins over `sim = true` in the file.
+    let sim = args.sim || (file.sim && args.serial.is_none());
+    let board = if sim {
+        let mut emu = file.emulator.clone();
+        emu.framing = link.framing;
+        BoardSource::Simulated(emu)
+    } else {
+        BoardSource::Serial
+    };
+    Ok(Settings {
+        board,
+        link,
+        data_dir,
+    })
+}
+
+/// Emulator options for `emulate-board`: flags over the file's `[emulator]`.
+pub fn resolve_emulator(
+    args: &EmulateArgs,
+    config: Option<&Path>,
+) -> Result<EmulatorOptions, ConfigError> {
+    let file = match config {
+        Some(p) => FileConfig::load(p)?,
+        None => FileConfig::default(),
+    };
+    let mut emu = file.emulator;
+    if let Some(f) = args.framing {
+        emu.framing = f;
+    }
+    let faults: &mut FaultOptions = &mut emu.faults;
+    for (slot, value, name) in [
+        (&mut faults.garbage, args.garbage, "--garbage"),
+        (&mut faults.torn, args.torn, "--torn"),
+        (&mut faults.wild, args.wild, "--wild"),
+        (&mut faults.dropped, args.dropped, "--dropped"),
+    ] {
+        if let Some(p) = value {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(ConfigError::Invalid(format!(
+                    "{name} {p} is not a probability — use a value in 0..1"
+                )));
+            }
+            *slot = p;
+        }
+    }
+    if let Some(seed) = args.seed {
+        faults.seed = seed;
+    }
+    Ok(emu)
+}

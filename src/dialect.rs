@@ -2,7 +2,13 @@
 //! `dialect/neptunus.xml` (which includes MAVLink's development.xml and,
 //! through it, common.xml). Everything MAVLink in Neptunus uses these types.
 
-#![allow(clippy::all, clippy::pedantic, missing_docs, unused_imports, non_camel_case_types)]
+#![allow(
+    clippy::all,
+    clippy::pedantic,
+    missing_docs,
+    unused_imports,
+    non_camel_case_types
+)]
 
 use mavlink_core as mavlink;
 #[allow(unused_imports)]

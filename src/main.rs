@@ -1,1 +1,113 @@
-fn main() {}
+//! The `neptunus` binary: parses the command line and hands over to [`neptunus::app`].
+
+use std::io::Write as _;
+
+use anyhow::Context as _;
+use clap::Parser as _;
+use neptunus::config::{self, Cli, CliCommand};
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    match real_main(cli) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            // One clear line (plus causes) rather than a backtrace.
+            let mut msg = format!("neptunus: {e}");
+            for cause in e.chain().skip(1) {
+                msg.push_str(&format!(": {cause}"));
+            }
+            let _ = writeln!(std::io::stderr(), "{msg}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn real_main(cli: Cli) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    match cli.command {
+        Some(CliCommand::EmulateBoard(args)) => {
+            init_logging(None)?;
+            let opts = config::resolve_emulator(&args, cli.run.config.as_deref())?;
+            runtime.block_on(neptunus::app::emulate_board(
+                opts,
+                args.link.clone(),
+                |path| {
+                    let mut out = std::io::stdout();
+                    let _ = writeln!(out, "{}", path.display());
+                    let _ = out.flush();
+                },
+                shutdown_signal(),
+            ))?;
+        }
+        None => {
+            let settings = config::resolve(&cli.run)?;
+            std::fs::create_dir_all(&settings.data_dir).with_context(|| {
+                format!(
+                    "cannot create data directory {}",
+                    settings.data_dir.display()
+                )
+            })?;
+            init_logging(Some(&settings.data_dir))?;
+            tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
+            runtime.block_on(neptunus::app::run(settings, shutdown_signal()))?;
+        }
+    }
+    Ok(())
+}
+
+/// Logs to stderr and, for the vehicle, to `neptunus.log` in the data directory.
+fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
+    use tracing_subscriber::prelude::*;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let stderr = tracing_subscriber::fmt::layer().with_writer(std::io::stderr);
+    let file = match data_dir {
+        Some(dir) => {
+            let path = dir.join("neptunus.log");
+            let f = std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&path)
+                .with_context(|| format!("cannot open log file {}", path.display()))?;
+            Some(
+                tracing_subscriber::fmt::layer()
+                    .with_ansi(false)
+                    .with_writer(std::sync::Mutex::new(f)),
+            )
+        }
+        None => None,
+    };
+    tracing_subscriber::registry()
+        .with(filter)
+        .with(stderr)
+        .with(file)
+        .init();
+    Ok(())
+}
+
+async fn shutdown_signal() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term =
+            match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(s) => s,
+                Err(_) => {
+                    let _ = ctrl_c.await;
+                    return;
+                }
+            };
+        tokio::select! {
+            _ = ctrl_c => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = ctrl_c.await;
+    }
+}

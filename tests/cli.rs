@@ -1,0 +1,121 @@
+//! The `neptunus` binary as a user runs it.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_neptunus");
+
+#[test]
+fn missing_serial_device_is_one_clear_line_suggesting_sim() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new(BIN)
+        .args(["--serial", "/dev/does-not-exist-neptunus", "--data-dir"])
+        .arg(dir.path())
+        .env("RUST_LOG", "error")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = err.lines().collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].contains("/dev/does-not-exist-neptunus"), "{err}");
+    assert!(lines[0].contains("--sim"), "{err}");
+}
+
+#[test]
+fn bad_config_file_names_line_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("n.toml");
+    std::fs::write(
+        &cfg,
+        "sim = true\n[board]\nbaud = 115200\nframming = \"crc8\"\n",
+    )
+    .unwrap();
+    let out = Command::new(BIN)
+        .arg("--config")
+        .arg(&cfg)
+        .arg("--data-dir")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("framming"), "{err}");
+    assert!(err.contains("line 4"), "{err}");
+}
+
+#[test]
+fn bad_framing_flag_is_refused() {
+    let out = Command::new(BIN)
+        .args(["--sim", "--framing", "crc16"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("crc16"));
+}
+
+#[test]
+fn emulate_board_prints_a_tty_path() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("board");
+    let mut child = Command::new(BIN)
+        .args(["emulate-board", "--link"])
+        .arg(&link)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    assert_eq!(line.trim(), link.to_str().unwrap());
+    let target = std::fs::read_link(&link).unwrap();
+    assert!(target.starts_with("/dev/pts/"), "{target:?}");
+    child.kill().unwrap();
+    child.wait().unwrap();
+}
+
+/// `neptunus --sim` brings the board link up through the emulator's pty and
+/// logs decoded telemetry once a second.
+#[test]
+fn sim_runs_and_logs_telemetry() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = Command::new(BIN)
+        .arg("--sim")
+        .arg("--data-dir")
+        .arg(dir.path())
+        .env("RUST_LOG", "info")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = BufReader::new(child.stderr.take().unwrap());
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let mut up = false;
+    let mut telemetry = 0;
+    for line in stderr.lines() {
+        let line = line.unwrap();
+        up |= line.contains("board link up");
+        if up && line.contains("telemetry") && line.contains("heading_deg") && !line.contains("NaN")
+        {
+            telemetry += 1;
+        }
+        if telemetry >= 2 || Instant::now() > deadline {
+            break;
+        }
+    }
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let status = child.wait().unwrap();
+    assert!(up, "board link never came up");
+    assert!(telemetry >= 2, "telemetry lines: {telemetry}");
+    assert!(status.success(), "clean exit on SIGTERM: {status:?}");
+    let log = std::fs::read_to_string(dir.path().join("neptunus.log")).unwrap();
+    assert!(log.contains("board link up"));
+}
