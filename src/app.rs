@@ -21,6 +21,8 @@ pub enum AppError {
     Link(#[from] LinkError),
     #[error("cannot start the board emulator: {0}")]
     Emulator(#[from] crate::firmware::pty::PtyError),
+    #[error(transparent)]
+    Endpoint(#[from] EndpointError),
     #[error("cannot create the data directory {path}: {source}")]
     DataDir {
         path: std::path::PathBuf,
@@ -36,14 +38,9 @@ pub const NEUTRAL: Command = Command::Go {
 };
 
 /// Runs the vehicle until `shutdown` resolves.
-pub async fn run(
-    mut settings: Settings,
-    shutdown: impl Future<Output = ()>,
-) -> Result<(), AppError> {
-    std::fs::create_dir_all(&settings.data_dir).map_err(|source| AppError::DataDir {
-        path: settings.data_dir.clone(),
-        source,
-    })?;
+pub async fn run(mut settings: Settings, shutdown: impl Future<Output = ()>) -> Result<(), AppError> {
+    std::fs::create_dir_all(&settings.data_dir)
+        .map_err(|source| AppError::DataDir { path: settings.data_dir.clone(), source })?;
     let board = match &settings.board {
         BoardSource::Simulated(opts) => {
             let board = PtyBoard::spawn(opts.clone(), None)?;
@@ -56,63 +53,147 @@ pub async fn run(
             None
         }
     };
+
+    // Parameters: a corrupt file is set aside and defaults apply, loudly.
+    let param_file = ParamFile::new(&settings.data_dir);
+    let (mut store, warnings) = param_file.load();
+    for w in &warnings {
+        tracing::warn!("parameters: {w}");
+    }
+    if let Some(sysid) = settings.mavlink.sysid
+        && let Err(e) = store.set("SYSID_THISMAV", f64::from(sysid))
+    {
+        tracing::warn!("configured sysid refused: {e}");
+    }
+
+    let session = session_name();
+    let (in_tx, mut inbound) = mpsc::channel(4096);
+    let router_cfg = RouterConfig {
+        peer_timeout: settings.mavlink.peer_timeout,
+        tlog: Some(TlogConfig { dir: settings.data_dir.join("tlogs"), max_bytes: settings.mavlink.tlog_max_bytes }),
+        session: session.clone(),
+    };
+    let router = Router::start(settings.mavlink.endpoints.clone(), router_cfg, in_tx).await?;
+    for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
+        tracing::info!(endpoint = %spec, local = ?router.local_addr(i), "MAVLink endpoint");
+    }
+
     let (link, mut events) = link::spawn(settings.link.clone());
+    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, settings.mavlink.endpoints.len());
+    let t0 = Instant::now();
+    let clock = move || Now {
+        mono: t0.elapsed(),
+        unix_us: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_micros() as u64),
+    };
+    let mut io = Io { router: router.clone(), link: link.clone(), params: param_file, seq: 0, last_healthy: None };
     let mut shutdown = std::pin::pin!(shutdown);
+    let mut outputs = Vec::with_capacity(64);
+    let mut tick = tokio::time::interval(Duration::from_millis(10));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut report = tokio::time::interval_at(Instant::now() + Duration::from_secs(1), Duration::from_secs(5));
     let mut nav = NavSample::default();
     let mut status = StatusSample::default();
-    let mut state = LinkState::Down;
-    let mut healthy = tokio::time::interval(Duration::from_millis(250));
-    let mut report = tokio::time::interval_at(
-        Instant::now() + Duration::from_secs(1),
-        Duration::from_secs(1),
-    );
     loop {
+        let now = clock();
         tokio::select! {
             () = &mut shutdown => break,
-            _ = healthy.tick() => link.healthy(),
+            _ = tick.tick() => vehicle.handle(Input::Tick, now, &mut outputs),
             ev = events.recv() => match ev {
                 None => break,
-                Some(LinkEvent::State { state: s, reason }) => {
-                    state = s;
-                    if s == LinkState::Up {
-                        // Disarmed: whatever the board last had, it gets neutral.
-                        link.send(NEUTRAL);
+                Some(LinkEvent::State { state, reason }) => vehicle.handle(Input::Link { state, reason }, now, &mut outputs),
+                Some(LinkEvent::Telemetry(ev)) => {
+                    match &ev {
+                        Event::Nav(n) => nav = merge_nav(nav, *n),
+                        Event::Status(s) if s.vout_v.is_some() => status = s.clone(),
+                        _ => {}
                     }
-                    tracing::debug!(?s, ?reason, "link state");
+                    vehicle.handle(Input::Board(ev), now, &mut outputs);
                 }
-                Some(LinkEvent::Telemetry(Event::Nav(n))) => nav = merge_nav(nav, n),
-                Some(LinkEvent::Telemetry(Event::Status(s))) => status = s,
-                Some(LinkEvent::Telemetry(_)) => {}
+            },
+            msg = inbound.recv() => match msg {
+                None => break,
+                Some(Inbound { endpoint, peer, frame }) => {
+                    let from = Sender { endpoint, peer, sysid: frame.sysid, compid: frame.compid };
+                    vehicle.handle(Input::Mavlink { from, msg: frame.msg }, now, &mut outputs);
+                }
             },
             _ = report.tick() => {
                 let s = link.stats();
                 tracing::info!(
-                    link = ?state,
+                    link = ?s.state,
+                    armed = vehicle.armed(),
+                    mode = crate::vehicle::machine::mode_name(vehicle.mode()),
                     heading_deg = nav.heading_deg.unwrap_or(f64::NAN),
                     depth_m = nav.depth_m.unwrap_or(f64::NAN),
-                    pitch_deg = nav.pitch_deg.unwrap_or(f64::NAN),
-                    roll_deg = nav.roll_deg.unwrap_or(f64::NAN),
                     voltage_v = status.vout_v.unwrap_or(f64::NAN),
-                    current_a = status.btti_a.unwrap_or(f64::NAN),
                     telemetry_age_ms = s.telemetry_age_ms.unwrap_or(u64::MAX),
-                    lines = s.decode.lines_accepted,
                     rejected = s.decode.rejected_total(),
                     crc_fail = s.crc_failures_echoed,
-                    written = s.commands_written,
                     "telemetry"
                 );
             }
         }
+        io.apply(&mut outputs, &vehicle, now);
     }
     tracing::info!("shutting down: thrusters to neutral");
     link.send(NEUTRAL);
     // Give the link a moment to put the neutral command on the wire.
     tokio::time::sleep(Duration::from_millis(50)).await;
     drop(link);
+    router.shutdown().await;
     if let Some(board) = board {
         board.shutdown().await;
     }
     Ok(())
+}
+
+/// Carries the core's outputs to the router, the link and the parameter file.
+struct Io {
+    router: RouterHandle,
+    link: link::LinkHandle,
+    params: ParamFile,
+    seq: u8,
+    last_healthy: Option<Duration>,
+}
+
+impl Io {
+    fn apply(&mut self, outputs: &mut Vec<Output>, vehicle: &Vehicle, now: Now) {
+        for out in outputs.drain(..) {
+            match out {
+                Output::Send { to, msg } => {
+                    let bytes = encode_v2(vehicle.sysid(), COMPONENT_ID, self.seq, &msg);
+                    self.seq = self.seq.wrapping_add(1);
+                    let route = match to {
+                        To::All => Route::All,
+                        To::Endpoint(e) => Route::Endpoint(e),
+                        To::Peer(e, p) => Route::Peer(e, p),
+                    };
+                    self.router.send(Outbound { route, bytes: bytes.into() });
+                }
+                Output::Board(cmd) => self.link.send(cmd),
+                Output::SaveParams => {
+                    if let Err(e) = self.params.save(vehicle.params()) {
+                        tracing::error!("parameters not saved: {e}");
+                    }
+                }
+                Output::Healthy => {
+                    // The link only needs to hear this every few hundred ms.
+                    if self.last_healthy.is_none_or(|t| now.mono.saturating_sub(t) >= Duration::from_millis(100)) {
+                        self.last_healthy = Some(now.mono);
+                        self.link.healthy();
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// `neptunus-YYYYmmddTHHMMSSZ` (UTC) for this run's telemetry log.
+fn session_name() -> String {
+    let stamp = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+    format!("neptunus-{}", stamp.replace(['-', ':'], ""))
 }
 
 fn merge_nav(old: NavSample, new: NavSample) -> NavSample {

@@ -12,6 +12,8 @@ use serde::{Deserialize, Serialize};
 use crate::firmware::codec::Framing;
 use crate::firmware::emulator::{EmulatorOptions, FaultOptions};
 use crate::firmware::link::LinkConfig;
+use crate::mavlink::endpoint::{DEFAULT_ENDPOINTS, EndpointSpec};
+use crate::vehicle::machine::Identity;
 
 /// The BeagleBone UART wired to the OpenROV board.
 pub const DEFAULT_SERIAL: &str = "/dev/ttyO1";
@@ -49,6 +51,14 @@ pub struct RunArgs {
     /// Where logs, parameters and telemetry logs go [default: the user's data directory].
     #[arg(long, value_name = "DIR", global = true)]
     pub data_dir: Option<PathBuf>,
+    /// MAVLink endpoint, repeatable: udpin:HOST:PORT, udpout:HOST:PORT,
+    /// tcpin:HOST:PORT, tcpout:HOST:PORT, serial:PATH:BAUD
+    /// [default: udpout:127.0.0.1:14550 and tcpin:0.0.0.0:5760].
+    #[arg(long = "mavlink", value_name = "URL")]
+    pub mavlink: Vec<EndpointSpec>,
+    /// How the vehicle presents itself: ardupilot (ArduSub-compatible) or generic.
+    #[arg(long, value_name = "ardupilot|generic")]
+    pub identity: Option<Identity>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -91,6 +101,32 @@ pub struct FileConfig {
     pub sim: bool,
     pub board: BoardFileConfig,
     pub emulator: EmulatorOptions,
+    pub mavlink: MavlinkFileConfig,
+}
+
+/// `[mavlink]` section.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MavlinkFileConfig {
+    /// Endpoint URLs (replace the defaults).
+    pub endpoints: Option<Vec<String>>,
+    pub identity: Option<Identity>,
+    /// Our system id (sets SYSID_THISMAV at start).
+    pub sysid: Option<u8>,
+    /// UDP peers are forgotten after this many seconds of silence.
+    pub peer_timeout_s: Option<f64>,
+    /// Telemetry logs rotate at this size.
+    pub tlog_max_mb: Option<u64>,
+}
+
+/// MAVLink settings, resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MavlinkSettings {
+    pub endpoints: Vec<EndpointSpec>,
+    pub identity: Identity,
+    pub sysid: Option<u8>,
+    pub peer_timeout: std::time::Duration,
+    pub tlog_max_bytes: u64,
 }
 
 /// `[board]` section.
@@ -134,6 +170,7 @@ pub struct Settings {
     /// For `Serial`, the device; for `Simulated`, filled in once the pty exists.
     pub link: LinkConfig,
     pub data_dir: PathBuf,
+    pub mavlink: MavlinkSettings,
 }
 
 impl FileConfig {

@@ -12,4 +12,6 @@ pub mod app;
 pub mod config;
 pub mod dialect;
 pub mod firmware;
+pub mod mavlink;
 pub mod sim;
+pub mod vehicle;

@@ -1,0 +1,1109 @@
+//! The vehicle core: one state machine that owns everything the vehicle
+//! knows and decides, driven by [`Vehicle::handle`].
+//!
+//! Sans-IO: inputs are decoded MAVLink messages, board events and ticks,
+//! each with the time as an argument; outputs are messages to send, board
+//! commands and requests to persist parameters. Nothing here reads a clock,
+//! sleeps or touches a socket — so every rule is testable with synthetic time.
+//!
+//! It must never let a thruster move while disarmed: every `go()` it emits
+//! while disarmed is neutral.
+
+use std::time::Duration;
+
+use mavlink_core::types::CharArray;
+
+use super::params::ParamStore;
+use super::telemetry::{self, Schedule};
+use crate::dialect::neptunus::*;
+use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
+use crate::firmware::link::LinkState;
+
+/// Our MAVLink component id (the autopilot).
+pub const COMPONENT_ID: u8 = 1;
+/// Telemetry older than this is not re-sent as if fresh.
+pub const FRESH: Duration = Duration::from_millis(1500);
+/// Parameters sent per tick while a list is being streamed (a burst of
+/// hundreds of datagrams can overflow a ground station's socket buffer).
+const PARAMS_PER_TICK: usize = 20;
+
+/// Where an output message goes (the app maps this onto its endpoints).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum To {
+    /// Every peer on every endpoint.
+    All,
+    /// Every peer on one endpoint.
+    Endpoint(usize),
+    /// One peer.
+    Peer(usize, u64),
+}
+
+/// Who sent a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sender {
+    pub endpoint: usize,
+    pub peer: u64,
+    pub sysid: u8,
+    pub compid: u8,
+}
+
+impl Sender {
+    fn reply(&self) -> To {
+        To::Peer(self.endpoint, self.peer)
+    }
+}
+
+/// Time as the core sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Now {
+    /// Monotonic time since the vehicle started.
+    pub mono: Duration,
+    /// Wall clock, µs since the Unix epoch.
+    pub unix_us: u64,
+}
+
+/// What the core reacts to.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    Mavlink { from: Sender, msg: MavMessage },
+    Board(Event),
+    Link { state: LinkState, reason: Option<String> },
+    /// Periodic (the app ticks at 100 Hz): telemetry, timeouts.
+    Tick,
+}
+
+/// What the core asks the I/O around it to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    Send { to: To, msg: MavMessage },
+    Board(Command),
+    /// Parameters changed: persist them.
+    SaveParams,
+    /// The core is alive: the link may feed the board's dead-man switch.
+    Healthy,
+}
+
+/// How the vehicle presents itself.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum Identity {
+    /// ArduSub-compatible (autopilot ARDUPILOTMEGA): QGC's Sub plugin, pymavlink's mode map.
+    #[default]
+    Ardupilot,
+    /// MAV_AUTOPILOT_GENERIC: generic ground-station plugins, REAL32 parameters.
+    Generic,
+}
+
+/// ArduSub's modes: number, name, and whether Neptunus can honour it now.
+pub const MODES: &[(u32, &str, Option<&str>)] = &[
+    (19, "MANUAL", None),
+    (0, "STABILIZE", Some("heading hold is not implemented yet")),
+    (1, "ACRO", Some("rate control is not implemented on this vehicle")),
+    (2, "ALT_HOLD", Some("depth hold is not implemented yet")),
+    (3, "AUTO", Some("needs a position estimate, which this vehicle does not have")),
+    (4, "GUIDED", Some("needs a position estimate, which this vehicle does not have")),
+    (7, "CIRCLE", Some("needs a position estimate, which this vehicle does not have")),
+    (9, "SURFACE", Some("surfacing is not implemented yet")),
+    (16, "POSHOLD", Some("needs a position estimate, which this vehicle does not have")),
+    (20, "MOTOR_DETECT", Some("not available on this vehicle")),
+    (21, "SURFTRAK", Some("needs a rangefinder, which this vehicle does not have")),
+];
+pub const MODE_MANUAL: u32 = 19;
+
+pub fn mode_name(mode: u32) -> &'static str {
+    MODES.iter().find(|m| m.0 == mode).map_or("UNKNOWN", |m| m.1)
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Stamped<T> {
+    value: T,
+    at: Option<Duration>,
+}
+
+/// Everything the vehicle knows and decides.
+#[derive(Debug)]
+pub struct Vehicle {
+    identity: Identity,
+    params: ParamStore,
+    mode: u32,
+    armed: bool,
+    link: LinkState,
+    link_reason: Option<String>,
+    heading_deg: Stamped<f64>,
+    depth_m: Stamped<f64>,
+    pitch_deg: Stamped<f64>,
+    roll_deg: Stamped<f64>,
+    prev_heading: Option<(Duration, f64)>,
+    yaw_rate_rps: f64,
+    status: Stamped<StatusSample>,
+    consumed_mah: f64,
+    last_current: Option<(Duration, f64)>,
+    lights: u8,
+    last_lights_on: u8,
+    laser: u8,
+    tilt_us: u16,
+    gain: f64,
+    motors_us: [u16; 3],
+    schedules: Vec<Schedule>,
+    param_queue: Vec<(To, usize)>,
+    statustext_id: u16,
+    booted: Duration,
+    started: bool,
+}
+
+fn chars<const N: usize>(s: &str) -> CharArray<N> {
+    CharArray::from(s)
+}
+
+fn char_str<const N: usize>(c: &CharArray<N>) -> String {
+    let bytes: &[u8] = c;
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    String::from_utf8_lossy(&bytes[..end]).into_owned()
+}
+
+/// NaN means "not given" (MAVSDK sends unused params as NaN).
+fn given(v: f32) -> Option<f32> {
+    (!v.is_nan()).then_some(v)
+}
+
+impl Vehicle {
+    pub fn new(identity: Identity, params: ParamStore, endpoints: usize) -> Self {
+        let gain = params.get("JS_GAIN_DEFAULT").unwrap_or(0.5);
+        Self {
+            identity,
+            params,
+            mode: MODE_MANUAL,
+            armed: false,
+            link: LinkState::Down,
+            link_reason: None,
+            heading_deg: Stamped::default(),
+            depth_m: Stamped::default(),
+            pitch_deg: Stamped::default(),
+            roll_deg: Stamped::default(),
+            prev_heading: None,
+            yaw_rate_rps: 0.0,
+            status: Stamped::default(),
+            consumed_mah: 0.0,
+            last_current: None,
+            lights: 0,
+            last_lights_on: 255,
+            laser: 0,
+            tilt_us: 1500,
+            gain,
+            motors_us: [1500; 3],
+            schedules: vec![Schedule::default(); endpoints.max(1)],
+            param_queue: Vec::new(),
+            statustext_id: 0,
+            booted: Duration::ZERO,
+            started: false,
+        }
+    }
+
+    pub fn params(&self) -> &ParamStore {
+        &self.params
+    }
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+    pub fn mode(&self) -> u32 {
+        self.mode
+    }
+    pub fn sysid(&self) -> u8 {
+        self.param_u8("SYSID_THISMAV", 1)
+    }
+    pub fn motors_us(&self) -> [u16; 3] {
+        self.motors_us
+    }
+
+    fn param(&self, name: &str, default: f64) -> f64 {
+        self.params.get(name).unwrap_or(default)
+    }
+    fn param_u8(&self, name: &str, default: u8) -> u8 {
+        self.param(name, f64::from(default)).clamp(0.0, 255.0) as u8
+    }
+
+    /// Reacts to one input at `now`, appending what must happen to `out`.
+    pub fn handle(&mut self, input: Input, now: Now, out: &mut Vec<Output>) {
+        if !self.started {
+            self.started = true;
+            self.booted = now.mono;
+            for s in &mut self.schedules {
+                *s = Schedule::with_defaults(now.mono);
+            }
+        }
+        match input {
+            Input::Tick => self.tick(now, out),
+            Input::Link { state, reason } => self.on_link(state, reason, now, out),
+            Input::Board(ev) => self.on_board(ev, now),
+            Input::Mavlink { from, msg } => self.on_mavlink(from, msg, now, out),
+        }
+    }
+
+    fn boot_ms(&self, now: Now) -> u32 {
+        (now.mono.saturating_sub(self.booted)).as_millis() as u32
+    }
+
+    fn statustext(&mut self, severity: MavSeverity, text: &str, out: &mut Vec<Output>) {
+        tracing::info!(severity = ?severity, "{text}");
+        // Long texts go in 50-byte chunks sharing an id, as MAVLink 2 allows.
+        let bytes = text.as_bytes();
+        if bytes.len() <= 50 {
+            out.push(Output::Send {
+                to: To::All,
+                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA { severity, text: chars(text), id: 0, chunk_seq: 0 }),
+            });
+            return;
+        }
+        self.statustext_id = self.statustext_id.wrapping_add(1).max(1);
+        for (i, chunk) in bytes.chunks(50).enumerate() {
+            let mut arr = [0u8; 50];
+            arr[..chunk.len()].copy_from_slice(chunk);
+            out.push(Output::Send {
+                to: To::All,
+                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                    severity,
+                    text: CharArray::from(arr),
+                    id: self.statustext_id,
+                    chunk_seq: i as u8,
+                }),
+            });
+        }
+    }
+
+    fn send_neutral(&mut self, out: &mut Vec<Output>) {
+        self.motors_us = [1500; 3];
+        out.push(Output::Board(Command::Go { port_us: 1500, vertical_us: 1500, starboard_us: 1500 }));
+    }
+
+    // ---- board ----
+
+    fn on_link(&mut self, state: LinkState, reason: Option<String>, now: Now, out: &mut Vec<Output>) {
+        let was = self.link;
+        self.link = state;
+        self.link_reason = reason.clone();
+        if state == LinkState::Up && was != LinkState::Up {
+            // Whatever the board had, it gets what we decide now.
+            self.send_neutral(out);
+            let (l, t) = (self.lights, self.tilt_us);
+            out.push(Output::Board(Command::Lights(l)));
+            out.push(Output::Board(Command::Tilt(t)));
+            if self.laser > 0 {
+                out.push(Output::Board(Command::Laser(self.laser)));
+            }
+            self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Board link up", out);
+        } else if state == LinkState::Down && was != LinkState::Down {
+            let why = reason.unwrap_or_else(|| "unknown".into());
+            self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, &format!("Board link down: {why}"), out);
+            if self.armed {
+                self.armed = false;
+                self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, "Disarmed: board link lost", out);
+            }
+            let _ = now;
+        }
+    }
+
+    fn on_board(&mut self, ev: Event, now: Now) {
+        let t = Some(now.mono);
+        match ev {
+            Event::Nav(NavSample { heading_deg, depth_m, pitch_deg, roll_deg, .. }) => {
+                if let Some(h) = heading_deg {
+                    if let Some((pt, ph)) = self.prev_heading {
+                        let dt = now.mono.saturating_sub(pt).as_secs_f64();
+                        if dt > 0.0 {
+                            let d = (h - ph + 540.0).rem_euclid(360.0) - 180.0;
+                            self.yaw_rate_rps = d.to_radians() / dt;
+                        }
+                    }
+                    self.prev_heading = Some((now.mono, h));
+                    self.heading_deg = Stamped { value: h, at: t };
+                }
+                if let Some(d) = depth_m {
+                    self.depth_m = Stamped { value: d, at: t };
+                }
+                if let Some(p) = pitch_deg {
+                    self.pitch_deg = Stamped { value: p, at: t };
+                }
+                if let Some(r) = roll_deg {
+                    self.roll_deg = Stamped { value: r, at: t };
+                }
+            }
+            Event::Status(s) => {
+                if s.vout_v.is_none() {
+                    // A `motors:` line on its own: keep the last full status.
+                    return;
+                }
+                if let Some(i) = s.btti_a.or(s.iout_a) {
+                    if let Some((pt, pi)) = self.last_current {
+                        let h = now.mono.saturating_sub(pt).as_secs_f64() / 3600.0;
+                        self.consumed_mah += (pi + i) / 2.0 * h * 1000.0;
+                    }
+                    self.last_current = Some((now.mono, i));
+                }
+                self.status = Stamped { value: s, at: t };
+            }
+            Event::Lights { level, .. } => self.lights = level,
+            Event::Laser(l) => self.laser = l,
+            _ => {}
+        }
+    }
+
+    fn fresh<T>(&self, s: &Stamped<T>, now: Now) -> bool {
+        self.link == LinkState::Up && s.at.is_some_and(|t| now.mono.saturating_sub(t) <= FRESH)
+    }
+
+    // ---- time ----
+
+    fn tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        out.push(Output::Healthy);
+        if !self.armed && self.motors_us != [1500; 3] {
+            self.send_neutral(out);
+        }
+        let mut due = Vec::new();
+        for ep in 0..self.schedules.len() {
+            due.clear();
+            self.schedules[ep].due(now.mono, &mut due);
+            for id in &due {
+                for msg in self.build(*id, now) {
+                    out.push(Output::Send { to: To::Endpoint(ep), msg });
+                }
+            }
+        }
+        // Stream pending parameter lists.
+        let n = self.param_queue.len().min(PARAMS_PER_TICK);
+        let batch: Vec<(To, usize)> = self.param_queue.drain(..n).collect();
+        for (to, idx) in batch {
+            if let Some(msg) = self.param_value(idx) {
+                out.push(Output::Send { to, msg });
+            }
+        }
+    }
+
+    // ---- telemetry ----
+
+    fn sensors(&self, now: Now) -> (MavSysStatusSensor, MavSysStatusSensor, MavSysStatusSensor) {
+        use MavSysStatusSensor as S;
+        let imu = S::MAV_SYS_STATUS_SENSOR_3D_GYRO | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL | S::MAV_SYS_STATUS_SENSOR_3D_MAG;
+        let depth = S::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE;
+        let motors = S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
+        let battery = S::MAV_SYS_STATUS_SENSOR_BATTERY;
+        let rc = S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER;
+        let prearm = S::MAV_SYS_STATUS_PREARM_CHECK;
+        let present = imu | depth | motors | battery | rc | prearm;
+        let enabled = present;
+        let mut health = S::empty();
+        if self.fresh(&self.heading_deg, now) {
+            health |= imu;
+        }
+        if self.fresh(&self.depth_m, now) {
+            health |= depth;
+        }
+        if self.link == LinkState::Up {
+            health |= motors | rc;
+        }
+        if self.battery_ok(now) {
+            health |= battery;
+        }
+        if self.prearm_failure(now).is_none() {
+            health |= prearm;
+        }
+        (present, enabled, health)
+    }
+
+    fn battery_ok(&self, now: Now) -> bool {
+        let low = self.param("BATT_LOW_VOLT", 10.5);
+        self.fresh(&self.status, now) && self.status.value.vout_v.is_some_and(|v| low <= 0.0 || v > low)
+    }
+
+    /// Why the vehicle cannot arm, if it cannot.
+    pub fn prearm_failure(&self, now: Now) -> Option<String> {
+        if self.link != LinkState::Up {
+            return Some(format!(
+                "board link down ({})",
+                self.link_reason.clone().unwrap_or_else(|| "no telemetry".into())
+            ));
+        }
+        if !self.fresh(&self.depth_m, now) || !self.fresh(&self.heading_deg, now) {
+            return Some("no fresh depth and attitude from the board".into());
+        }
+        if !self.battery_ok(now) {
+            return Some(format!("battery below BATT_LOW_VOLT {:.1} V", self.param("BATT_LOW_VOLT", 10.5)));
+        }
+        let disarm_mapped = (0..32).any(|i| {
+            [format!("BTN{i}_FUNCTION"), format!("BTN{i}_SFUNCTION")]
+                .iter()
+                .any(|n| matches!(self.params.get(n).map(|v| v as i64), Some(2 | 4)))
+        });
+        if !disarm_mapped {
+            return Some("no joystick button is mapped to disarm (BTNn_FUNCTION 2 or 4)".into());
+        }
+        None
+    }
+
+    fn battery_remaining(&self) -> i8 {
+        let Some(v) = self.status.value.vout_v else { return -1 };
+        let empty = self.param("BATT_LOW_VOLT", 10.5);
+        let full = 12.6_f64.max(empty + 0.1);
+        // A voltage-based estimate: the board has no coulomb counter.
+        (((v - empty) / (full - empty)) * 100.0).clamp(0.0, 100.0) as i8
+    }
+
+    fn heartbeat(&self) -> MavMessage {
+        use MavModeFlag as F;
+        let mut base = F::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | F::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | F::MAV_MODE_FLAG_STABILIZE_ENABLED;
+        if self.armed {
+            base |= F::MAV_MODE_FLAG_SAFETY_ARMED;
+        }
+        let system_status = if self.link != LinkState::Up {
+            MavState::MAV_STATE_CRITICAL
+        } else if self.armed {
+            MavState::MAV_STATE_ACTIVE
+        } else {
+            MavState::MAV_STATE_STANDBY
+        };
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: self.mode,
+            mavtype: MavType::MAV_TYPE_SUBMARINE,
+            autopilot: match self.identity {
+                Identity::Ardupilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+                Identity::Generic => MavAutopilot::MAV_AUTOPILOT_GENERIC,
+            },
+            base_mode: base,
+            system_status,
+            mavlink_version: 3,
+        })
+    }
+
+    /// The message(s) for `id` now; empty when there is nothing honest to send.
+    pub fn build(&self, id: u32, now: Now) -> Vec<MavMessage> {
+        let boot_ms = self.boot_ms(now);
+        let heading = self.heading_deg.value;
+        let depth = self.depth_m.value;
+        match id {
+            0 => vec![self.heartbeat()],
+            1 => {
+                let (present, enabled, health) = self.sensors(now);
+                let s = &self.status.value;
+                vec![MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+                    onboard_control_sensors_present: present,
+                    onboard_control_sensors_enabled: enabled,
+                    onboard_control_sensors_health: health,
+                    load: 0,
+                    voltage_battery: s.vout_v.map_or(u16::MAX, |v| (v * 1000.0).round().clamp(0.0, 65534.0) as u16),
+                    current_battery: s.btti_a.map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+                    battery_remaining: self.battery_remaining(),
+                    ..Default::default()
+                })]
+            }
+            2 => vec![MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA { time_unix_usec: now.unix_us, time_boot_ms: boot_ms })],
+            30 if self.fresh(&self.heading_deg, now) => {
+                let yaw = (heading + 180.0).rem_euclid(360.0) - 180.0;
+                vec![MavMessage::ATTITUDE(ATTITUDE_DATA {
+                    time_boot_ms: boot_ms,
+                    roll: self.roll_deg.value.to_radians() as f32,
+                    pitch: self.pitch_deg.value.to_radians() as f32,
+                    yaw: yaw.to_radians() as f32,
+                    rollspeed: 0.0,
+                    pitchspeed: 0.0,
+                    yawspeed: self.yaw_rate_rps as f32,
+                })]
+            }
+            33 if self.fresh(&self.depth_m, now) => vec![MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                time_boot_ms: boot_ms,
+                lat: 0,
+                lon: 0,
+                alt: (-depth * 1000.0).round() as i32,
+                relative_alt: (-depth * 1000.0).round() as i32,
+                vx: 0,
+                vy: 0,
+                vz: 0,
+                hdg: if self.fresh(&self.heading_deg, now) { (heading * 100.0).round().rem_euclid(36000.0) as u16 } else { u16::MAX },
+            })],
+            36 => {
+                let [port, vert, star] = self.motors_us;
+                let laser_pwm = if self.laser > 0 { 1900 } else { 1100 };
+                let lights_pwm = 1100 + (u16::from(self.lights) * 800) / 255;
+                vec![MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
+                    time_usec: (now.mono.saturating_sub(self.booted).as_micros() & 0xffff_ffff) as u32,
+                    // MOT_1 starboard, MOT_2 port, MOT_3 vertical (ArduSub SimpleROV-3 numbering).
+                    servo1_raw: star,
+                    servo2_raw: port,
+                    servo3_raw: vert,
+                    servo6_raw: laser_pwm,
+                    servo7_raw: lights_pwm,
+                    servo8_raw: self.tilt_us,
+                    ..Default::default()
+                })]
+            }
+            74 if self.fresh(&self.heading_deg, now) || self.fresh(&self.depth_m, now) => {
+                let throttle = ((i32::from(self.motors_us[1]) - 1500).unsigned_abs() / 5).min(100) as u16;
+                vec![MavMessage::VFR_HUD(VFR_HUD_DATA {
+                    airspeed: 0.0,
+                    groundspeed: 0.0,
+                    alt: -depth as f32,
+                    climb: 0.0,
+                    heading: heading.round().rem_euclid(360.0) as i16,
+                    throttle,
+                })]
+            }
+            137 if self.fresh(&self.status, now) && self.status.value.pres_mbar.is_some() => {
+                let s = &self.status.value;
+                vec![MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
+                    time_boot_ms: boot_ms,
+                    press_abs: s.pres_mbar.unwrap_or(0.0) as f32,
+                    press_diff: 0.0,
+                    temperature: s.temp_c.map_or(0, |t| (t * 100.0).round() as i16),
+                    temperature_press_diff: 0,
+                })]
+            }
+            147 => {
+                let s = &self.status.value;
+                let mut voltages = [u16::MAX; 10];
+                voltages[0] = s.vout_v.map_or(u16::MAX, |v| (v * 1000.0).round().clamp(0.0, 65534.0) as u16);
+                vec![MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
+                    current_consumed: self.consumed_mah.round() as i32,
+                    energy_consumed: -1,
+                    temperature: i16::MAX,
+                    voltages,
+                    current_battery: s.btti_a.map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+                    id: 0,
+                    battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
+                    mavtype: MavBatteryType::MAV_BATTERY_TYPE_UNKNOWN,
+                    battery_remaining: self.battery_remaining(),
+                    ..Default::default()
+                })]
+            }
+            251 => {
+                let tilt_min = self.param("NEPT_TILT_MIN_US", 1000.0);
+                let tilt_max = self.param("NEPT_TILT_MAX_US", 2000.0);
+                let tilt = if tilt_max > tilt_min { (f64::from(self.tilt_us) - tilt_min) / (tilt_max - tilt_min) } else { 0.5 };
+                [
+                    ("Lights1", f64::from(self.lights) / 255.0),
+                    ("PilotGain", self.gain),
+                    ("CamTilt", tilt),
+                    ("Laser", f64::from(self.laser) / 255.0),
+                    ("InputHold", 0.0),
+                ]
+                .iter()
+                .map(|(name, v)| {
+                    MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA { time_boot_ms: boot_ms, value: *v as f32, name: chars(name) })
+                })
+                .collect()
+            }
+            148 => vec![self.autopilot_version()],
+            _ => Vec::new(),
+        }
+    }
+
+    fn autopilot_version(&self) -> MavMessage {
+        use MavProtocolCapability as C;
+        let mut caps = C::MAV_PROTOCOL_CAPABILITY_MAVLINK2 | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT | C::MAV_PROTOCOL_CAPABILITY_MISSION_INT;
+        #[allow(deprecated)]
+        let param_float = C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT;
+        caps |= param_float;
+        caps |= match self.identity {
+            Identity::Ardupilot => C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
+            Identity::Generic => C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
+        };
+        let mut custom = [0u8; 8];
+        let v = env!("CARGO_PKG_VERSION").as_bytes();
+        let tag = b"nept";
+        custom[..4].copy_from_slice(tag);
+        for (i, b) in v.iter().filter(|b| b.is_ascii_digit()).take(4).enumerate() {
+            custom[4 + i] = *b;
+        }
+        MavMessage::AUTOPILOT_VERSION(AUTOPILOT_VERSION_DATA {
+            capabilities: caps,
+            uid: 0x4e45_5054_0000_0000 | u64::from(self.sysid()),
+            // Claim ArduSub 4.5.0, BETA type: QGC then uses its Sub 4.5 metadata and does not nag.
+            flight_sw_version: (4 << 24) | (5 << 16) | 128,
+            middleware_sw_version: 0,
+            os_sw_version: 0,
+            board_version: 0,
+            vendor_id: 0,
+            product_id: 0,
+            flight_custom_version: custom,
+            ..Default::default()
+        })
+    }
+
+    fn param_value(&self, index: usize) -> Option<MavMessage> {
+        let (def, value) = self.params.get_index(index)?;
+        let param_type = match self.identity {
+            Identity::Ardupilot => def.ty.mav_type(),
+            Identity::Generic => MavParamType::MAV_PARAM_TYPE_REAL32,
+        };
+        Some(MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+            param_value: value as f32,
+            param_count: self.params.len() as u16,
+            param_index: index as u16,
+            param_id: chars(def.name),
+            param_type,
+        }))
+    }
+
+    // ---- MAVLink in ----
+
+    fn for_us(&self, target_system: u8, target_component: u8) -> bool {
+        (target_system == 0 || target_system == self.sysid()) && (target_component == 0 || target_component == COMPONENT_ID)
+    }
+
+    fn on_mavlink(&mut self, from: Sender, msg: MavMessage, now: Now, out: &mut Vec<Output>) {
+        match msg {
+            MavMessage::COMMAND_LONG(c) => {
+                if !self.for_us(c.target_system, c.target_component) {
+                    return;
+                }
+                let params = [c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7];
+                self.command(from, c.command, params, now, out);
+            }
+            MavMessage::COMMAND_INT(c) => {
+                if !self.for_us(c.target_system, c.target_component) {
+                    return;
+                }
+                let params = [c.param1, c.param2, c.param3, c.param4, c.x as f32, c.y as f32, c.z];
+                self.command(from, c.command, params, now, out);
+            }
+            MavMessage::SET_MODE(m) => {
+                if m.target_system != self.sysid() && m.target_system != 0 {
+                    return;
+                }
+                let result = self.set_mode(m.custom_mode, out);
+                out.push(Output::Send { to: from.reply(), msg: ack_set_mode(result, from) });
+            }
+            MavMessage::PARAM_REQUEST_LIST(p) => {
+                if !self.for_us(p.target_system, p.target_component) {
+                    return;
+                }
+                // A repeated request restarts the list for that peer.
+                let to = from.reply();
+                self.param_queue.retain(|(t, _)| *t != to);
+                self.param_queue.extend((0..self.params.len()).map(|i| (to, i)));
+            }
+            MavMessage::PARAM_REQUEST_READ(p) => {
+                if !self.for_us(p.target_system, p.target_component) {
+                    return;
+                }
+                let index = if p.param_index >= 0 {
+                    Some(p.param_index as usize)
+                } else {
+                    super::params::index_of(&char_str(&p.param_id))
+                };
+                if let Some(msg) = index.and_then(|i| self.param_value(i)) {
+                    out.push(Output::Send { to: from.reply(), msg });
+                }
+            }
+            MavMessage::PARAM_SET(p) => {
+                if !self.for_us(p.target_system, p.target_component) {
+                    return;
+                }
+                let name = char_str(&p.param_id);
+                let Some(index) = super::params::index_of(&name) else {
+                    self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Param {name}: no such parameter"), out);
+                    return;
+                };
+                match self.params.set(&name, f64::from(p.param_value)) {
+                    Ok(_) => {
+                        self.on_param_changed(&name);
+                        out.push(Output::SaveParams);
+                    }
+                    Err(e) => self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Param refused: {e}"), out),
+                }
+                // Echo the value now in force (the old one if refused) to everyone.
+                if let Some(msg) = self.param_value(index) {
+                    out.push(Output::Send { to: To::All, msg });
+                }
+            }
+            MavMessage::REQUEST_DATA_STREAM(r) => {
+                if !self.for_us(r.target_system, r.target_component) {
+                    return;
+                }
+                let id = r.req_stream_id as u8;
+                let groups: Vec<u8> = if id == 0 { telemetry::ALL_GROUPS.to_vec() } else { vec![id] };
+                let interval = (r.start_stop != 0 && r.req_message_rate > 0)
+                    .then(|| Duration::from_secs_f64(1.0 / f64::from(r.req_message_rate)));
+                for g in groups {
+                    for msg_id in telemetry::stream_group(g) {
+                        self.schedules[from.endpoint.min(self.schedules.len() - 1)].set(*msg_id, interval, now.mono);
+                    }
+                }
+            }
+            MavMessage::MISSION_REQUEST_LIST(m) => {
+                if !self.for_us(m.target_system, m.target_component) {
+                    return;
+                }
+                out.push(Output::Send {
+                    to: from.reply(),
+                    msg: MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
+                        count: 0,
+                        target_system: from.sysid,
+                        target_component: from.compid,
+                        mission_type: m.mission_type,
+                        opaque_id: 0,
+                    }),
+                });
+            }
+            MavMessage::MISSION_COUNT(m) => {
+                if !self.for_us(m.target_system, m.target_component) {
+                    return;
+                }
+                out.push(self.mission_ack(from, m.mission_type, MavMissionResult::MAV_MISSION_UNSUPPORTED));
+            }
+            MavMessage::MISSION_CLEAR_ALL(m) => {
+                if !self.for_us(m.target_system, m.target_component) {
+                    return;
+                }
+                out.push(self.mission_ack(from, m.mission_type, MavMissionResult::MAV_MISSION_ACCEPTED));
+            }
+            MavMessage::FILE_TRANSFER_PROTOCOL(f) => {
+                if !self.for_us(f.target_system, f.target_component) {
+                    return;
+                }
+                out.push(Output::Send { to: from.reply(), msg: ftp_reply(&f.payload, from) });
+            }
+            MavMessage::TIMESYNC(t) => {
+                if t.tc1 == 0 {
+                    out.push(Output::Send {
+                        to: from.reply(),
+                        msg: MavMessage::TIMESYNC(TIMESYNC_DATA {
+                            tc1: now.mono.as_nanos().min(i64::MAX as u128) as i64,
+                            ts1: t.ts1,
+                            target_system: from.sysid,
+                            target_component: from.compid,
+                        }),
+                    });
+                }
+            }
+            MavMessage::PING(p) => {
+                if p.target_system == 0 && p.target_component == 0 {
+                    out.push(Output::Send {
+                        to: from.reply(),
+                        msg: MavMessage::PING(PING_DATA {
+                            time_usec: p.time_usec,
+                            seq: p.seq,
+                            target_system: from.sysid,
+                            target_component: from.compid,
+                        }),
+                    });
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn mission_ack(&self, from: Sender, mission_type: MavMissionType, result: MavMissionResult) -> Output {
+        Output::Send {
+            to: from.reply(),
+            msg: MavMessage::MISSION_ACK(MISSION_ACK_DATA {
+                target_system: from.sysid,
+                target_component: from.compid,
+                mavtype: result,
+                mission_type,
+                opaque_id: 0,
+            }),
+        }
+    }
+
+    fn on_param_changed(&mut self, name: &str) {
+        if name == "JS_GAIN_DEFAULT" {
+            self.gain = self.param("JS_GAIN_DEFAULT", 0.5);
+        }
+    }
+
+    fn set_mode(&mut self, mode: u32, out: &mut Vec<Output>) -> MavResult {
+        match MODES.iter().find(|m| m.0 == mode) {
+            None => {
+                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Mode {mode} does not exist"), out);
+                MavResult::MAV_RESULT_FAILED
+            }
+            Some((_, name, Some(why))) => {
+                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Mode {name} refused: {why}"), out);
+                MavResult::MAV_RESULT_FAILED
+            }
+            Some((m, name, None)) => {
+                if self.mode != *m {
+                    self.mode = *m;
+                    // A mode change is a safety-mode stop.
+                    self.send_neutral(out);
+                    self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {name}"), out);
+                }
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+        }
+    }
+
+    fn command(&mut self, from: Sender, cmd: MavCmd, p: [f32; 7], now: Now, out: &mut Vec<Output>) {
+        use MavCmd as C;
+        use MavResult as R;
+        let reply = from.reply();
+        let ack = |result: MavResult| Output::Send { to: reply, msg: ack(cmd, result, from) };
+        match cmd {
+            C::MAV_CMD_COMPONENT_ARM_DISARM => {
+                let arm = given(p[0]).unwrap_or(0.0) >= 0.5;
+                let force = given(p[1]).is_some_and(|v| (v - 2989.0).abs() < 0.5 || (v - 21196.0).abs() < 0.5);
+                let result = if arm { self.arm(force, now, out) } else { self.disarm("commanded", out) };
+                out.push(ack(result));
+            }
+            C::MAV_CMD_DO_SET_MODE => {
+                let mode = given(p[1]).map_or(u32::MAX, |m| m.max(0.0) as u32);
+                let result = self.set_mode(mode, out);
+                out.push(ack(result));
+            }
+            C::MAV_CMD_SET_MESSAGE_INTERVAL => {
+                let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
+                let interval_us = given(p[1]).unwrap_or(0.0);
+                let result = if !telemetry::is_streamable(id) {
+                    R::MAV_RESULT_UNSUPPORTED
+                } else {
+                    let iv = if interval_us < 0.0 {
+                        None
+                    } else if interval_us == 0.0 {
+                        telemetry::default_interval(id)
+                    } else {
+                        Some(Duration::from_micros(interval_us as u64))
+                    };
+                    self.schedules[from.endpoint.min(self.schedules.len() - 1)].set(id, iv, now.mono);
+                    R::MAV_RESULT_ACCEPTED
+                };
+                out.push(ack(result));
+            }
+            C::MAV_CMD_GET_MESSAGE_INTERVAL => {
+                let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
+                if telemetry::is_streamable(id) {
+                    let iv = self.schedules[from.endpoint.min(self.schedules.len() - 1)].interval(id);
+                    out.push(ack(R::MAV_RESULT_ACCEPTED));
+                    out.push(Output::Send {
+                        to: reply,
+                        msg: MavMessage::MESSAGE_INTERVAL(MESSAGE_INTERVAL_DATA {
+                            interval_us: iv.map_or(-1, |d| d.as_micros().min(i32::MAX as u128) as i32),
+                            message_id: id as u16,
+                        }),
+                    });
+                } else {
+                    out.push(ack(R::MAV_RESULT_UNSUPPORTED));
+                }
+            }
+            C::MAV_CMD_REQUEST_MESSAGE => {
+                let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
+                let msgs = match id {
+                    435 => self.available_modes(given(p[1]).unwrap_or(0.0) as u32),
+                    22 => {
+                        // PARAM_VALUE by index (param2).
+                        self.param_value(given(p[1]).unwrap_or(-1.0).max(0.0) as usize).into_iter().collect()
+                    }
+                    300 => vec![protocol_version()],
+                    _ => self.build(id, now),
+                };
+                if msgs.is_empty() {
+                    out.push(ack(R::MAV_RESULT_UNSUPPORTED));
+                } else {
+                    out.push(ack(R::MAV_RESULT_ACCEPTED));
+                    out.extend(msgs.into_iter().map(|msg| Output::Send { to: reply, msg }));
+                }
+            }
+            C::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES => {
+                out.push(ack(R::MAV_RESULT_ACCEPTED));
+                out.push(Output::Send { to: reply, msg: self.autopilot_version() });
+            }
+            C::MAV_CMD_REQUEST_PROTOCOL_VERSION => {
+                out.push(ack(R::MAV_RESULT_ACCEPTED));
+                out.push(Output::Send { to: reply, msg: protocol_version() });
+            }
+            C::MAV_CMD_DO_SET_SERVO => {
+                let result = self.set_servo(given(p[0]).unwrap_or(0.0) as u32, given(p[1]).unwrap_or(0.0), out);
+                out.push(ack(result));
+            }
+            C::MAV_CMD_DO_MOUNT_CONTROL => {
+                let result = match given(p[0]) {
+                    Some(tilt_cdeg) => {
+                        let deg = f64::from(tilt_cdeg) / 100.0;
+                        self.set_tilt_us((1500.0 + deg / 90.0 * 500.0).round(), out);
+                        R::MAV_RESULT_ACCEPTED
+                    }
+                    None => R::MAV_RESULT_DENIED,
+                };
+                out.push(ack(result));
+            }
+            C::MAV_CMD_ILLUMINATOR_ON_OFF => {
+                let on = given(p[0]).unwrap_or(0.0) >= 0.5;
+                let level = if on { self.last_lights_on.max(1) } else { 0 };
+                self.set_lights(level, out);
+                out.push(ack(R::MAV_RESULT_ACCEPTED));
+            }
+            C::MAV_CMD_DO_ILLUMINATOR_CONFIGURE => {
+                let result = match given(p[1]) {
+                    Some(pct) if (0.0..=100.0).contains(&pct) => {
+                        let level = (f64::from(pct) / 100.0 * self.param("NEPT_LIGHTS_MAX", 255.0)).round().clamp(0.0, 255.0) as u8;
+                        self.set_lights(level, out);
+                        R::MAV_RESULT_ACCEPTED
+                    }
+                    _ => R::MAV_RESULT_DENIED,
+                };
+                out.push(ack(result));
+            }
+            _ => out.push(ack(R::MAV_RESULT_UNSUPPORTED)),
+        }
+    }
+
+    fn arm(&mut self, force: bool, now: Now, out: &mut Vec<Output>) -> MavResult {
+        if self.armed {
+            return MavResult::MAV_RESULT_ACCEPTED;
+        }
+        if self.link != LinkState::Up {
+            let why = self.prearm_failure(now).unwrap_or_else(|| "board link down".into());
+            self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, &format!("Arm: {why}"), out);
+            return MavResult::MAV_RESULT_FAILED;
+        }
+        if !force && let Some(why) = self.prearm_failure(now) {
+            self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, &format!("PreArm: {why}"), out);
+            return MavResult::MAV_RESULT_FAILED;
+        }
+        self.armed = true;
+        self.send_neutral(out);
+        self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Armed", out);
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    fn disarm(&mut self, why: &str, out: &mut Vec<Output>) -> MavResult {
+        if self.armed {
+            self.armed = false;
+            self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Disarmed ({why})"), out);
+        }
+        self.send_neutral(out);
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    fn set_lights(&mut self, level: u8, out: &mut Vec<Output>) {
+        self.lights = level;
+        if level > 0 {
+            self.last_lights_on = level;
+        }
+        out.push(Output::Board(Command::Lights(level)));
+    }
+
+    fn set_tilt_us(&mut self, us: f64, out: &mut Vec<Output>) {
+        let lo = self.param("NEPT_TILT_MIN_US", 1000.0);
+        let hi = self.param("NEPT_TILT_MAX_US", 2000.0);
+        let us = us.clamp(lo.min(hi), hi.max(lo)).round() as u16;
+        self.tilt_us = us;
+        out.push(Output::Board(Command::Tilt(us)));
+    }
+
+    /// DO_SET_SERVO: the output's SERVOn_FUNCTION says what it drives.
+    fn set_servo(&mut self, servo: u32, pwm: f32, out: &mut Vec<Output>) -> MavResult {
+        let function = self.params.get(&format!("SERVO{servo}_FUNCTION")).map(|f| f as i64);
+        let pwm = f64::from(pwm);
+        if !(800.0..=2200.0).contains(&pwm) {
+            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Servo {servo}: {pwm} µs out of range"), out);
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        let frac = ((pwm - 1100.0) / 800.0).clamp(0.0, 1.0);
+        match function {
+            Some(59) => {
+                let level = (frac * self.param("NEPT_LIGHTS_MAX", 255.0)).round().clamp(0.0, 255.0) as u8;
+                self.set_lights(level, out);
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            Some(60) => {
+                self.laser = if pwm > 1500.0 { 255 } else { 0 };
+                out.push(Output::Board(Command::Laser(self.laser)));
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            Some(7) => {
+                self.set_tilt_us(pwm, out);
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            Some(33..=35) => {
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("Servo {servo} is a thruster: use MAV_CMD_DO_MOTOR_TEST"),
+                    out,
+                );
+                MavResult::MAV_RESULT_DENIED
+            }
+            _ => MavResult::MAV_RESULT_UNSUPPORTED,
+        }
+    }
+
+    fn available_modes(&self, index: u32) -> Vec<MavMessage> {
+        let n = MODES.len() as u8;
+        MODES
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| index == 0 || *i as u32 + 1 == index)
+            .map(|(i, (num, name, refused))| {
+                MavMessage::AVAILABLE_MODES(AVAILABLE_MODES_DATA {
+                    custom_mode: *num,
+                    properties: if refused.is_some() {
+                        MavModeProperty::MAV_MODE_PROPERTY_NOT_USER_SELECTABLE
+                    } else {
+                        MavModeProperty::empty()
+                    },
+                    number_modes: n,
+                    mode_index: i as u8 + 1,
+                    standard_mode: MavStandardMode::MAV_STANDARD_MODE_NON_STANDARD,
+                    mode_name: chars(name),
+                })
+            })
+            .collect()
+    }
+}
+
+fn protocol_version() -> MavMessage {
+    MavMessage::PROTOCOL_VERSION(PROTOCOL_VERSION_DATA {
+        version: 200,
+        min_version: 100,
+        max_version: 200,
+        spec_version_hash: [0; 8],
+        library_version_hash: [0; 8],
+    })
+}
+
+fn ack(command: MavCmd, result: MavResult, from: Sender) -> MavMessage {
+    MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+        command,
+        result,
+        progress: 0,
+        result_param2: 0,
+        target_system: from.sysid,
+        target_component: from.compid,
+    })
+}
+
+/// COMMAND_ACK for the SET_MODE message: ArduPilot puts the message id (11)
+/// in `command`, and clients wait for exactly that.
+fn ack_set_mode(result: MavResult, from: Sender) -> MavMessage {
+    ack(MavCmd::MAV_CMD_NEPTUNUS_SET_MODE_MESSAGE, result, from)
+}
+
+/// MAVLink FTP: we hold no files. Opening anything answers NAK FileNotFound,
+/// so QGroundControl and MAVProxy fall back to the parameter protocol at once.
+fn ftp_reply(req: &[u8; 251], from: Sender) -> MavMessage {
+    const ACK: u8 = 128;
+    const NAK: u8 = 129;
+    const FILE_NOT_FOUND: u8 = 10;
+    let seq = u16::from_le_bytes([req[0], req[1]]).wrapping_add(1);
+    let session = req[2];
+    let opcode = req[3];
+    let mut payload = [0u8; 251];
+    payload[0..2].copy_from_slice(&seq.to_le_bytes());
+    payload[2] = session;
+    payload[5] = opcode;
+    match opcode {
+        // TerminateSession, ResetSessions: nothing to do, fine.
+        1 | 2 => {
+            payload[3] = ACK;
+            payload[4] = 0;
+        }
+        _ => {
+            payload[3] = NAK;
+            payload[4] = 1;
+            payload[12] = FILE_NOT_FOUND;
+        }
+    }
+    MavMessage::FILE_TRANSFER_PROTOCOL(FILE_TRANSFER_PROTOCOL_DATA {
+        target_network: 0,
+        target_system: from.sysid,
+        target_component: from.compid,
+        payload,
+    })
+}

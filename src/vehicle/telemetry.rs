@@ -1,0 +1,116 @@
+//! Telemetry scheduling: which message is due on which endpoint, at what
+//! interval, following ArduSub's defaults and honouring
+//! SET_MESSAGE_INTERVAL, REQUEST_DATA_STREAM and REQUEST_MESSAGE.
+//!
+//! Pure: intervals are plain numbers and "now" is an argument. Building the
+//! messages is the vehicle's job; this module only keeps the schedule.
+
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// Message ids Neptunus can stream, with ArduSub's default rate in Hz
+/// (0 = not streamed unless asked for).
+pub const STREAMABLE: &[(u32, f64)] = &[
+    (0, 1.0),    // HEARTBEAT
+    (1, 2.0),    // SYS_STATUS
+    (2, 3.0),    // SYSTEM_TIME
+    (30, 10.0),  // ATTITUDE
+    (33, 3.0),   // GLOBAL_POSITION_INT
+    (36, 2.0),   // SERVO_OUTPUT_RAW
+    (74, 10.0),  // VFR_HUD
+    (137, 2.0),  // SCALED_PRESSURE2
+    (147, 3.0),  // BATTERY_STATUS
+    (251, 2.0),  // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
+    (512, 1.0),  // CONTROL_STATUS
+];
+
+/// Legacy REQUEST_DATA_STREAM groups, as ArduPilot maps them for a submarine.
+pub fn stream_group(stream_id: u8) -> &'static [u32] {
+    match stream_id {
+        1 => &[137],          // RAW_SENSORS
+        2 => &[1],            // EXTENDED_STATUS
+        3 => &[36],           // RC_CHANNELS
+        6 => &[33],           // POSITION
+        10 => &[30],          // EXTRA1
+        11 => &[74],          // EXTRA2
+        12 => &[2, 147, 251], // EXTRA3
+        _ => &[],
+    }
+}
+
+/// All groups, for stream id 0 (ALL).
+pub const ALL_GROUPS: [u8; 7] = [1, 2, 3, 6, 10, 11, 12];
+
+/// Default interval of a streamable message, if it has one.
+pub fn default_interval(msg_id: u32) -> Option<Duration> {
+    STREAMABLE
+        .iter()
+        .find(|(id, _)| *id == msg_id)
+        .and_then(|(_, hz)| (*hz > 0.0).then(|| Duration::from_secs_f64(1.0 / hz)))
+}
+
+pub fn is_streamable(msg_id: u32) -> bool {
+    STREAMABLE.iter().any(|(id, _)| *id == msg_id)
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Slot {
+    interval: Duration,
+    next_due: Duration,
+}
+
+/// One endpoint's schedule.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Schedule {
+    slots: BTreeMap<u32, Slot>,
+}
+
+/// Messages faster than this are not honoured (the vehicle ticks at 100 Hz).
+pub const MIN_INTERVAL: Duration = Duration::from_millis(10);
+
+impl Schedule {
+    /// ArduSub's default streams, starting at `now`.
+    pub fn with_defaults(now: Duration) -> Self {
+        let mut s = Self::default();
+        for (id, _) in STREAMABLE {
+            if let Some(iv) = default_interval(*id) {
+                s.slots.insert(*id, Slot { interval: iv, next_due: now });
+            }
+        }
+        s
+    }
+
+    /// Sets an interval; `None` stops the message.
+    pub fn set(&mut self, msg_id: u32, interval: Option<Duration>, now: Duration) {
+        match interval {
+            None => {
+                self.slots.remove(&msg_id);
+            }
+            Some(iv) => {
+                let iv = iv.max(MIN_INTERVAL);
+                let next_due = self.slots.get(&msg_id).map_or(now, |s| s.next_due.min(now + iv));
+                self.slots.insert(msg_id, Slot { interval: iv, next_due });
+            }
+        }
+    }
+
+    /// The current interval (`None` = not streamed).
+    pub fn interval(&self, msg_id: u32) -> Option<Duration> {
+        self.slots.get(&msg_id).map(|s| s.interval)
+    }
+
+    /// Message ids due at `now`; each is rescheduled one interval later
+    /// (kept on its grid, so the average rate is exact; a late tick does
+    /// not cause a burst of catch-up sends).
+    pub fn due(&mut self, now: Duration, out: &mut Vec<u32>) {
+        for (id, slot) in &mut self.slots {
+            if now >= slot.next_due {
+                out.push(*id);
+                slot.next_due += slot.interval;
+                if slot.next_due <= now {
+                    slot.next_due = now + slot.interval;
+                }
+            }
+        }
+    }
+}
