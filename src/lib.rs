@@ -7,9 +7,11 @@
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
 //! - [`app`]: wiring of tasks and shutdown.
+//! - [`vehicle`]: the vehicle core (parameters so far).
 
 pub mod app;
 pub mod config;
 pub mod dialect;
 pub mod firmware;
 pub mod sim;
+pub mod vehicle;
