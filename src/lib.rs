@@ -7,6 +7,7 @@
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
 //! - [`app`]: wiring of tasks and shutdown.
+//! - [`vehicle`]: the vehicle core (parameters so far).
 
 pub mod app;
 pub mod config;

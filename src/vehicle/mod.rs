@@ -2,8 +2,12 @@
 //! and decides every byte sent to the board and to ground stations.
 //!
 //! - [`machine`]: the state machine, `Vehicle::handle(input, now) -> outputs`.
-//! - [`params`]: the parameter set (ArduSub names), validation and storage.
+//! - [`params`]: the MAVLink parameter set (ArduSub names and types where
+//!   the meaning is the same), its validation and its file storage.
 //! - [`telemetry`]: the per-endpoint telemetry schedule.
+//!
+//! Nothing here opens a socket, reads a clock or sleeps; time comes in as an
+//! argument and effects go out as values.
 
 pub mod machine;
 pub mod params;

@@ -1,0 +1,1225 @@
+//! The MAVLink parameter set, its validation and its file storage.
+//!
+//! Neptunus presents itself as ArduSub, so ground stations (QGroundControl
+//! above all) expect ArduSub's parameter names and types: a missing one makes
+//! QGC pop up an error, a wrong type breaks its write echo. Every parameter is
+//! therefore either one Neptunus acts on ([`Use::Neptunus`]) or one that
+//! exists only so ground stations work ([`Use::Compat`], no effect). Our own
+//! parameters are prefixed `NEPT_`.
+//!
+//! This module owns the list ([`definitions`], in the index order of
+//! PARAM_REQUEST_READ), the values ([`ParamStore`]), the typed accessors the
+//! vehicle uses, and `params.toml` in the data directory ([`ParamFile`]).
+//! It never touches a socket or a clock; the only I/O is [`ParamFile`].
+//!
+//! Values are `f64` holding the numeric value, as MAVLink's C-cast encoding
+//! carries it: integer parameters hold integral values, REAL32 parameters
+//! hold values exactly representable as `f32`. No parameter is UINT8/UINT16
+//! (QGC fails to match its own write echo for those).
+
+use std::collections::HashMap;
+use std::fmt::Write as _;
+use std::fs::{self, File};
+use std::io::{self, Write as _};
+use std::path::{Path, PathBuf};
+use std::sync::LazyLock;
+
+use crate::dialect::neptunus::MavParamType;
+
+/// Wire type of a parameter (only the types ArduSub uses).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum ParamType {
+    Int8,
+    Int16,
+    Int32,
+    Real32,
+}
+
+impl ParamType {
+    /// The MAVLink `MAV_PARAM_TYPE` sent in PARAM_VALUE.
+    pub fn mav_type(self) -> MavParamType {
+        match self {
+            Self::Int8 => MavParamType::MAV_PARAM_TYPE_INT8,
+            Self::Int16 => MavParamType::MAV_PARAM_TYPE_INT16,
+            Self::Int32 => MavParamType::MAV_PARAM_TYPE_INT32,
+            Self::Real32 => MavParamType::MAV_PARAM_TYPE_REAL32,
+        }
+    }
+
+    /// The name used in documentation (`INT8`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Int8 => "INT8",
+            Self::Int16 => "INT16",
+            Self::Int32 => "INT32",
+            Self::Real32 => "REAL32",
+        }
+    }
+
+    /// Smallest and largest value the wire type can carry.
+    pub fn limits(self) -> (f64, f64) {
+        match self {
+            Self::Int8 => (i8::MIN.into(), i8::MAX.into()),
+            Self::Int16 => (i16::MIN.into(), i16::MAX.into()),
+            Self::Int32 => (i32::MIN.into(), i32::MAX.into()),
+            Self::Real32 => (f32::MIN.into(), f32::MAX.into()),
+        }
+    }
+
+    pub fn is_integer(self) -> bool {
+        self != Self::Real32
+    }
+}
+
+/// Whether Neptunus acts on a parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Use {
+    /// Neptunus acts on it.
+    Neptunus,
+    /// Exists so that ground stations work; setting it has no effect.
+    Compat,
+}
+
+/// One parameter: name, wire type, default, inclusive range and documentation.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ParamDef {
+    pub name: &'static str,
+    pub ty: ParamType,
+    pub default: f64,
+    pub min: f64,
+    pub max: f64,
+    pub units: &'static str,
+    pub doc: &'static str,
+    pub used: Use,
+}
+
+#[allow(clippy::too_many_arguments)]
+const fn def(
+    name: &'static str,
+    ty: ParamType,
+    default: f64,
+    min: f64,
+    max: f64,
+    units: &'static str,
+    used: Use,
+    doc: &'static str,
+) -> ParamDef {
+    ParamDef {
+        name,
+        ty,
+        default,
+        min,
+        max,
+        units,
+        doc,
+        used,
+    }
+}
+
+use ParamType::{Int8, Int16, Int32, Real32};
+use Use::{Compat, Neptunus};
+
+/// Button function code of Neptunus' own "toggle the laser" (not in ArduSub).
+pub const BTN_FUNCTION_LASER_TOGGLE: u8 = 101;
+/// ArduSub's button function "disarm".
+pub const BTN_FUNCTION_DISARM: u8 = 4;
+/// ArduSub's button function "arm_toggle".
+pub const BTN_FUNCTION_ARM_TOGGLE: u8 = 2;
+
+/// Whether `code` is a button function ArduSub knows (or our laser toggle).
+pub fn is_button_function(code: u8) -> bool {
+    matches!(code, 0..=13 | 21..=27 | 31..=36 | 41..=49 | 51..=59 | 61..=87 | 91..=96)
+        || code == BTN_FUNCTION_LASER_TOGGLE
+}
+
+/// Number of joystick buttons with a BTNn_FUNCTION/SFUNCTION pair.
+pub const BUTTONS: usize = 32;
+
+macro_rules! button_names {
+    ($($n:literal)*) => {
+        [$((concat!("BTN", $n, "_FUNCTION"), concat!("BTN", $n, "_SFUNCTION"))),*]
+    };
+}
+
+const BTN_NAMES: [(&str, &str); BUTTONS] = button_names!(
+    0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23 24 25 26 27 28 29 30 31
+);
+
+/// ArduSub's default button map (regular, shifted) for buttons 0..15;
+/// buttons 16..31 default to 0 (none).
+pub const BTN_DEFAULTS: [(u8, u8); 16] = [
+    (0, 0),   // 0: none
+    (5, 0),   // 1: mode_manual
+    (7, 0),   // 2: mode_depth_hold
+    (6, 0),   // 3: mode_stabilize
+    (4, 0),   // 4: disarm
+    (1, 0),   // 5: shift
+    (3, 0),   // 6: arm
+    (21, 0),  // 7: mount_center
+    (48, 0),  // 8: input_hold_set
+    (23, 27), // 9: mount_tilt_down / mount_pan_left
+    (22, 26), // 10: mount_tilt_up / mount_pan_right
+    (42, 47), // 11: gain_inc / trim_pitch_dec
+    (43, 46), // 12: gain_dec / trim_pitch_inc
+    (33, 45), // 13: lights1_dimmer / trim_roll_dec
+    (32, 44), // 14: lights1_brighter / trim_roll_inc
+    (0, 0),   // 15: none
+];
+
+const BTN_DOC: &str = "Function of joystick button n (BTNn_FUNCTION) or of button n while \
+     the shift button is held (BTNn_SFUNCTION). ArduSub's function codes: 0 none, 1 shift, \
+     2 arm_toggle, 3 arm, 4 disarm, 5..13 modes, 21..27 mount and camera, 31..36 lights, \
+     41..49 gain, trim, input hold and roll/pitch, 51..59 relays, 61..87 actuators, \
+     91..96 custom; plus Neptunus' 101 = toggle the laser. Some button must be disarm (4) \
+     or arm_toggle (2) for arming to be allowed.";
+
+/// Virtual output map (SERVOn_FUNCTION): what QGC's Lights and Motors pages
+/// need to see for Neptunus' hardware.
+const SERVOS: [(&str, f64, &str); 16] = [
+    (
+        "SERVO1_FUNCTION",
+        33.0,
+        "Output 1 = motor 1 (starboard thruster). Fixed: describes Neptunus' hardware for ground stations; no effect.",
+    ),
+    (
+        "SERVO2_FUNCTION",
+        34.0,
+        "Output 2 = motor 2 (port thruster). Fixed: describes Neptunus' hardware for ground stations; no effect.",
+    ),
+    (
+        "SERVO3_FUNCTION",
+        35.0,
+        "Output 3 = motor 3 (vertical thruster). Fixed: describes Neptunus' hardware for ground stations; no effect.",
+    ),
+    (
+        "SERVO4_FUNCTION",
+        0.0,
+        "Output 4: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO5_FUNCTION",
+        0.0,
+        "Output 5: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO6_FUNCTION",
+        60.0,
+        "Output 6 = lights 2 (60), which is the laser on Neptunus, so QGC's Lights page finds it. Fixed; no effect.",
+    ),
+    (
+        "SERVO7_FUNCTION",
+        59.0,
+        "Output 7 = lights 1 (59), the lamp, so QGC's Lights page finds it. Fixed; no effect.",
+    ),
+    (
+        "SERVO8_FUNCTION",
+        7.0,
+        "Output 8 = camera tilt (7). Fixed: describes Neptunus' hardware for ground stations; no effect.",
+    ),
+    (
+        "SERVO9_FUNCTION",
+        0.0,
+        "Output 9: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO10_FUNCTION",
+        0.0,
+        "Output 10: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO11_FUNCTION",
+        0.0,
+        "Output 11: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO12_FUNCTION",
+        0.0,
+        "Output 12: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO13_FUNCTION",
+        0.0,
+        "Output 13: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO14_FUNCTION",
+        0.0,
+        "Output 14: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO15_FUNCTION",
+        0.0,
+        "Output 15: unused. Fixed; no effect.",
+    ),
+    (
+        "SERVO16_FUNCTION",
+        0.0,
+        "Output 16: unused. Fixed; no effect.",
+    ),
+];
+
+const I32_MAX: f64 = i32::MAX as f64;
+
+/// Identity, control authority, motors, joystick and lights (before the buttons).
+#[rustfmt::skip]
+const HEAD: &[ParamDef] = &[
+    def("SYSID_THISMAV", Int16, 1.0, 1.0, 255.0, "", Neptunus,
+        "MAVLink system id of the vehicle. Takes effect at the next start."),
+    def("SYSID_MYGCS", Int16, 255.0, 1.0, 255.0, "", Neptunus,
+        "System id of the main ground station (QGroundControl and MAVProxy use 255). MANUAL_CONTROL is accepted from it and from the NEPT_GCS_ALLOWn ids; its heartbeats feed the GCS failsafe."),
+    def("NEPT_CTRL_CLAIM", Int8, 0.0, 0.0, 1.0, "", Neptunus,
+        "How an allowed ground station gets control of a vehicle nobody controls: 0 = the first one that drives (MANUAL_CONTROL) or arms (ArduSub-like), 1 = only by an explicit MAV_CMD_REQUEST_OPERATOR_CONTROL."),
+    def("NEPT_GCS_ALLOW1", Int16, 245.0, 0.0, 255.0, "", Neptunus,
+        "Another ground-station system id allowed to control the vehicle besides SYSID_MYGCS (245 = MAVSDK's default); 0 = unused slot."),
+    def("NEPT_GCS_ALLOW2", Int16, 0.0, 0.0, 255.0, "", Neptunus,
+        "Another ground-station system id allowed to control the vehicle; 0 = unused slot."),
+    def("NEPT_GCS_ALLOW3", Int16, 0.0, 0.0, 255.0, "", Neptunus,
+        "Another ground-station system id allowed to control the vehicle; 0 = unused slot."),
+    def("NEPT_GCS_ALLOW4", Int16, 0.0, 0.0, 255.0, "", Neptunus,
+        "Another ground-station system id allowed to control the vehicle; 0 = unused slot."),
+    def("FRAME_CONFIG", Int8, 4.0, 4.0, 4.0, "", Compat,
+        "Frame: 4 = SimpleROV-3, from which QGC derives three thrusters. Fixed: Neptunus' mixer is always the three-thruster one; no effect."),
+    def("MOT_1_DIRECTION", Int8, 1.0, -1.0, 1.0, "", Neptunus,
+        "Direction of motor 1, the starboard thruster (SimpleROV-3 factors: yaw -1, forward +1): 1 normal, -1 reversed."),
+    def("MOT_2_DIRECTION", Int8, -1.0, -1.0, 1.0, "", Neptunus,
+        "Direction of motor 2, the port thruster (SimpleROV-3 factors: yaw +1, forward +1): 1 normal, -1 reversed. Default -1 because Neptunus' port thruster is wired reversed."),
+    def("MOT_3_DIRECTION", Int8, 1.0, -1.0, 1.0, "", Neptunus,
+        "Direction of motor 3, the vertical thruster (SimpleROV-3 factor: throttle -1): 1 normal, -1 reversed."),
+    def("MOT_PWM_MIN", Int16, 1100.0, 1000.0, 2000.0, "µs", Neptunus,
+        "Pulse width for full reverse thrust. Must stay below the 1500 µs neutral (and so below MOT_PWM_MAX)."),
+    def("MOT_PWM_MAX", Int16, 1900.0, 1000.0, 2000.0, "µs", Neptunus,
+        "Pulse width for full forward thrust. Must stay above the 1500 µs neutral (and so above MOT_PWM_MIN)."),
+    def("JS_GAIN_DEFAULT", Real32, 0.5, 0.1, 1.0, "", Neptunus,
+        "Pilot gain at start: stick deflection is scaled by it (clamped to JS_GAIN_MIN..JS_GAIN_MAX)."),
+    def("JS_GAIN_MIN", Real32, 0.25, 0.1, 0.8, "", Neptunus,
+        "Lowest pilot gain the gain buttons reach."),
+    def("JS_GAIN_MAX", Real32, 1.0, 0.2, 1.0, "", Neptunus,
+        "Highest pilot gain the gain buttons reach."),
+    def("JS_GAIN_STEPS", Int8, 4.0, 1.0, 10.0, "", Neptunus,
+        "Number of steps between JS_GAIN_MIN and JS_GAIN_MAX for the gain buttons."),
+    def("JS_THR_GAIN", Real32, 1.0, 0.5, 4.0, "", Neptunus,
+        "Extra gain on the throttle (vertical) axis, on top of the pilot gain."),
+    def("JS_LIGHTS_STEPS", Int16, 8.0, 1.0, 10.0, "", Neptunus,
+        "Number of brightness steps of the lights buttons from off to full."),
+    def("NEPT_LIGHTS_MAX", Int16, 255.0, 0.0, 255.0, "", Neptunus,
+        "Lamp level sent to the OpenROV board (ligt) at full brightness; lower it to cap the lamp's power."),
+    def("NEPT_TILT_MIN_US", Int16, 1000.0, 500.0, 2500.0, "µs", Neptunus,
+        "Camera tilt servo pulse width at the lowest tilt. Must be below NEPT_TILT_MAX_US."),
+    def("NEPT_TILT_MAX_US", Int16, 2000.0, 500.0, 2500.0, "µs", Neptunus,
+        "Camera tilt servo pulse width at the highest tilt. Must be above NEPT_TILT_MIN_US."),
+];
+
+/// Failsafes, battery, arming, depth (after the buttons).
+#[rustfmt::skip]
+const SAFETY: &[ParamDef] = &[
+    def("FS_GCS_ENABLE", Int8, 2.0, 0.0, 4.0, "", Neptunus,
+        "Action when the controlling ground station's heartbeats stop for FS_GCS_TIMEOUT while armed: 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface."),
+    def("FS_GCS_TIMEOUT", Real32, 5.0, 2.0, 120.0, "s", Neptunus,
+        "Time without a heartbeat from the controlling ground station before the GCS failsafe acts."),
+    def("FS_PILOT_INPUT", Int8, 2.0, 0.0, 2.0, "", Neptunus,
+        "Action when pilot input (MANUAL_CONTROL or RC override) stops for FS_PILOT_TIMEOUT while armed: 0 off, 1 warn, 2 disarm. The sticks go neutral first in every case."),
+    def("FS_PILOT_TIMEOUT", Real32, 3.0, 0.1, 3.0, "s", Neptunus,
+        "Time without pilot input before the pilot-input failsafe acts."),
+    def("FS_LEAK_ENABLE", Int8, 1.0, 0.0, 2.0, "", Compat,
+        "Leak failsafe (0 off, 1 warn, 2 surface). The OpenROV 2.x has no leak sensor (LEAK1_PIN -1): no effect."),
+    def("LEAK1_PIN", Int8, -1.0, -1.0, 127.0, "", Compat,
+        "Leak sensor input; -1 = none, which is the OpenROV 2.x. No effect."),
+    def("LEAK1_LOGIC", Int8, 0.0, 0.0, 1.0, "", Compat,
+        "Leak sensor polarity (0 low when dry, 1 high when dry). No effect: there is no leak sensor."),
+    def("FS_EKF_ACTION", Int8, 1.0, 0.0, 2.0, "", Compat,
+        "EKF failsafe action (0 off, 1 warn, 2 disarm). Neptunus has no EKF: no effect."),
+    def("FS_EKF_THRESH", Real32, 0.8, 0.6, 1.0, "", Compat,
+        "EKF variance threshold of the EKF failsafe. No effect."),
+    def("FS_PRESS_ENABLE", Int8, 0.0, 0.0, 1.0, "", Compat,
+        "Internal pressure failsafe (0 off, 1 warn). The OpenROV 2.x has no internal pressure sensor: no effect."),
+    def("FS_PRESS_MAX", Int32, 105_000.0, 0.0, 1_000_000.0, "Pa", Compat,
+        "Internal pressure limit of the pressure failsafe. No effect."),
+    def("FS_TEMP_ENABLE", Int8, 0.0, 0.0, 1.0, "", Compat,
+        "Internal temperature failsafe (0 off, 1 warn). No effect."),
+    def("FS_TEMP_MAX", Int8, 62.0, 0.0, 100.0, "°C", Compat,
+        "Internal temperature limit of the temperature failsafe. No effect."),
+    def("FS_OPTIONS", Int32, 0.0, 0.0, 255.0, "", Compat,
+        "ArduSub failsafe option bits (QGC's status drawer reads them). No effect."),
+    def("BATT_MONITOR", Int8, 4.0, 4.0, 4.0, "", Compat,
+        "Battery monitor: 4 = voltage and current, which the OpenROV board always reports. Fixed; no effect."),
+    def("BATT_CAPACITY", Int32, 3300.0, 0.0, 1_000_000.0, "mAh", Compat,
+        "Battery capacity. No effect yet (Neptunus estimates charge from voltage)."),
+    def("BATT_LOW_VOLT", Real32, 10.5, 0.0, 30.0, "V", Neptunus,
+        "Battery voltage below which the low-battery failsafe acts (BATT_FS_LOW_ACT) and arming is refused; 0 = off."),
+    def("BATT_FS_LOW_ACT", Int8, 1.0, 0.0, 3.0, "", Neptunus,
+        "Action of the low-battery failsafe: 0 none, 1 warn, 2 disarm, 3 surface."),
+    def("BATT_CRT_VOLT", Real32, 0.0, 0.0, 30.0, "V", Neptunus,
+        "Battery voltage below which the critical-battery failsafe acts (BATT_FS_CRT_ACT); 0 = off."),
+    def("BATT_FS_CRT_ACT", Int8, 0.0, 0.0, 3.0, "", Neptunus,
+        "Action of the critical-battery failsafe: 0 none, 1 warn, 2 disarm, 3 surface."),
+    def("BATT_LOW_MAH", Real32, 0.0, 0.0, 1_000_000.0, "mAh", Compat,
+        "Remaining-capacity threshold of the low-battery failsafe. Neptunus counts no mAh: no effect."),
+    def("BATT_CRT_MAH", Real32, 0.0, 0.0, 1_000_000.0, "mAh", Compat,
+        "Remaining-capacity threshold of the critical-battery failsafe. No effect."),
+    def("ARMING_CHECK", Int32, 1.0, 0.0, I32_MAX, "", Compat,
+        "ArduPilot pre-arm check bits. Neptunus' own pre-arm checks always run: no effect."),
+    def("SURFACE_DEPTH", Real32, -10.0, -100.0, 0.0, "cm", Neptunus,
+        "Depth (negative below the surface) at which the vehicle counts as surfaced: depth hold and surface mode stop climbing there."),
+];
+
+/// Sensors and calibration that QGC checks to call setup complete.
+#[rustfmt::skip]
+const SENSORS: &[ParamDef] = &[
+    def("AHRS_ORIENTATION", Int8, 0.0, 0.0, 101.0, "", Compat,
+        "Mounting rotation of the autopilot board. The OpenROV IMU reports attitude in the vehicle frame: no effect."),
+    def("COMPASS_DEV_ID", Int32, 0.0, 0.0, 0.0, "", Compat,
+        "Compass device id; fixed at 0 (no compass for ground stations to calibrate; the OpenROV IMU calibrates itself). No effect."),
+    def("COMPASS_DEV_ID2", Int32, 0.0, 0.0, 0.0, "", Compat,
+        "Second compass device id; fixed at 0 (none). No effect."),
+    def("COMPASS_DEV_ID3", Int32, 0.0, 0.0, 0.0, "", Compat,
+        "Third compass device id; fixed at 0 (none). No effect."),
+    def("COMPASS_OFS_X", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Compass offset X. No effect."),
+    def("COMPASS_OFS_Y", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Compass offset Y. No effect."),
+    def("COMPASS_OFS_Z", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Compass offset Z. No effect."),
+    def("COMPASS_OFS2_X", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Second compass offset X. No effect."),
+    def("COMPASS_OFS2_Y", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Second compass offset Y. No effect."),
+    def("COMPASS_OFS2_Z", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Second compass offset Z. No effect."),
+    def("COMPASS_OFS3_X", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Third compass offset X. No effect."),
+    def("COMPASS_OFS3_Y", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Third compass offset Y. No effect."),
+    def("COMPASS_OFS3_Z", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
+        "Third compass offset Z. No effect."),
+    def("COMPASS_DEC", Real32, 0.0, -3.142, 3.142, "rad", Compat,
+        "Magnetic declination. Heading is reported as the IMU gives it: no effect."),
+    def("COMPASS_AUTODEC", Int8, 1.0, 0.0, 1.0, "", Compat,
+        "Automatic declination (0 off, 1 on). No effect."),
+    def("INS_ACCOFFS_X", Real32, 0.001, -3.5, 3.5, "m/s²", Compat,
+        "Accelerometer offset X: a small non-zero value, because all offsets 0 tells QGC the accelerometer is uncalibrated. The OpenROV IMU calibrates itself: no effect."),
+    def("INS_ACCOFFS_Y", Real32, -0.002, -3.5, 3.5, "m/s²", Compat,
+        "Accelerometer offset Y (non-zero so QGC shows setup complete). No effect."),
+    def("INS_ACCOFFS_Z", Real32, 0.003, -3.5, 3.5, "m/s²", Compat,
+        "Accelerometer offset Z (non-zero so QGC shows setup complete). No effect."),
+];
+
+/// QGC's Tuning page; the heading (yaw) and depth (Z) gains are used by
+/// Neptunus' heading hold and depth hold, the rest exist for QGC only.
+#[rustfmt::skip]
+const TUNING: &[ParamDef] = &[
+    def("ATC_ANG_PIT_P", Real32, 4.5, 3.0, 12.0, "", Compat,
+        "Pitch angle P gain. Neptunus has no pitch control: no effect."),
+    def("ATC_ANG_RLL_P", Real32, 4.5, 3.0, 12.0, "", Compat,
+        "Roll angle P gain. Neptunus has no roll control: no effect."),
+    def("ATC_ANG_YAW_P", Real32, 4.5, 3.0, 12.0, "", Neptunus,
+        "Heading hold: heading error to yaw rate P gain."),
+    def("ATC_RAT_PIT_P", Real32, 0.135, 0.0, 0.5, "", Compat,
+        "Pitch rate P gain. No effect."),
+    def("ATC_RAT_PIT_I", Real32, 0.09, 0.0, 2.0, "", Compat,
+        "Pitch rate I gain. No effect."),
+    def("ATC_RAT_PIT_IMAX", Real32, 0.444, 0.0, 1.0, "", Compat,
+        "Pitch rate I limit. No effect."),
+    def("ATC_RAT_PIT_D", Real32, 0.0036, 0.0, 0.05, "", Compat,
+        "Pitch rate D gain. No effect."),
+    def("ATC_RAT_RLL_P", Real32, 0.135, 0.0, 0.5, "", Compat,
+        "Roll rate P gain. No effect."),
+    def("ATC_RAT_RLL_I", Real32, 0.09, 0.0, 2.0, "", Compat,
+        "Roll rate I gain. No effect."),
+    def("ATC_RAT_RLL_IMAX", Real32, 0.444, 0.0, 1.0, "", Compat,
+        "Roll rate I limit. No effect."),
+    def("ATC_RAT_RLL_D", Real32, 0.0036, 0.0, 0.05, "", Compat,
+        "Roll rate D gain. No effect."),
+    def("ATC_RAT_YAW_P", Real32, 0.18, 0.0, 2.5, "", Neptunus,
+        "Heading hold: yaw rate error to yaw demand P gain."),
+    def("ATC_RAT_YAW_I", Real32, 0.018, 0.0, 1.0, "", Neptunus,
+        "Heading hold: yaw rate I gain."),
+    def("ATC_RAT_YAW_IMAX", Real32, 0.222, 0.0, 1.0, "", Neptunus,
+        "Heading hold: limit of the yaw rate integrator, as a fraction of full yaw demand."),
+    def("ATC_RAT_YAW_D", Real32, 0.0, 0.0, 0.02, "", Neptunus,
+        "Heading hold: yaw rate D gain."),
+    def("PSC_POSXY_P", Real32, 1.0, 0.5, 2.0, "", Compat,
+        "Horizontal position P gain. Neptunus has no position estimate: no effect."),
+    def("PSC_POSZ_P", Real32, 3.0, 1.0, 3.0, "", Neptunus,
+        "Depth hold: depth error to climb rate P gain."),
+    def("PSC_VELXY_P", Real32, 2.0, 0.1, 6.0, "", Compat,
+        "Horizontal velocity P gain. No effect."),
+    def("PSC_VELXY_I", Real32, 1.0, 0.02, 1.0, "", Compat,
+        "Horizontal velocity I gain. No effect."),
+    def("PSC_VELXY_IMAX", Real32, 100.0, 0.0, 4500.0, "cm/s²", Compat,
+        "Horizontal velocity I limit. No effect."),
+    def("PSC_VELZ_P", Real32, 8.0, 1.0, 8.0, "", Neptunus,
+        "Depth hold: climb rate error to vertical acceleration P gain."),
+    def("PSC_ACCZ_P", Real32, 0.5, 0.2, 1.5, "", Neptunus,
+        "Depth hold: vertical acceleration error to vertical thrust P gain."),
+    def("PSC_ACCZ_I", Real32, 0.1, 0.0, 3.0, "", Neptunus,
+        "Depth hold: vertical acceleration I gain (holds buoyancy trim)."),
+    def("PSC_ACCZ_IMAX", Real32, 100.0, 0.0, 1000.0, "d%", Neptunus,
+        "Depth hold: limit of the vertical acceleration integrator, in tenths of a percent of full vertical thrust."),
+    def("PSC_ACCZ_D", Real32, 0.0, 0.0, 0.4, "", Neptunus,
+        "Depth hold: vertical acceleration D gain."),
+    def("PSC_ACCZ_FLTD", Real32, 0.0, 0.0, 100.0, "Hz", Neptunus,
+        "Depth hold: low-pass cutoff of the D term; 0 = no filter."),
+    def("PSC_ACCZ_FLTE", Real32, 20.0, 0.0, 100.0, "Hz", Neptunus,
+        "Depth hold: low-pass cutoff of the acceleration error; 0 = no filter."),
+    def("PSC_ACCZ_FLTT", Real32, 0.0, 0.0, 100.0, "Hz", Neptunus,
+        "Depth hold: low-pass cutoff of the acceleration target; 0 = no filter."),
+    def("WPNAV_ACCEL", Real32, 100.0, 50.0, 500.0, "cm/s²", Compat,
+        "Waypoint horizontal acceleration. Neptunus has no waypoint navigation: no effect."),
+    def("WPNAV_ACCEL_Z", Real32, 100.0, 50.0, 500.0, "cm/s²", Compat,
+        "Waypoint vertical acceleration. No effect."),
+    def("WPNAV_RADIUS", Real32, 200.0, 5.0, 1000.0, "cm", Compat,
+        "Waypoint radius. No effect."),
+    def("WPNAV_SPEED", Real32, 500.0, 20.0, 2000.0, "cm/s", Compat,
+        "Waypoint horizontal speed. No effect."),
+    def("WPNAV_SPEED_DN", Real32, 150.0, 10.0, 500.0, "cm/s", Compat,
+        "Waypoint descent speed. No effect."),
+    def("WPNAV_SPEED_UP", Real32, 250.0, 10.0, 1000.0, "cm/s", Compat,
+        "Waypoint ascent speed. No effect."),
+    def("LOIT_SPEED", Real32, 1250.0, 20.0, 3500.0, "cm/s", Compat,
+        "Position-hold speed. Neptunus has no position hold: no effect."),
+    def("LOIT_ACC_MAX", Real32, 500.0, 100.0, 981.0, "cm/s²", Compat,
+        "Position-hold acceleration. No effect."),
+    def("LOIT_ANG_MAX", Real32, 0.0, 0.0, 45.0, "deg", Compat,
+        "Position-hold lean angle. No effect."),
+    def("LOIT_BRK_ACCEL", Real32, 250.0, 25.0, 250.0, "cm/s²", Compat,
+        "Position-hold braking acceleration. No effect."),
+    def("LOIT_BRK_DELAY", Real32, 1.0, 0.0, 2.0, "s", Compat,
+        "Position-hold braking delay. No effect."),
+    def("LOIT_BRK_JERK", Real32, 500.0, 500.0, 5000.0, "cm/s³", Compat,
+        "Position-hold braking jerk. No effect."),
+];
+
+const SR_DOC: &str = "Legacy stream rate of this telemetry group on link 0. Neptunus schedules \
+     telemetry per message (REQUEST_DATA_STREAM, SET_MESSAGE_INTERVAL) instead: no effect.";
+
+/// Legacy stream rates and output hardware description (at the end).
+#[rustfmt::skip]
+const TAIL: &[ParamDef] = &[
+    def("SR0_RAW_SENS", Int16, 2.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("SR0_EXT_STAT", Int16, 2.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("SR0_RC_CHAN", Int16, 2.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("SR0_POSITION", Int16, 3.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("SR0_EXTRA1", Int16, 10.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("SR0_EXTRA2", Int16, 10.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("SR0_EXTRA3", Int16, 3.0, 0.0, 50.0, "Hz", Compat, SR_DOC),
+    def("BRD_PWM_COUNT", Int8, 8.0, 0.0, 16.0, "", Compat,
+        "Number of outputs used as PWM (QGC's Lights page reads it). No effect."),
+];
+
+static DEFS: LazyLock<Vec<ParamDef>> = LazyLock::new(|| {
+    let mut defs = Vec::with_capacity(
+        HEAD.len() + 2 * BUTTONS + SAFETY.len() + SENSORS.len() + TUNING.len() + TAIL.len() + 16,
+    );
+    defs.extend_from_slice(HEAD);
+    for (i, (name, sname)) in BTN_NAMES.iter().enumerate() {
+        let (function, shifted) = BTN_DEFAULTS.get(i).copied().unwrap_or((0, 0));
+        defs.push(def(
+            name,
+            Int16,
+            function.into(),
+            0.0,
+            BTN_FUNCTION_LASER_TOGGLE.into(),
+            "",
+            Neptunus,
+            BTN_DOC,
+        ));
+        defs.push(def(
+            sname,
+            Int16,
+            shifted.into(),
+            0.0,
+            BTN_FUNCTION_LASER_TOGGLE.into(),
+            "",
+            Neptunus,
+            BTN_DOC,
+        ));
+    }
+    defs.extend_from_slice(SAFETY);
+    defs.extend_from_slice(SENSORS);
+    defs.extend_from_slice(TUNING);
+    defs.extend_from_slice(TAIL);
+    for (name, function, doc) in SERVOS {
+        defs.push(def(
+            name, Int16, function, function, function, "", Compat, doc,
+        ));
+    }
+    defs
+});
+
+static INDEX: LazyLock<HashMap<&'static str, usize>> =
+    LazyLock::new(|| DEFS.iter().enumerate().map(|(i, d)| (d.name, i)).collect());
+
+/// Every parameter, in index order (PARAM_REQUEST_READ by index uses it).
+pub fn definitions() -> &'static [ParamDef] {
+    &DEFS
+}
+
+/// Index of the parameter called `name` (exact, case-sensitive).
+pub fn index_of(name: &str) -> Option<usize> {
+    INDEX.get(name).copied()
+}
+
+/// Rejected parameter writes.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ParamError {
+    #[error("no parameter named {0}")]
+    Unknown(String),
+    #[error("{name} = {value} is outside {min}..{max}")]
+    OutOfRange {
+        name: String,
+        value: f64,
+        min: f64,
+        max: f64,
+    },
+    #[error("{name} = {value} is not a valid value: {why}")]
+    Invalid {
+        name: String,
+        value: f64,
+        why: String,
+    },
+}
+
+/// What a failsafe does when it triggers, decoded from its ArduSub parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailsafeAction {
+    Off,
+    Warn,
+    Disarm,
+    DepthHold,
+    Surface,
+}
+
+/// How an allowed ground station gets control of an unowned vehicle
+/// (`NEPT_CTRL_CLAIM`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControlClaim {
+    /// The first allowed GCS that drives or arms takes control (ArduSub-like).
+    FirstToDrive,
+    /// Only an explicit MAV_CMD_REQUEST_OPERATOR_CONTROL takes control.
+    ExplicitOnly,
+}
+
+/// PID gains as ArduPilot names them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PidGains {
+    pub p: f32,
+    pub i: f32,
+    pub imax: f32,
+    pub d: f32,
+}
+
+/// Neutral thruster pulse width; MOT_PWM_MIN/MAX must bracket it.
+pub const PWM_NEUTRAL_US: f64 = 1500.0;
+
+/// The values of every parameter, aligned with [`definitions`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamStore {
+    values: Vec<f64>,
+}
+
+impl Default for ParamStore {
+    fn default() -> Self {
+        Self::defaults()
+    }
+}
+
+/// The value as it travels: REAL32 rounded to `f32`, integers cast toward zero.
+fn wire_value(ty: ParamType, value: f64) -> f64 {
+    match ty {
+        ParamType::Real32 => f64::from(value as f32),
+        _ => value.trunc(),
+    }
+}
+
+impl ParamStore {
+    /// Every parameter at its default.
+    pub fn defaults() -> Self {
+        Self {
+            values: DEFS.iter().map(|d| wire_value(d.ty, d.default)).collect(),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    pub fn get(&self, name: &str) -> Option<f64> {
+        index_of(name).map(|i| self.values[i])
+    }
+
+    pub fn get_index(&self, index: usize) -> Option<(&'static ParamDef, f64)> {
+        Some((definitions().get(index)?, *self.values.get(index)?))
+    }
+
+    /// Validates and stores a value; returns the value stored.
+    ///
+    /// The value must be finite and inside the parameter's range. Integer
+    /// parameters take it rounded toward zero, as a C cast would (1.9 → 1,
+    /// -1.5 → -1); REAL32 parameters take it rounded to `f32`. Button
+    /// functions must be a known code, motor directions ±1, and pairs that
+    /// bracket something (MOT_PWM_MIN/MAX around neutral, the tilt range)
+    /// must keep doing so. On error nothing changes.
+    pub fn set(&mut self, name: &str, value: f64) -> Result<f64, ParamError> {
+        let index = index_of(name).ok_or_else(|| ParamError::Unknown(name.to_owned()))?;
+        let d = &definitions()[index];
+        let invalid = |why: &str| ParamError::Invalid {
+            name: d.name.to_owned(),
+            value,
+            why: why.to_owned(),
+        };
+        if !value.is_finite() {
+            return Err(invalid("not a finite number"));
+        }
+        let v = wire_value(d.ty, value);
+        let outside = match d.ty {
+            // Compare in f32 so a bound such as 0.7 accepts 0.7 sent as REAL32.
+            ParamType::Real32 => {
+                !v.is_finite() || (v as f32) < (d.min as f32) || (v as f32) > (d.max as f32)
+            }
+            _ => v < d.min || v > d.max,
+        };
+        if outside {
+            return Err(ParamError::OutOfRange {
+                name: d.name.to_owned(),
+                value,
+                min: d.min,
+                max: d.max,
+            });
+        }
+        if d.name.starts_with("BTN") {
+            // In range 0..=101, so the cast is exact.
+            if !is_button_function(v as u8) {
+                return Err(invalid(
+                    "not an ArduSub button function (0..13, 21..27, 31..36, 41..49, 51..59, 61..87, 91..96) nor 101 (Neptunus laser toggle)",
+                ));
+            }
+        } else if d.name.starts_with("MOT_") && d.name.ends_with("_DIRECTION") {
+            if v == 0.0 {
+                return Err(invalid("a motor direction is 1 (normal) or -1 (reversed)"));
+            }
+        } else if d.name == "MOT_PWM_MIN" && v >= PWM_NEUTRAL_US {
+            return Err(invalid(
+                "must be below the 1500 µs neutral, or reverse demand would drive forward",
+            ));
+        } else if d.name == "MOT_PWM_MAX" && v <= PWM_NEUTRAL_US {
+            return Err(invalid(
+                "must be above the 1500 µs neutral, or forward demand would drive reverse",
+            ));
+        } else if d.name == "NEPT_TILT_MIN_US" && v >= self.num("NEPT_TILT_MAX_US") {
+            return Err(invalid("must be below NEPT_TILT_MAX_US"));
+        } else if d.name == "NEPT_TILT_MAX_US" && v <= self.num("NEPT_TILT_MIN_US") {
+            return Err(invalid("must be above NEPT_TILT_MIN_US"));
+        }
+        self.values[index] = v;
+        Ok(v)
+    }
+
+    /// Parameters that differ from their default, as TOML `NAME = value`
+    /// lines sorted by name. Defaults are not written, so a later version's
+    /// new defaults apply to everything the user never changed.
+    pub fn to_toml(&self) -> String {
+        let mut changed: Vec<(&str, String)> = DEFS
+            .iter()
+            .zip(&self.values)
+            .filter(|(d, v)| **v != wire_value(d.ty, d.default))
+            .map(|(d, v)| (d.name, format_value(d.ty, *v)))
+            .collect();
+        changed.sort_unstable();
+        let mut out = String::from(
+            "# Neptunus parameters that differ from their defaults.\n\
+             # Written by Neptunus; edit only while it is stopped.\n",
+        );
+        for (name, value) in changed {
+            let _ = writeln!(out, "{name} = {value}");
+        }
+        out
+    }
+
+    /// Parses what [`to_toml`](Self::to_toml) wrote, starting from defaults.
+    /// Unknown names and bad values are skipped with a warning naming the
+    /// line; everything else applies. Only text that is not TOML at all is an
+    /// error.
+    pub fn from_toml(text: &str) -> Result<(Self, Vec<String>), String> {
+        let table: std::collections::BTreeMap<String, toml::Spanned<toml::Value>> =
+            toml::from_str(text).map_err(|e| e.to_string())?;
+        let line_of = |offset: usize| {
+            1 + text
+                .get(..offset)
+                .map_or(0, |before| before.bytes().filter(|&b| b == b'\n').count())
+        };
+        let mut store = Self::defaults();
+        let mut warnings: Vec<(usize, String)> = Vec::new();
+        let mut pending = Vec::new();
+        for (name, spanned) in &table {
+            let line = line_of(spanned.span().start);
+            let value = match spanned.get_ref() {
+                toml::Value::Integer(i) => *i as f64,
+                toml::Value::Float(f) => *f,
+                other => {
+                    warnings.push((line, format!("{name} = {other} is not a number")));
+                    continue;
+                }
+            };
+            pending.push((line, name.as_str(), value));
+        }
+        // Pairs checked against each other (the tilt range) may need the other
+        // value first; retry until nothing more applies.
+        let mut errors = Vec::new();
+        loop {
+            errors.clear();
+            let before = pending.len();
+            pending.retain(|&(line, name, value)| match store.set(name, value) {
+                Ok(_) => false,
+                Err(e) => {
+                    errors.push((line, e.to_string()));
+                    true
+                }
+            });
+            if pending.is_empty() || pending.len() == before {
+                break;
+            }
+        }
+        warnings.append(&mut errors);
+        warnings.sort();
+        let warnings = warnings
+            .into_iter()
+            .map(|(line, w)| format!("line {line}: {w}; ignored"))
+            .collect();
+        Ok((store, warnings))
+    }
+
+    /// Value of a parameter the accessors know exists (tests check every one).
+    fn num(&self, name: &'static str) -> f64 {
+        match index_of(name) {
+            Some(i) => self.values[i],
+            None => {
+                debug_assert!(
+                    false,
+                    "accessor for a parameter that does not exist: {name}"
+                );
+                0.0
+            }
+        }
+    }
+
+    fn f32_of(&self, name: &'static str) -> f32 {
+        self.num(name) as f32
+    }
+
+    /// An integer parameter as `u8`, saturating (ranges keep it inside anyway).
+    fn u8_of(&self, name: &'static str) -> u8 {
+        self.num(name).clamp(0.0, 255.0) as u8
+    }
+
+    fn u16_of(&self, name: &'static str) -> u16 {
+        self.num(name).clamp(0.0, f64::from(u16::MAX)) as u16
+    }
+
+    pub fn sysid_thismav(&self) -> u8 {
+        self.u8_of("SYSID_THISMAV")
+    }
+
+    pub fn sysid_mygcs(&self) -> u8 {
+        self.u8_of("SYSID_MYGCS")
+    }
+
+    /// The NEPT_GCS_ALLOWn system ids that are set (non-zero).
+    pub fn gcs_allowed_extra(&self) -> Vec<u8> {
+        [
+            "NEPT_GCS_ALLOW1",
+            "NEPT_GCS_ALLOW2",
+            "NEPT_GCS_ALLOW3",
+            "NEPT_GCS_ALLOW4",
+        ]
+        .into_iter()
+        .map(|n| self.u8_of(n))
+        .filter(|&id| id != 0)
+        .collect()
+    }
+
+    /// Whether `sysid` may control the vehicle (SYSID_MYGCS or NEPT_GCS_ALLOWn).
+    pub fn gcs_allowed(&self, sysid: u8) -> bool {
+        sysid != 0 && (sysid == self.sysid_mygcs() || self.gcs_allowed_extra().contains(&sysid))
+    }
+
+    pub fn ctrl_claim(&self) -> ControlClaim {
+        if self.num("NEPT_CTRL_CLAIM") == 1.0 {
+            ControlClaim::ExplicitOnly
+        } else {
+            ControlClaim::FirstToDrive
+        }
+    }
+
+    pub fn js_gain_min(&self) -> f32 {
+        self.f32_of("JS_GAIN_MIN")
+    }
+
+    /// At least [`js_gain_min`](Self::js_gain_min), even if set lower.
+    pub fn js_gain_max(&self) -> f32 {
+        self.f32_of("JS_GAIN_MAX").max(self.js_gain_min())
+    }
+
+    /// Clamped to JS_GAIN_MIN..JS_GAIN_MAX.
+    pub fn js_gain_default(&self) -> f32 {
+        self.f32_of("JS_GAIN_DEFAULT")
+            .max(self.js_gain_min())
+            .min(self.js_gain_max())
+    }
+
+    pub fn js_gain_steps(&self) -> u8 {
+        self.u8_of("JS_GAIN_STEPS").max(1)
+    }
+
+    pub fn js_thr_gain(&self) -> f32 {
+        self.f32_of("JS_THR_GAIN")
+    }
+
+    pub fn js_lights_steps(&self) -> u16 {
+        self.u16_of("JS_LIGHTS_STEPS").max(1)
+    }
+
+    /// Function code of button `i` (0..32), regular or shifted; 0 for any
+    /// other button.
+    pub fn btn_function(&self, i: usize, shifted: bool) -> u8 {
+        BTN_NAMES.get(i).map_or(0, |(name, sname)| {
+            self.u8_of(if shifted { sname } else { name })
+        })
+    }
+
+    /// Whether some button (regular or shifted) disarms (disarm or
+    /// arm_toggle); ArduSub refuses to arm otherwise.
+    pub fn some_button_disarms(&self) -> bool {
+        (0..BUTTONS).any(|i| {
+            [false, true].into_iter().any(|s| {
+                matches!(
+                    self.btn_function(i, s),
+                    BTN_FUNCTION_DISARM | BTN_FUNCTION_ARM_TOGGLE
+                )
+            })
+        })
+    }
+
+    /// Direction of motor 1..=3 (1 starboard, 2 port, 3 vertical): 1 or -1.
+    /// Motors without a parameter get 1.
+    pub fn mot_direction(&self, motor: usize) -> i8 {
+        let name = match motor {
+            1 => "MOT_1_DIRECTION",
+            2 => "MOT_2_DIRECTION",
+            3 => "MOT_3_DIRECTION",
+            _ => return 1,
+        };
+        if self.num(name) < 0.0 { -1 } else { 1 }
+    }
+
+    pub fn mot_pwm_min(&self) -> u16 {
+        self.u16_of("MOT_PWM_MIN")
+    }
+
+    pub fn mot_pwm_max(&self) -> u16 {
+        self.u16_of("MOT_PWM_MAX")
+    }
+
+    /// FS_GCS_ENABLE: off, warn, disarm, depth hold or surface.
+    pub fn fs_gcs_enable(&self) -> FailsafeAction {
+        match self.num("FS_GCS_ENABLE") as i64 {
+            0 => FailsafeAction::Off,
+            1 => FailsafeAction::Warn,
+            3 => FailsafeAction::DepthHold,
+            4 => FailsafeAction::Surface,
+            _ => FailsafeAction::Disarm,
+        }
+    }
+
+    pub fn fs_gcs_timeout_s(&self) -> f32 {
+        self.f32_of("FS_GCS_TIMEOUT")
+    }
+
+    /// FS_PILOT_INPUT: off, warn or disarm.
+    pub fn fs_pilot_input(&self) -> FailsafeAction {
+        match self.num("FS_PILOT_INPUT") as i64 {
+            0 => FailsafeAction::Off,
+            1 => FailsafeAction::Warn,
+            _ => FailsafeAction::Disarm,
+        }
+    }
+
+    pub fn fs_pilot_timeout_s(&self) -> f32 {
+        self.f32_of("FS_PILOT_TIMEOUT")
+    }
+
+    fn battery_action(&self, name: &'static str) -> FailsafeAction {
+        match self.num(name) as i64 {
+            1 => FailsafeAction::Warn,
+            2 => FailsafeAction::Disarm,
+            3 => FailsafeAction::Surface,
+            _ => FailsafeAction::Off,
+        }
+    }
+
+    /// Low-battery threshold; 0 = off.
+    pub fn batt_low_volt(&self) -> f32 {
+        self.f32_of("BATT_LOW_VOLT")
+    }
+
+    pub fn batt_fs_low_act(&self) -> FailsafeAction {
+        self.battery_action("BATT_FS_LOW_ACT")
+    }
+
+    /// Critical-battery threshold; 0 = off.
+    pub fn batt_crt_volt(&self) -> f32 {
+        self.f32_of("BATT_CRT_VOLT")
+    }
+
+    pub fn batt_fs_crt_act(&self) -> FailsafeAction {
+        self.battery_action("BATT_FS_CRT_ACT")
+    }
+
+    /// SURFACE_DEPTH converted from ArduSub's centimetres to metres
+    /// (negative below the surface, -0.1 by default).
+    pub fn surface_depth_m(&self) -> f32 {
+        self.f32_of("SURFACE_DEPTH") / 100.0
+    }
+
+    pub fn tilt_min_us(&self) -> u16 {
+        self.u16_of("NEPT_TILT_MIN_US")
+    }
+
+    pub fn tilt_max_us(&self) -> u16 {
+        self.u16_of("NEPT_TILT_MAX_US")
+    }
+
+    pub fn lights_max(&self) -> u8 {
+        self.u8_of("NEPT_LIGHTS_MAX")
+    }
+
+    /// Heading hold: heading error → yaw rate gain.
+    pub fn atc_ang_yaw_p(&self) -> f32 {
+        self.f32_of("ATC_ANG_YAW_P")
+    }
+
+    /// Heading hold: yaw rate PID.
+    pub fn atc_rat_yaw(&self) -> PidGains {
+        PidGains {
+            p: self.f32_of("ATC_RAT_YAW_P"),
+            i: self.f32_of("ATC_RAT_YAW_I"),
+            imax: self.f32_of("ATC_RAT_YAW_IMAX"),
+            d: self.f32_of("ATC_RAT_YAW_D"),
+        }
+    }
+
+    /// Depth hold: depth error → climb rate gain.
+    pub fn psc_posz_p(&self) -> f32 {
+        self.f32_of("PSC_POSZ_P")
+    }
+
+    /// Depth hold: climb rate error → acceleration gain.
+    pub fn psc_velz_p(&self) -> f32 {
+        self.f32_of("PSC_VELZ_P")
+    }
+
+    /// Depth hold: vertical acceleration PID (IMAX in tenths of a percent).
+    pub fn psc_accz(&self) -> PidGains {
+        PidGains {
+            p: self.f32_of("PSC_ACCZ_P"),
+            i: self.f32_of("PSC_ACCZ_I"),
+            imax: self.f32_of("PSC_ACCZ_IMAX"),
+            d: self.f32_of("PSC_ACCZ_D"),
+        }
+    }
+}
+
+/// A value as TOML and documentation show it: integers without a decimal
+/// point, REAL32 as the shortest decimal that reads back to the same `f32`.
+fn format_value(ty: ParamType, value: f64) -> String {
+    if ty.is_integer() {
+        format!("{}", value as i64)
+    } else {
+        let s = format!("{}", value as f32);
+        if s.contains(['.', 'e', 'i', 'N']) {
+            s
+        } else {
+            s + ".0"
+        }
+    }
+}
+
+/// Failures to store parameters.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    #[error("could not {action} {} while saving parameters: {source}", path.display())]
+    Io {
+        action: &'static str,
+        path: PathBuf,
+        #[source]
+        source: io::Error,
+    },
+}
+
+/// `params.toml` in the data directory.
+#[derive(Debug, Clone)]
+pub struct ParamFile {
+    path: PathBuf,
+}
+
+impl ParamFile {
+    pub const FILE_NAME: &'static str = "params.toml";
+
+    /// The file `dir/params.toml`.
+    pub fn new(dir: &Path) -> Self {
+        Self {
+            path: dir.join(Self::FILE_NAME),
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Reads the parameters. A missing file gives the defaults. A file that is
+    /// not TOML (or not text) is moved aside to `params.toml.corrupt-<n>`
+    /// (never overwriting an earlier one) and the defaults apply. A file with
+    /// some bad entries applies the good ones. Every problem is a warning
+    /// naming the file.
+    pub fn load(&self) -> (ParamStore, Vec<String>) {
+        let shown = self.path.display();
+        let bytes = match fs::read(&self.path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                return (ParamStore::defaults(), vec![]);
+            }
+            Err(e) => {
+                return (
+                    ParamStore::defaults(),
+                    vec![format!(
+                        "could not read {shown}: {e}; using default parameters (fix the file's permissions, or remove it)"
+                    )],
+                );
+            }
+        };
+        let parsed = std::str::from_utf8(&bytes)
+            .map_err(|e| format!("not UTF-8 text ({e})"))
+            .and_then(ParamStore::from_toml);
+        match parsed {
+            Ok((store, warnings)) => (
+                store,
+                warnings
+                    .into_iter()
+                    .map(|w| format!("{shown}: {w}"))
+                    .collect(),
+            ),
+            Err(why) => {
+                let why = why.trim_end().replace('\n', " ");
+                let warning = match self.move_aside() {
+                    Ok(aside) => format!(
+                        "{shown} is unreadable ({why}); moved it to {} and using default parameters",
+                        aside.display()
+                    ),
+                    Err(e) => format!(
+                        "{shown} is unreadable ({why}) and could not be moved aside ({e}); using default parameters, and the next parameter save will replace it"
+                    ),
+                };
+                (ParamStore::defaults(), vec![warning])
+            }
+        }
+    }
+
+    /// Renames the file to the first free `params.toml.corrupt-<n>`.
+    fn move_aside(&self) -> io::Result<PathBuf> {
+        for n in 1..10_000u32 {
+            let mut name = self.path.clone().into_os_string();
+            name.push(format!(".corrupt-{n}"));
+            let aside = PathBuf::from(name);
+            if aside.symlink_metadata().is_ok() {
+                continue;
+            }
+            // A hard link cannot replace an existing file, so a concurrent
+            // writer can't make us overwrite an earlier aside file.
+            match fs::hard_link(&self.path, &aside) {
+                Ok(()) => {
+                    fs::remove_file(&self.path)?;
+                    return Ok(aside);
+                }
+                Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+                // Filesystems without hard links (FAT on an SD card).
+                Err(_) => {
+                    fs::rename(&self.path, &aside)?;
+                    return Ok(aside);
+                }
+            }
+        }
+        Err(io::Error::other(
+            "10,000 corrupt-parameter files already exist",
+        ))
+    }
+
+    /// Writes atomically: `params.toml.tmp`, fsync, rename over
+    /// `params.toml`, fsync the directory. A crash leaves either the old or
+    /// the new file, never a torn one.
+    pub fn save(&self, store: &ParamStore) -> Result<(), StoreError> {
+        let io_err = |action, path: &Path| {
+            let path = path.to_path_buf();
+            move |source| StoreError::Io {
+                action,
+                path,
+                source,
+            }
+        };
+        let dir = match self.path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        fs::create_dir_all(&dir).map_err(io_err("create directory", &dir))?;
+        let mut tmp_name = self.path.clone().into_os_string();
+        tmp_name.push(".tmp");
+        let tmp = PathBuf::from(tmp_name);
+        let mut file = File::create(&tmp).map_err(io_err("create", &tmp))?;
+        file.write_all(store.to_toml().as_bytes())
+            .map_err(io_err("write", &tmp))?;
+        file.sync_all().map_err(io_err("fsync", &tmp))?;
+        drop(file);
+        fs::rename(&tmp, &self.path).map_err(io_err("rename over", &self.path))?;
+        File::open(&dir)
+            .and_then(|d| d.sync_all())
+            .map_err(io_err("fsync directory", &dir))?;
+        Ok(())
+    }
+}
+
+/// Markdown table of every parameter, for README.md.
+pub fn markdown_table() -> String {
+    let mut out = String::from(
+        "| Name | Type | Default | Range | Units | Used | Description |\n\
+         |---|---|---|---|---|---|---|\n",
+    );
+    for d in definitions() {
+        let range = if d.min == d.max {
+            format!("fixed {}", format_value(d.ty, d.min))
+        } else {
+            format!(
+                "{} … {}",
+                format_value(d.ty, d.min),
+                format_value(d.ty, d.max)
+            )
+        };
+        let used = match d.used {
+            Use::Neptunus => "Neptunus",
+            Use::Compat => "compat only",
+        };
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} | {} | {} | {} |",
+            d.name,
+            d.ty.name(),
+            format_value(d.ty, d.default),
+            range,
+            d.units,
+            used,
+            d.doc.replace('|', "\\|")
+        );
+    }
+    out
+}
