@@ -780,3 +780,75 @@ fn markdown_table_lists_every_parameter() {
     assert!(table.contains("| `FRAME_CONFIG` | INT8 | 4 | fixed 4 |"));
     assert!(table.contains("| `BATT_LOW_VOLT` | REAL32 | 10.5 | 0.0 … 30.0 | V | Neptunus |"));
 }
+
+mod arbitrary_writes {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A write to parameter `index`: either any f64 (NaN, huge, negative…) or
+    /// a value inside the parameter's range, so that most writes land.
+    fn write() -> impl Strategy<Value = (usize, f64)> {
+        let n = definitions().len();
+        (0..n, any::<bool>(), any::<f64>(), 0.0..=1.0f64).prop_map(|(i, inside, raw, frac)| {
+            let d = &definitions()[i];
+            let v = if inside {
+                d.min + frac * (d.max - d.min)
+            } else {
+                raw
+            };
+            (i, v)
+        })
+    }
+
+    proptest! {
+        /// Whatever is written, the store only ever holds values a ground
+        /// station can receive: in range, integral for integer types, exact
+        /// f32 for REAL32; and what is saved reads back identically.
+        #[test]
+        fn store_invariants_and_round_trip(writes in proptest::collection::vec(write(), 0..40)) {
+            let mut s = ParamStore::defaults();
+            for (i, v) in writes {
+                let name = definitions()[i].name;
+                let before = s.clone();
+                match s.set(name, v) {
+                    Ok(stored) => prop_assert_eq!(s.get(name), Some(stored)),
+                    Err(_) => prop_assert_eq!(&s, &before),
+                }
+            }
+            for (i, d) in definitions().iter().enumerate() {
+                let (_, v) = s.get_index(i).expect("index");
+                prop_assert!(v.is_finite());
+                prop_assert!(v as f32 >= d.min as f32 && v as f32 <= d.max as f32, "{} = {}", d.name, v);
+                if d.ty == ParamType::Real32 {
+                    prop_assert_eq!(f64::from(v as f32), v);
+                } else {
+                    prop_assert_eq!(v.fract(), 0.0);
+                }
+            }
+            prop_assert!(s.mot_pwm_min() < 1500 && s.mot_pwm_max() > 1500);
+            prop_assert!(s.tilt_min_us() < s.tilt_max_us());
+            let (back, warnings) = ParamStore::from_toml(&s.to_toml()).expect("TOML");
+            prop_assert!(warnings.is_empty(), "{:?}", warnings);
+            prop_assert_eq!(back, s);
+        }
+
+        /// from_toml never panics, whatever the text: random text, or lines
+        /// of real names with number-like values.
+        #[test]
+        fn from_toml_never_panics(
+            text in ".{0,200}",
+            lines in proptest::collection::vec(
+                (0..definitions().len(), "[-+0-9.eE_a-z\"]{1,12}"), 0..20),
+        ) {
+            let _ = ParamStore::from_toml(&text);
+            let doc: String = lines
+                .iter()
+                .map(|(i, v)| format!("{} = {v}\n", definitions()[*i].name))
+                .collect();
+            if let Ok((store, warnings)) = ParamStore::from_toml(&doc) {
+                prop_assert!(warnings.len() <= lines.len());
+                prop_assert_eq!(store.len(), definitions().len());
+            }
+        }
+    }
+}
