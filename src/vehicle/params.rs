@@ -166,12 +166,10 @@ pub const BTN_DEFAULTS: [(u8, u8); 16] = [
     (0, 0),   // 15: none
 ];
 
-const BTN_DOC: &str = "Function of joystick button n (BTNn_FUNCTION) or of button n while \
-     the shift button is held (BTNn_SFUNCTION). ArduSub's function codes: 0 none, 1 shift, \
-     2 arm_toggle, 3 arm, 4 disarm, 5..13 modes, 21..27 mount and camera, 31..36 lights, \
-     41..49 gain, trim, input hold and roll/pitch, 51..59 relays, 61..87 actuators, \
-     91..96 custom; plus Neptunus' 101 = toggle the laser. Some button must be disarm (4) \
-     or arm_toggle (2) for arming to be allowed.";
+const BTN_DOC: &str = "Function of joystick button n (SFUNCTION: while shift is held): an \
+     ArduSub code (0 none, 1 shift, 2 arm_toggle, 3 arm, 4 disarm, 5-13 modes, 21-27 mount and \
+     camera, 31-36 lights, 41-49 gain, trim and input hold, 51-59 relays, 61-87 actuators, \
+     91-96 custom) or 101 = Neptunus' laser toggle. Arming needs some button on 4 or 2.";
 
 /// Virtual output map (SERVOn_FUNCTION): what QGC's Lights and Motors pages
 /// need to see for Neptunus' hardware.
@@ -391,7 +389,7 @@ const SENSORS: &[ParamDef] = &[
         "Third compass offset Y. No effect."),
     def("COMPASS_OFS3_Z", Real32, 0.0, -400.0, 400.0, "mGauss", Compat,
         "Third compass offset Z. No effect."),
-    def("COMPASS_DEC", Real32, 0.0, -3.142, 3.142, "rad", Compat,
+    def("COMPASS_DEC", Real32, 0.0, -std::f64::consts::PI, std::f64::consts::PI, "rad", Compat,
         "Magnetic declination. Heading is reported as the IMU gives it: no effect."),
     def("COMPASS_AUTODEC", Int8, 1.0, 0.0, 1.0, "", Compat,
         "Automatic declination (0 off, 1 on). No effect."),
