@@ -278,6 +278,8 @@ impl Router {
             let task = match opened {
                 Opened::Udp { socket, target } => {
                     ctx.counters.set_local_addr(socket.local_addr().ok());
+                    // The udpout target is a peer from the start.
+                    ctx.set_peers(usize::from(target.is_some()));
                     tokio::spawn(run_udp(
                         task_ctx,
                         socket,
