@@ -4,6 +4,8 @@
 //! - [`firmware`]: the OpenROV board's serial protocol (sans-IO codec), the
 //!   serial link task and the board emulator.
 //! - [`sim`]: the vehicle simulator (pure physics and sensor model).
+//! - [`mavlink`]: MAVLink framing, endpoints (UDP, TCP, serial), routing
+//!   and the telemetry log.
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
 //! - [`app`]: wiring of tasks and shutdown.

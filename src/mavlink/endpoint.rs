@@ -1,0 +1,1158 @@
+//! MAVLink endpoints: the sockets and serial ports ground stations talk to,
+//! and the router that fans frames in and out of them.
+//!
+//! Owns: parsing endpoint URLs (`udpin:`, `udpout:`, `tcpin:`, `tcpout:`,
+//! `serial:`), binding/connecting and reconnecting, the per-endpoint peer
+//! tables (UDP addresses, TCP connections, the serial port), per-endpoint
+//! counters, and feeding the telemetry log. Every decoded frame goes to one
+//! inbound channel tagged with where it came from; outbound bytes are routed
+//! to all endpoints, one endpoint, or one peer.
+//!
+//! It never interprets a message (no authority, no signing, no replies):
+//! that is the vehicle core's job. It never blocks the caller of
+//! [`RouterHandle::send`]: queues are bounded, and a slow client loses frames
+//! (counted in `send_errors`) rather than stalling the vehicle or the other
+//! clients. A full inbound channel drops frames (counted) rather than
+//! buffering without bound.
+
+use std::collections::HashMap;
+use std::fmt;
+use std::future::Future;
+use std::io;
+use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr, ToSocketAddrs};
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use serde::Serialize;
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, BufWriter};
+use tokio::net::{TcpListener, TcpStream, UdpSocket};
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+use tokio::time::{Instant, MissedTickBehavior};
+
+use super::frame::{Frame, FrameDecoder, FrameStats, decode_datagram};
+use super::tlog::{TlogConfig, TlogWriter};
+
+/// Where a ground station can reach us.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum EndpointSpec {
+    /// Listen on a UDP address; whoever sends to it becomes a peer.
+    UdpIn(SocketAddr),
+    /// Send to a UDP address (a ground station listening there), and to
+    /// whoever sends to our socket.
+    UdpOut(SocketAddr),
+    /// Accept any number of TCP clients.
+    TcpIn(SocketAddr),
+    /// Connect to a TCP server, reconnecting as needed.
+    TcpOut(SocketAddr),
+    /// A serial port (telemetry radio, USB adapter), reopened as needed.
+    Serial { path: PathBuf, baud: u32 },
+}
+
+/// Endpoints used when the user names none: QGroundControl's default UDP
+/// port on this machine, and a TCP port for MAVProxy/pymavlink scripts.
+pub const DEFAULT_ENDPOINTS: [&str; 2] = ["udpout:127.0.0.1:14550", "tcpin:0.0.0.0:5760"];
+
+/// Baud rate used when a `serial:` URL names none (SiK radios' default).
+pub const DEFAULT_SERIAL_BAUD: u32 = 57_600;
+
+const EXPECTED_FORMS: &str = "udpin:ADDR:PORT, udpout:HOST:PORT, tcpin:ADDR:PORT, \
+     tcpout:HOST:PORT or serial:PATH[:BAUD] (e.g. udpin:0.0.0.0:14550, serial:/dev/ttyUSB0:57600)";
+
+/// Errors at the endpoint boundary.
+#[derive(Debug, thiserror::Error)]
+pub enum EndpointError {
+    #[error("endpoint {url:?} is not valid: {reason}; expected {EXPECTED_FORMS}")]
+    Spec { url: String, reason: String },
+    #[error(
+        "cannot open endpoint {url}: {source}; another program (QGroundControl, MAVProxy, \
+         a second neptunus) may be using that address: pick another port or stop it"
+    )]
+    Bind { url: String, source: io::Error },
+    #[error(
+        "cannot create the telemetry log in {}: {source}; make the folder writable or turn \
+         the telemetry log off",
+        dir.display()
+    )]
+    Tlog { dir: PathBuf, source: io::Error },
+}
+
+impl FromStr for EndpointSpec {
+    type Err = EndpointError;
+
+    fn from_str(url: &str) -> Result<Self, Self::Err> {
+        let err = |reason: String| EndpointError::Spec {
+            url: url.to_owned(),
+            reason,
+        };
+        let Some((scheme, rest)) = url.trim().split_once(':') else {
+            return Err(err("no scheme".into()));
+        };
+        let addr = |rest: &str| resolve(rest).map_err(err);
+        match scheme.to_ascii_lowercase().as_str() {
+            "udpin" => Ok(Self::UdpIn(addr(rest)?)),
+            "udpout" => Ok(Self::UdpOut(addr(rest)?)),
+            "tcpin" => Ok(Self::TcpIn(addr(rest)?)),
+            "tcpout" => Ok(Self::TcpOut(addr(rest)?)),
+            "serial" => {
+                let (path, baud) = match rest.rsplit_once(':') {
+                    Some((path, baud)) if !baud.is_empty() => {
+                        let baud =
+                            baud.parse::<u32>().ok().filter(|&b| b > 0).ok_or_else(|| {
+                                err(format!("baud rate {baud:?} is not a number"))
+                            })?;
+                        (path, baud)
+                    }
+                    _ => (rest, DEFAULT_SERIAL_BAUD),
+                };
+                if path.is_empty() {
+                    return Err(err("no serial device path".into()));
+                }
+                Ok(Self::Serial {
+                    path: PathBuf::from(path),
+                    baud,
+                })
+            }
+            other => Err(err(format!("unknown scheme {other:?}"))),
+        }
+    }
+}
+
+/// `host:port` or `ip:port` (`[v6]:port`) to one address; hostnames are
+/// resolved now, once, so a typo fails at start-up rather than at send time.
+fn resolve(text: &str) -> Result<SocketAddr, String> {
+    if let Ok(addr) = text.parse::<SocketAddr>() {
+        return Ok(addr);
+    }
+    if text
+        .rsplit_once(':')
+        .is_none_or(|(host, _)| host.is_empty())
+    {
+        return Err(format!("{text:?} is not HOST:PORT"));
+    }
+    let addrs: Vec<SocketAddr> = text
+        .to_socket_addrs()
+        .map_err(|e| format!("cannot resolve {text:?}: {e}"))?
+        .collect();
+    // Prefer IPv4: ground stations on robot networks rarely listen on v6.
+    addrs
+        .iter()
+        .find(|a| a.is_ipv4())
+        .or_else(|| addrs.first())
+        .copied()
+        .ok_or_else(|| format!("{text:?} resolves to no address"))
+}
+
+impl fmt::Display for EndpointSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::UdpIn(a) => write!(f, "udpin:{a}"),
+            Self::UdpOut(a) => write!(f, "udpout:{a}"),
+            Self::TcpIn(a) => write!(f, "tcpin:{a}"),
+            Self::TcpOut(a) => write!(f, "tcpout:{a}"),
+            Self::Serial { path, baud } => write!(f, "serial:{}:{baud}", path.display()),
+        }
+    }
+}
+
+/// Index of an endpoint in the list given to [`Router::start`].
+pub type EndpointId = usize;
+/// One remote (UDP address, TCP connection, serial port session); never
+/// reused while the router runs.
+pub type PeerId = u64;
+
+/// A frame from a ground station.
+#[derive(Debug, Clone)]
+pub struct Inbound {
+    pub endpoint: EndpointId,
+    pub peer: PeerId,
+    pub frame: Frame,
+}
+
+/// Who gets an outbound frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Route {
+    All,
+    Endpoint(EndpointId),
+    Peer(EndpointId, PeerId),
+}
+
+/// Encoded bytes (MAVLink 2) and where they go.
+#[derive(Debug, Clone)]
+pub struct Outbound {
+    pub route: Route,
+    pub bytes: Arc<[u8]>,
+}
+
+/// Counters of one endpoint. `frames_out`/`bytes_out` count each delivery to
+/// each peer; `send_errors` counts frames a peer did not get (its queue was
+/// full, or the OS refused them).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EndpointStats {
+    pub spec: String,
+    pub local_addr: Option<SocketAddr>,
+    pub peers: usize,
+    pub frames_in: u64,
+    pub frames_out: u64,
+    pub bytes_in: u64,
+    pub bytes_out: u64,
+    pub decode: FrameStats,
+    pub send_errors: u64,
+    /// Frames decoded but dropped because the inbound channel was full.
+    pub inbound_dropped: u64,
+}
+
+/// Router settings.
+#[derive(Debug, Clone)]
+pub struct RouterConfig {
+    /// UDP peers expire after this long without a datagram.
+    pub peer_timeout: Duration,
+    pub tlog: Option<TlogConfig>,
+}
+
+impl Default for RouterConfig {
+    fn default() -> Self {
+        Self {
+            peer_timeout: Duration::from_secs(10),
+            tlog: None,
+        }
+    }
+}
+
+/// Frames queued for one endpoint task before `send` starts dropping.
+const ENDPOINT_QUEUE: usize = 1024;
+/// Frames queued for one TCP/serial peer before its frames are dropped.
+const PEER_QUEUE: usize = 256;
+/// Records queued for the telemetry log thread.
+const TLOG_QUEUE: usize = 8192;
+const TLOG_FLUSH_PERIOD: Duration = Duration::from_secs(1);
+const BACKOFF_MIN: Duration = Duration::from_millis(200);
+const BACKOFF_MAX: Duration = Duration::from_secs(5);
+/// How long `shutdown` waits for an endpoint task before aborting it.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);
+
+/// Starts endpoints; see [`Router::start`].
+pub struct Router;
+
+impl Router {
+    /// Binds/opens every endpoint, spawns one task per endpoint, and returns
+    /// the handle. A bind failure is an error naming the URL and the OS
+    /// error; `tcpout` and `serial` endpoints that cannot connect yet keep
+    /// retrying with backoff instead. Every decoded frame goes to `inbound`
+    /// (without waiting: frames are dropped and counted when it is full).
+    pub async fn start(
+        specs: Vec<EndpointSpec>,
+        cfg: RouterConfig,
+        inbound: mpsc::Sender<Inbound>,
+    ) -> Result<RouterHandle, EndpointError> {
+        let tlog = match &cfg.tlog {
+            Some(tlog_cfg) => Some(TlogHandle::spawn(tlog_cfg)?),
+            None => None,
+        };
+        let next_peer = Arc::new(AtomicU64::new(1));
+        let (shutdown_tx, shutdown_rx) = watch::channel(false);
+
+        // Bind everything before spawning anything, so a failure leaves no task behind.
+        let mut opened = Vec::with_capacity(specs.len());
+        for spec in &specs {
+            opened.push(open(spec).await?);
+        }
+
+        let mut endpoints = Vec::with_capacity(specs.len());
+        let mut tasks = Vec::with_capacity(specs.len());
+        for (id, (spec, opened)) in specs.into_iter().zip(opened).enumerate() {
+            let ctx = Arc::new(EndpointCtx {
+                id,
+                url: spec.to_string(),
+                counters: Counters::default(),
+                inbound: inbound.clone(),
+                tlog: tlog.as_ref().map(|t| t.sender.clone()),
+                next_peer: Arc::clone(&next_peer),
+            });
+            let (queue_tx, queue_rx) = mpsc::channel(ENDPOINT_QUEUE);
+            let shutdown = shutdown_rx.clone();
+            let task_ctx = Arc::clone(&ctx);
+            let task = match opened {
+                Opened::Udp { socket, target } => {
+                    ctx.counters.set_local_addr(socket.local_addr().ok());
+                    // The udpout target is a peer from the start.
+                    ctx.set_peers(usize::from(target.is_some()));
+                    tokio::spawn(run_udp(
+                        task_ctx,
+                        socket,
+                        target,
+                        cfg.peer_timeout,
+                        queue_rx,
+                        shutdown,
+                    ))
+                }
+                Opened::TcpListener(listener) => {
+                    ctx.counters.set_local_addr(listener.local_addr().ok());
+                    tokio::spawn(run_tcp_in(task_ctx, listener, queue_rx, shutdown))
+                }
+                Opened::TcpOut(addr) => tokio::spawn(run_connector(
+                    task_ctx,
+                    queue_rx,
+                    shutdown,
+                    move || async move {
+                        let stream = TcpStream::connect(addr).await?;
+                        // MAVLink frames are small and latency matters more than packing.
+                        stream.set_nodelay(true)?;
+                        let local = stream.local_addr().ok();
+                        Ok((stream, local))
+                    },
+                )),
+                Opened::Serial { path, baud } => {
+                    tokio::spawn(run_connector(task_ctx, queue_rx, shutdown, move || {
+                        let opened = open_serial(&path, baud);
+                        async move { opened.map(|s| (s, None)) }
+                    }))
+                }
+            };
+            tracing::info!(endpoint = %ctx.url, "MAVLink endpoint started");
+            endpoints.push(EndpointSlot {
+                ctx,
+                queue: queue_tx,
+            });
+            tasks.push(task);
+        }
+
+        Ok(RouterHandle {
+            inner: Arc::new(Inner {
+                endpoints,
+                shutdown: shutdown_tx,
+                tasks: Mutex::new(tasks),
+                tlog,
+            }),
+        })
+    }
+}
+
+/// The running router. Cloning is cheap; dropping every clone stops it (but
+/// only [`RouterHandle::shutdown`] waits for the telemetry log to be flushed).
+#[derive(Clone)]
+pub struct RouterHandle {
+    inner: Arc<Inner>,
+}
+
+struct Inner {
+    endpoints: Vec<EndpointSlot>,
+    shutdown: watch::Sender<bool>,
+    tasks: Mutex<Vec<JoinHandle<()>>>,
+    tlog: Option<TlogHandle>,
+}
+
+struct EndpointSlot {
+    ctx: Arc<EndpointCtx>,
+    queue: mpsc::Sender<Queued>,
+}
+
+impl RouterHandle {
+    /// Queues bytes for their route. Never blocks: when an endpoint's queue
+    /// is full the frame is dropped for that endpoint and counted.
+    pub fn send(&self, out: Outbound) {
+        if let Some(tlog) = &self.inner.tlog {
+            // Once per send, however many peers get it.
+            tlog.sender.record(unix_time_us(), Arc::clone(&out.bytes));
+        }
+        let (slots, target) = match out.route {
+            Route::All => (&self.inner.endpoints[..], Target::All),
+            Route::Endpoint(e) => (self.slot(e), Target::All),
+            Route::Peer(e, p) => (self.slot(e), Target::Peer(p)),
+        };
+        for slot in slots {
+            let queued = Queued {
+                target,
+                bytes: Arc::clone(&out.bytes),
+            };
+            if let Err(mpsc::error::TrySendError::Full(_)) = slot.queue.try_send(queued) {
+                slot.ctx
+                    .send_error("endpoint queue full: dropping outbound frames");
+            }
+        }
+    }
+
+    fn slot(&self, endpoint: EndpointId) -> &[EndpointSlot] {
+        let slots = self.inner.endpoints.get(endpoint..=endpoint).unwrap_or(&[]);
+        if slots.is_empty() {
+            tracing::debug!(
+                endpoint,
+                "outbound frame for an endpoint that does not exist"
+            );
+        }
+        slots
+    }
+
+    /// Counters of every endpoint, in the order given to [`Router::start`].
+    pub fn stats(&self) -> Vec<EndpointStats> {
+        self.inner
+            .endpoints
+            .iter()
+            .map(|slot| slot.ctx.stats())
+            .collect()
+    }
+
+    /// The address an endpoint is bound to (for `tcpout`, the local end of
+    /// the current connection; `None` for serial).
+    pub fn local_addr(&self, endpoint: EndpointId) -> Option<SocketAddr> {
+        self.inner
+            .endpoints
+            .get(endpoint)
+            .and_then(|slot| slot.ctx.counters.local_addr())
+    }
+
+    /// Stops every endpoint, closes every socket and connection, and flushes
+    /// the telemetry log.
+    pub async fn shutdown(self) {
+        self.inner.shutdown.send_replace(true);
+        let tasks = std::mem::take(
+            &mut *self
+                .inner
+                .tasks
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner),
+        );
+        for mut task in tasks {
+            if tokio::time::timeout(SHUTDOWN_GRACE, &mut task)
+                .await
+                .is_err()
+            {
+                task.abort();
+            }
+        }
+        if let Some(tlog) = &self.inner.tlog {
+            tlog.stop().await;
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// per-endpoint context and counters
+// ---------------------------------------------------------------------------
+
+#[derive(Debug, Clone, Copy)]
+enum Target {
+    All,
+    Peer(PeerId),
+}
+
+struct Queued {
+    target: Target,
+    bytes: Arc<[u8]>,
+}
+
+/// What every task of one endpoint shares.
+struct EndpointCtx {
+    id: EndpointId,
+    url: String,
+    counters: Counters,
+    inbound: mpsc::Sender<Inbound>,
+    tlog: Option<TlogSender>,
+    next_peer: Arc<AtomicU64>,
+}
+
+#[derive(Default)]
+struct Counters {
+    peers: AtomicUsize,
+    frames_in: AtomicU64,
+    frames_out: AtomicU64,
+    bytes_in: AtomicU64,
+    bytes_out: AtomicU64,
+    send_errors: AtomicU64,
+    inbound_dropped: AtomicU64,
+    decode: Mutex<FrameStats>,
+    local_addr: Mutex<Option<SocketAddr>>,
+    /// Kinds of trouble already logged (bit per kind): log once, count always.
+    warned: AtomicU32,
+}
+
+impl Counters {
+    fn set_local_addr(&self, addr: Option<SocketAddr>) {
+        *self
+            .local_addr
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner) = addr;
+    }
+
+    fn local_addr(&self) -> Option<SocketAddr> {
+        *self
+            .local_addr
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+    }
+}
+
+const WARN_BAD_CRC: u32 = 1;
+const WARN_UNKNOWN: u32 = 2;
+const WARN_BAD_PAYLOAD: u32 = 4;
+const WARN_GARBAGE: u32 = 8;
+const WARN_SEND: u32 = 16;
+const WARN_INBOUND: u32 = 32;
+
+impl EndpointCtx {
+    fn new_peer(&self) -> PeerId {
+        self.next_peer.fetch_add(1, Ordering::Relaxed)
+    }
+
+    fn set_peers(&self, n: usize) {
+        self.counters.peers.store(n, Ordering::Relaxed);
+    }
+
+    fn first_time(&self, bit: u32) -> bool {
+        self.counters.warned.fetch_or(bit, Ordering::Relaxed) & bit == 0
+    }
+
+    fn send_error(&self, what: &str) {
+        self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+        if self.first_time(WARN_SEND) {
+            tracing::warn!(endpoint = %self.url, "{what} (logged once; see send_errors)");
+        }
+    }
+
+    fn sent(&self, bytes: usize) {
+        self.counters.frames_out.fetch_add(1, Ordering::Relaxed);
+        self.counters
+            .bytes_out
+            .fetch_add(bytes as u64, Ordering::Relaxed);
+    }
+
+    /// Accounts for `bytes_in` bytes that decoded to `frames` (drained) with
+    /// `delta` decoder counters, and passes the frames on.
+    fn deliver(&self, peer: PeerId, bytes_in: usize, frames: &mut Vec<Frame>, delta: &FrameStats) {
+        let c = &self.counters;
+        c.bytes_in.fetch_add(bytes_in as u64, Ordering::Relaxed);
+        c.frames_in
+            .fetch_add(frames.len() as u64, Ordering::Relaxed);
+        if delta != &FrameStats::default() {
+            c.decode
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .add(delta);
+            for (count, bit, what) in [
+                (delta.bad_crc, WARN_BAD_CRC, "frames with a bad CRC"),
+                (
+                    delta.unknown_msg,
+                    WARN_UNKNOWN,
+                    "frames of unknown message ids",
+                ),
+                (
+                    delta.bad_payload,
+                    WARN_BAD_PAYLOAD,
+                    "frames with undecodable payloads",
+                ),
+                (
+                    delta.garbage_bytes,
+                    WARN_GARBAGE,
+                    "bytes that are not MAVLink",
+                ),
+            ] {
+                if count > 0 && self.first_time(bit) {
+                    tracing::warn!(endpoint = %self.url, peer, "dropping {what} (logged once; see the endpoint's decode stats)");
+                }
+            }
+        }
+        let now_us = unix_time_us();
+        for frame in frames.drain(..) {
+            if let Some(tlog) = &self.tlog {
+                tlog.record(now_us, Arc::from(frame.raw.as_slice()));
+            }
+            let inbound = Inbound {
+                endpoint: self.id,
+                peer,
+                frame,
+            };
+            if let Err(mpsc::error::TrySendError::Full(_)) = self.inbound.try_send(inbound) {
+                c.inbound_dropped.fetch_add(1, Ordering::Relaxed);
+                if self.first_time(WARN_INBOUND) {
+                    tracing::warn!(endpoint = %self.url, "inbound channel full: dropping frames (logged once)");
+                }
+            }
+        }
+    }
+
+    fn stats(&self) -> EndpointStats {
+        let c = &self.counters;
+        EndpointStats {
+            spec: self.url.clone(),
+            local_addr: c.local_addr(),
+            peers: c.peers.load(Ordering::Relaxed),
+            frames_in: c.frames_in.load(Ordering::Relaxed),
+            frames_out: c.frames_out.load(Ordering::Relaxed),
+            bytes_in: c.bytes_in.load(Ordering::Relaxed),
+            bytes_out: c.bytes_out.load(Ordering::Relaxed),
+            decode: c
+                .decode
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .clone(),
+            send_errors: c.send_errors.load(Ordering::Relaxed),
+            inbound_dropped: c.inbound_dropped.load(Ordering::Relaxed),
+        }
+    }
+}
+
+fn unix_time_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+        .unwrap_or(0)
+}
+
+// ---------------------------------------------------------------------------
+// opening
+// ---------------------------------------------------------------------------
+
+enum Opened {
+    Udp {
+        socket: UdpSocket,
+        target: Option<SocketAddr>,
+    },
+    TcpListener(TcpListener),
+    TcpOut(SocketAddr),
+    Serial {
+        path: PathBuf,
+        baud: u32,
+    },
+}
+
+async fn open(spec: &EndpointSpec) -> Result<Opened, EndpointError> {
+    let bind_err = |source| EndpointError::Bind {
+        url: spec.to_string(),
+        source,
+    };
+    Ok(match spec {
+        EndpointSpec::UdpIn(addr) => {
+            let socket = UdpSocket::bind(addr).await.map_err(bind_err)?;
+            allow_broadcast(&socket);
+            Opened::Udp {
+                socket,
+                target: None,
+            }
+        }
+        EndpointSpec::UdpOut(target) => {
+            let any: SocketAddr = if target.is_ipv4() {
+                (Ipv4Addr::UNSPECIFIED, 0).into()
+            } else {
+                (Ipv6Addr::UNSPECIFIED, 0).into()
+            };
+            let socket = UdpSocket::bind(any).await.map_err(bind_err)?;
+            allow_broadcast(&socket);
+            Opened::Udp {
+                socket,
+                target: Some(*target),
+            }
+        }
+        EndpointSpec::TcpIn(addr) => {
+            Opened::TcpListener(TcpListener::bind(addr).await.map_err(bind_err)?)
+        }
+        EndpointSpec::TcpOut(addr) => Opened::TcpOut(*addr),
+        EndpointSpec::Serial { path, baud } => Opened::Serial {
+            path: path.clone(),
+            baud: *baud,
+        },
+    })
+}
+
+/// `udpout:192.168.2.255:14550` (a subnet broadcast) is a common set-up on
+/// tethered ROVs; without SO_BROADCAST every send would fail.
+fn allow_broadcast(socket: &UdpSocket) {
+    if let Err(e) = socket.set_broadcast(true) {
+        tracing::debug!(error = %e, "cannot enable UDP broadcast");
+    }
+}
+
+fn open_serial(path: &std::path::Path, baud: u32) -> io::Result<tokio_serial::SerialStream> {
+    use tokio_serial::SerialPortBuilderExt;
+    let mut port = tokio_serial::new(path.to_string_lossy(), baud)
+        .data_bits(tokio_serial::DataBits::Eight)
+        .parity(tokio_serial::Parity::None)
+        .stop_bits(tokio_serial::StopBits::One)
+        .flow_control(tokio_serial::FlowControl::None)
+        .open_native_async()
+        .map_err(io::Error::from)?;
+    // Not exclusive: a technician may want to sniff the radio link; and on a
+    // pty some ioctls are unsupported, which is harmless here.
+    if let Err(e) = port.set_exclusive(false) {
+        tracing::debug!(path = %path.display(), error = %e, "cannot clear exclusive mode");
+    }
+    Ok(port)
+}
+
+/// Resolves when the router shuts down (or every handle is gone).
+async fn stopped(shutdown: &mut watch::Receiver<bool>) {
+    // An error means the sender is gone: nobody can ever use us again.
+    let _ = shutdown.wait_for(|&stop| stop).await;
+}
+
+// ---------------------------------------------------------------------------
+// UDP
+// ---------------------------------------------------------------------------
+
+struct UdpPeer {
+    id: PeerId,
+    last_seen: Instant,
+}
+
+async fn run_udp(
+    ctx: Arc<EndpointCtx>,
+    socket: UdpSocket,
+    target: Option<SocketAddr>,
+    peer_timeout: Duration,
+    mut queue: mpsc::Receiver<Queued>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    // The configured target is a permanent peer; it never expires.
+    let target = target.map(|addr| (addr, ctx.new_peer()));
+    let fixed = usize::from(target.is_some());
+    let mut peers: HashMap<SocketAddr, UdpPeer> = HashMap::new();
+    ctx.set_peers(fixed);
+    let mut buf = vec![0u8; 65_536];
+    let mut frames = Vec::new();
+    let mut sweep = tokio::time::interval((peer_timeout / 4).max(Duration::from_millis(10)));
+    sweep.set_missed_tick_behavior(MissedTickBehavior::Delay);
+
+    loop {
+        tokio::select! {
+            () = stopped(&mut shutdown) => break,
+            received = socket.recv_from(&mut buf) => match received {
+                Ok((n, from)) => {
+                    let peer = match target {
+                        Some((addr, id)) if addr == from => id,
+                        _ => {
+                            let now = Instant::now();
+                            let entry = peers.entry(from).or_insert_with(|| {
+                                let id = ctx.new_peer();
+                                tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+                                UdpPeer { id, last_seen: now }
+                            });
+                            entry.last_seen = now;
+                            entry.id
+                        }
+                    };
+                    ctx.set_peers(fixed + peers.len());
+                    let mut delta = FrameStats::default();
+                    decode_datagram(&buf[..n], &mut delta, &mut frames);
+                    ctx.deliver(peer, n, &mut frames, &delta);
+                }
+                Err(e) => {
+                    // Linux reports ICMP errors from earlier sends here; they
+                    // say nothing about the next datagram.
+                    tracing::debug!(endpoint = %ctx.url, error = %e, "UDP receive error");
+                }
+            },
+            queued = queue.recv() => {
+                let Some(queued) = queued else { break };
+                let mut dests: Vec<SocketAddr> = Vec::new();
+                match queued.target {
+                    Target::All => {
+                        dests.extend(target.map(|(addr, _)| addr));
+                        dests.extend(peers.keys().copied());
+                    }
+                    Target::Peer(id) => {
+                        if let Some((addr, _)) = target.filter(|&(_, t)| t == id) {
+                            dests.push(addr);
+                        } else if let Some((addr, _)) = peers.iter().find(|(_, p)| p.id == id) {
+                            dests.push(*addr);
+                        }
+                    }
+                }
+                for dest in dests {
+                    match socket.send_to(&queued.bytes, dest).await {
+                        Ok(_) => ctx.sent(queued.bytes.len()),
+                        Err(e) => ctx.send_error(&format!("UDP send to {dest} failed: {e}")),
+                    }
+                }
+            }
+            _ = sweep.tick() => {
+                let now = Instant::now();
+                peers.retain(|addr, peer| {
+                    let live = now.duration_since(peer.last_seen) < peer_timeout;
+                    if !live {
+                        tracing::info!(endpoint = %ctx.url, %addr, peer = peer.id, "UDP peer timed out");
+                    }
+                    live
+                });
+                ctx.set_peers(fixed + peers.len());
+            }
+        }
+    }
+    ctx.set_peers(0);
+}
+
+// ---------------------------------------------------------------------------
+// TCP server
+// ---------------------------------------------------------------------------
+
+async fn run_tcp_in(
+    ctx: Arc<EndpointCtx>,
+    listener: TcpListener,
+    mut queue: mpsc::Receiver<Queued>,
+    mut shutdown: watch::Receiver<bool>,
+) {
+    let mut conns: HashMap<PeerId, mpsc::Sender<Arc<[u8]>>> = HashMap::new();
+    let mut task_peer: HashMap<tokio::task::Id, PeerId> = HashMap::new();
+    // Dropping the set at the end aborts every connection.
+    let mut tasks = tokio::task::JoinSet::new();
+
+    loop {
+        tokio::select! {
+            () = stopped(&mut shutdown) => break,
+            accepted = listener.accept() => match accepted {
+                Ok((stream, from)) => {
+                    let peer = ctx.new_peer();
+                    if let Err(e) = stream.set_nodelay(true) {
+                        tracing::debug!(error = %e, "cannot set TCP_NODELAY");
+                    }
+                    tracing::info!(endpoint = %ctx.url, %from, peer, "TCP client connected");
+                    let (tx, rx) = mpsc::channel(PEER_QUEUE);
+                    conns.insert(peer, tx);
+                    let handle = tasks.spawn(run_stream(Arc::clone(&ctx), peer, stream, rx));
+                    task_peer.insert(handle.id(), peer);
+                    ctx.set_peers(conns.len());
+                }
+                Err(e) => {
+                    // Out of file descriptors, mostly: back off instead of spinning.
+                    tracing::warn!(endpoint = %ctx.url, error = %e, "accept failed");
+                    tokio::select! {
+                        () = stopped(&mut shutdown) => break,
+                        () = tokio::time::sleep(BACKOFF_MIN) => {}
+                    }
+                }
+            },
+            Some(done) = tasks.join_next_with_id() => {
+                let id = match done {
+                    Ok((id, ())) => id,
+                    Err(e) => e.id(),
+                };
+                if let Some(peer) = task_peer.remove(&id) {
+                    conns.remove(&peer);
+                    tracing::info!(endpoint = %ctx.url, peer, "TCP client disconnected");
+                }
+                ctx.set_peers(conns.len());
+            }
+            queued = queue.recv() => {
+                let Some(queued) = queued else { break };
+                dispatch(&ctx, &conns, &queued);
+            }
+        }
+    }
+    ctx.set_peers(0);
+}
+
+/// Hands a frame to stream peers' queues without waiting.
+fn dispatch(ctx: &EndpointCtx, conns: &HashMap<PeerId, mpsc::Sender<Arc<[u8]>>>, q: &Queued) {
+    let offer = |tx: &mpsc::Sender<Arc<[u8]>>| {
+        if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(Arc::clone(&q.bytes)) {
+            ctx.send_error("a client is not reading: dropping its frames");
+        }
+    };
+    match q.target {
+        Target::All => conns.values().for_each(offer),
+        Target::Peer(id) => conns.get(&id).into_iter().for_each(offer),
+    }
+}
+
+/// Runs one byte-stream peer (TCP connection or serial port) until it
+/// closes or fails: decodes what it sends, writes what is queued for it.
+/// Reading and writing are polled together so a peer that does not read
+/// still has its input decoded.
+async fn run_stream<S>(
+    ctx: Arc<EndpointCtx>,
+    peer: PeerId,
+    stream: S,
+    mut rx: mpsc::Receiver<Arc<[u8]>>,
+) where
+    S: AsyncRead + AsyncWrite + Send + 'static,
+{
+    let (mut rd, wr) = tokio::io::split(stream);
+    let reader = async {
+        let mut decoder = FrameDecoder::new();
+        let mut buf = vec![0u8; 4096];
+        let mut frames = Vec::new();
+        loop {
+            match rd.read(&mut buf).await {
+                Ok(0) => return Ok(()),
+                Ok(n) => {
+                    decoder.push(&buf[..n], &mut frames);
+                    let delta = decoder.take_stats();
+                    ctx.deliver(peer, n, &mut frames, &delta);
+                }
+                Err(e) => return Err(e),
+            }
+        }
+    };
+    let writer = async {
+        let mut wr = BufWriter::new(wr);
+        while let Some(bytes) = rx.recv().await {
+            wr.write_all(&bytes).await?;
+            ctx.sent(bytes.len());
+            // Batch whatever else is already queued into the same write.
+            while let Ok(bytes) = rx.try_recv() {
+                wr.write_all(&bytes).await?;
+                ctx.sent(bytes.len());
+            }
+            wr.flush().await?;
+        }
+        Ok::<(), io::Error>(())
+    };
+    let result = tokio::select! {
+        r = reader => r,
+        w = writer => w,
+    };
+    if let Err(e) = result {
+        tracing::info!(endpoint = %ctx.url, peer, error = %e, "peer connection ended");
+    }
+}
+
+// ---------------------------------------------------------------------------
+// TCP client and serial: one peer, reconnect with backoff
+// ---------------------------------------------------------------------------
+
+async fn run_connector<S, F, Fut>(
+    ctx: Arc<EndpointCtx>,
+    mut queue: mpsc::Receiver<Queued>,
+    mut shutdown: watch::Receiver<bool>,
+    mut connect: F,
+) where
+    S: AsyncRead + AsyncWrite + Send + 'static,
+    F: FnMut() -> Fut,
+    Fut: Future<Output = io::Result<(S, Option<SocketAddr>)>>,
+{
+    let mut backoff = BACKOFF_MIN;
+    let mut failures = 0u32;
+    loop {
+        let attempt = while_discarding(&mut queue, &mut shutdown, connect()).await;
+        let (stream, local) = match attempt {
+            None => break,
+            Some(Ok(opened)) => opened,
+            Some(Err(e)) => {
+                if failures == 0 {
+                    tracing::warn!(endpoint = %ctx.url, error = %e, "cannot connect; retrying with backoff");
+                } else {
+                    tracing::debug!(endpoint = %ctx.url, error = %e, "still cannot connect");
+                }
+                failures = failures.saturating_add(1);
+                let wait = tokio::time::sleep(backoff);
+                backoff = (backoff * 2).min(BACKOFF_MAX);
+                if while_discarding(&mut queue, &mut shutdown, wait)
+                    .await
+                    .is_none()
+                {
+                    break;
+                }
+                continue;
+            }
+        };
+        backoff = BACKOFF_MIN;
+        failures = 0;
+        let peer = ctx.new_peer();
+        tracing::info!(endpoint = %ctx.url, peer, "connected");
+        ctx.counters.set_local_addr(local);
+        ctx.set_peers(1);
+        let (tx, rx) = mpsc::channel(PEER_QUEUE);
+        let conns = HashMap::from([(peer, tx)]);
+        let session = run_stream(Arc::clone(&ctx), peer, stream, rx);
+        tokio::pin!(session);
+        let stop = loop {
+            tokio::select! {
+                () = stopped(&mut shutdown) => break true,
+                () = &mut session => break false,
+                queued = queue.recv() => match queued {
+                    Some(queued) => dispatch(&ctx, &conns, &queued),
+                    None => break true,
+                },
+            }
+        };
+        ctx.set_peers(0);
+        if stop {
+            break;
+        }
+        tracing::warn!(endpoint = %ctx.url, peer, "disconnected; reconnecting");
+        // A peer that drops us at once must not make us hammer it.
+        if while_discarding(&mut queue, &mut shutdown, tokio::time::sleep(BACKOFF_MIN))
+            .await
+            .is_none()
+        {
+            break;
+        }
+    }
+    ctx.set_peers(0);
+}
+
+/// Runs `fut` while throwing away frames queued for a peer that is not
+/// there (as UDP does with no peers), so `send` never sees a full queue
+/// because of a disconnected link. `None` on shutdown.
+async fn while_discarding<T>(
+    queue: &mut mpsc::Receiver<Queued>,
+    shutdown: &mut watch::Receiver<bool>,
+    fut: impl Future<Output = T>,
+) -> Option<T> {
+    tokio::pin!(fut);
+    loop {
+        tokio::select! {
+            () = stopped(shutdown) => return None,
+            out = &mut fut => return Some(out),
+            // A closed queue means the router is gone.
+            queued = queue.recv() => { queued.as_ref()?; }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// telemetry log thread
+// ---------------------------------------------------------------------------
+
+enum TlogMsg {
+    Frame(u64, Arc<[u8]>),
+    Stop,
+}
+
+#[derive(Clone)]
+struct TlogSender {
+    tx: std::sync::mpsc::SyncSender<TlogMsg>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl TlogSender {
+    fn record(&self, unix_time_us: u64, raw: Arc<[u8]>) {
+        if let Err(std::sync::mpsc::TrySendError::Full(_)) =
+            self.tx.try_send(TlogMsg::Frame(unix_time_us, raw))
+            && self.dropped.fetch_add(1, Ordering::Relaxed) == 0
+        {
+            tracing::warn!("telemetry log cannot keep up: dropping records (logged once)");
+        }
+    }
+}
+
+struct TlogHandle {
+    sender: TlogSender,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+impl TlogHandle {
+    fn spawn(cfg: &TlogConfig) -> Result<Self, EndpointError> {
+        let tlog_err = |source| EndpointError::Tlog {
+            dir: cfg.dir.clone(),
+            source,
+        };
+        let writer = TlogWriter::create(cfg, &session_name(SystemTime::now())).map_err(tlog_err)?;
+        tracing::info!(path = %writer.path().display(), "telemetry log started");
+        let (tx, rx) = std::sync::mpsc::sync_channel(TLOG_QUEUE);
+        // A thread, not a task: file writes may block, and must not hold up
+        // a runtime worker that is serving sockets.
+        let thread = std::thread::Builder::new()
+            .name("neptunus-tlog".into())
+            .spawn(move || run_tlog(writer, rx))
+            .map_err(tlog_err)?;
+        Ok(Self {
+            sender: TlogSender {
+                tx,
+                dropped: Arc::new(AtomicU64::new(0)),
+            },
+            thread: Mutex::new(Some(thread)),
+        })
+    }
+
+    async fn stop(&self) {
+        let thread = self
+            .thread
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
+        let Some(thread) = thread else { return };
+        let tx = self.sender.tx.clone();
+        let joined = tokio::task::spawn_blocking(move || {
+            // Blocks only while the thread drains a full queue.
+            let _ = tx.send(TlogMsg::Stop);
+            thread.join()
+        })
+        .await;
+        if !matches!(joined, Ok(Ok(()))) {
+            tracing::warn!("telemetry log thread did not stop cleanly");
+        }
+    }
+}
+
+fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
+    use std::sync::mpsc::RecvTimeoutError;
+    let mut next_flush = std::time::Instant::now() + TLOG_FLUSH_PERIOD;
+    let mut dirty = false;
+    let mut failed = false;
+    let mut report = |result: io::Result<()>, path: &std::path::Path| {
+        if let Err(e) = result
+            && !std::mem::replace(&mut failed, true)
+        {
+            tracing::warn!(path = %path.display(), error = %e, "cannot write the telemetry log (logged once)");
+        }
+    };
+    loop {
+        let wait = next_flush.saturating_duration_since(std::time::Instant::now());
+        match rx.recv_timeout(wait) {
+            Ok(TlogMsg::Frame(time_us, raw)) => {
+                let result = writer.write_frame(time_us, &raw);
+                report(result, writer.path());
+                dirty = true;
+            }
+            Ok(TlogMsg::Stop) | Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Timeout) => {}
+        }
+        let now = std::time::Instant::now();
+        if now >= next_flush {
+            if dirty {
+                let result = writer.flush();
+                report(result, writer.path());
+                dirty = false;
+            }
+            next_flush = now + TLOG_FLUSH_PERIOD;
+        }
+    }
+    let result = writer.flush();
+    report(result, writer.path());
+}
+
+/// `neptunus-YYYYMMDD-HHMMSS` in UTC: sorts by time, and reads the same on
+/// the ROV (which may have no time zone set) and on the laptop.
+fn session_name(now: SystemTime) -> String {
+    let secs = now.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let days = i64::try_from(secs / 86_400).unwrap_or(0);
+    let rem = secs % 86_400;
+    let (y, m, d) = civil_from_days(days);
+    format!(
+        "neptunus-{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        (rem / 60) % 60,
+        rem % 60
+    )
+}
+
+/// Proleptic Gregorian date of a day count since 1970-01-01 (the standard
+/// era-based conversion; avoids a date crate for one file name).
+fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    (y, m as u32, d as u32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn session_names_are_utc_dates() {
+        let t = UNIX_EPOCH + Duration::from_secs(1_700_000_000);
+        assert_eq!(session_name(t), "neptunus-20231114-221320");
+        assert_eq!(session_name(UNIX_EPOCH), "neptunus-19700101-000000");
+        let leap = UNIX_EPOCH + Duration::from_secs(951_782_400); // 2000-02-29
+        assert_eq!(session_name(leap), "neptunus-20000229-000000");
+    }
+}

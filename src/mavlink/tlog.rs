@@ -1,0 +1,170 @@
+//! Telemetry log (`.tlog`) files in the format pymavlink's `mavlogdump.py`
+//! and QGroundControl replay read: each record is an 8-byte big-endian Unix
+//! time in microseconds followed by one raw MAVLink frame.
+//!
+//! Owns: naming, writing, flushing and size-based rotation of the files, and
+//! scrubbing secrets out of frames before they are written. It must never
+//! write a signing key: SETUP_SIGNING (id 256) is logged with its key zeroed.
+//! It is synchronous on purpose; the router runs it on a dedicated thread so
+//! disk stalls never reach a socket or the vehicle.
+
+use std::borrow::Cow;
+use std::fs::{File, OpenOptions};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+/// Where and how big.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TlogConfig {
+    pub dir: PathBuf,
+    /// A new file is started before a record would take the current one past this.
+    pub max_bytes: u64,
+}
+
+impl TlogConfig {
+    pub const DEFAULT_MAX_BYTES: u64 = 64 * 1024 * 1024;
+
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            max_bytes: Self::DEFAULT_MAX_BYTES,
+        }
+    }
+}
+
+/// Message id of SETUP_SIGNING.
+const SETUP_SIGNING_ID: u32 = 256;
+/// `secret_key[32]` sits after `initial_timestamp` (u64), `target_system`
+/// and `target_component` (u8 each) in SETUP_SIGNING's wire order.
+const SETUP_SIGNING_KEY: std::ops::Range<usize> = 10..42;
+const V2_HEADER_LEN: usize = 10;
+
+/// A buffered writer of one session's `.tlog` files.
+#[derive(Debug)]
+pub struct TlogWriter {
+    dir: PathBuf,
+    session: String,
+    max_bytes: u64,
+    /// 1 for `{session}.tlog`, n for `{session}-n.tlog`.
+    index: u32,
+    path: PathBuf,
+    file: BufWriter<File>,
+    written: u64,
+}
+
+impl TlogWriter {
+    /// Creates `{dir}/{session}.tlog` (and `dir` if needed). An existing file
+    /// is never overwritten: the next free `{session}-n.tlog` is used instead.
+    pub fn create(cfg: &TlogConfig, session: &str) -> io::Result<Self> {
+        std::fs::create_dir_all(&cfg.dir)?;
+        let (index, path, file) = open_next(&cfg.dir, session, 1)?;
+        Ok(Self {
+            dir: cfg.dir.clone(),
+            session: session.to_owned(),
+            max_bytes: cfg.max_bytes,
+            index,
+            path,
+            file: BufWriter::new(file),
+            written: 0,
+        })
+    }
+
+    /// Appends one record, rotating first if it would not fit.
+    pub fn write_frame(&mut self, unix_time_us: u64, raw: &[u8]) -> io::Result<()> {
+        let record_len = 8 + raw.len() as u64;
+        if self.written > 0 && self.written + record_len > self.max_bytes {
+            self.rotate()?;
+        }
+        let raw = redact(raw);
+        self.file.write_all(&unix_time_us.to_be_bytes())?;
+        self.file.write_all(&raw)?;
+        self.written += record_len;
+        Ok(())
+    }
+
+    pub fn flush(&mut self) -> io::Result<()> {
+        self.file.flush()
+    }
+
+    /// The file being written now.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn rotate(&mut self) -> io::Result<()> {
+        self.file.flush()?;
+        let (index, path, file) = open_next(&self.dir, &self.session, self.index + 1)?;
+        tracing::info!(path = %path.display(), "telemetry log rotated");
+        self.index = index;
+        self.path = path;
+        self.file = BufWriter::new(file);
+        self.written = 0;
+        Ok(())
+    }
+}
+
+fn file_name(session: &str, index: u32) -> String {
+    if index <= 1 {
+        format!("{session}.tlog")
+    } else {
+        format!("{session}-{index}.tlog")
+    }
+}
+
+fn open_next(dir: &Path, session: &str, mut index: u32) -> io::Result<(u32, PathBuf, File)> {
+    loop {
+        let path = dir.join(file_name(session, index));
+        match OpenOptions::new().write(true).create_new(true).open(&path) {
+            Ok(file) => return Ok((index, path, file)),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists && index < u32::MAX => index += 1,
+            Err(e) => return Err(e),
+        }
+    }
+}
+
+/// Returns the frame as it may be logged: a MAVLink 2 SETUP_SIGNING has its
+/// secret key zeroed. Its CRC is left as it was, so the logged frame fails
+/// its CRC check on replay; that is deliberate, since recomputing it would
+/// make a forged all-zero key ("disable signing") look genuine.
+pub fn redact(raw: &[u8]) -> Cow<'_, [u8]> {
+    let is_setup_signing = raw.len() >= V2_HEADER_LEN
+        && raw[0] == mavlink_core::MAV_STX_V2
+        && u32::from_le_bytes([raw[7], raw[8], raw[9], 0]) == SETUP_SIGNING_ID;
+    if !is_setup_signing {
+        return Cow::Borrowed(raw);
+    }
+    let mut owned = raw.to_vec();
+    // MAVLink 2 trims trailing zero bytes from payloads, so only the key
+    // bytes actually present are zeroed, never the CRC after them.
+    let payload_len = usize::from(raw[1]);
+    let start = V2_HEADER_LEN + SETUP_SIGNING_KEY.start;
+    let end = V2_HEADER_LEN + SETUP_SIGNING_KEY.end.min(payload_len);
+    if let Some(key) = owned.get_mut(start..end) {
+        key.fill(0);
+    }
+    Cow::Owned(owned)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dialect::neptunus::{MavMessage, SETUP_SIGNING_DATA};
+
+    #[test]
+    fn key_offset_matches_the_dialect() {
+        let key = [0xA5; 32];
+        let msg = MavMessage::SETUP_SIGNING(SETUP_SIGNING_DATA {
+            initial_timestamp: 1,
+            target_system: 2,
+            target_component: 3,
+            secret_key: key,
+        });
+        let raw = crate::mavlink::frame::encode_v2(1, 1, 0, &msg);
+        let at = V2_HEADER_LEN + SETUP_SIGNING_KEY.start;
+        assert_eq!(&raw[at..at + 32], &key);
+        let redacted = redact(&raw);
+        assert!(redacted[at..at + 32].iter().all(|&b| b == 0));
+        assert_eq!(redacted.len(), raw.len());
+        assert_eq!(redacted[raw.len() - 2..], raw[raw.len() - 2..]);
+    }
+}
