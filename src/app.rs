@@ -7,12 +7,18 @@
 use std::future::Future;
 use std::time::Duration;
 
+use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::config::{BoardSource, Settings};
 use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
 use crate::firmware::emulator::PtyBoard;
-use crate::firmware::link::{self, LinkError, LinkEvent, LinkState};
+use crate::firmware::link::{self, LinkError, LinkEvent};
+use crate::mavlink::endpoint::{EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle};
+use crate::mavlink::frame::encode_v2;
+use crate::mavlink::tlog::TlogConfig;
+use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, To, Vehicle};
+use crate::vehicle::params::ParamFile;
 
 /// Errors starting the vehicle.
 #[derive(Debug, thiserror::Error)]
@@ -66,12 +72,10 @@ pub async fn run(mut settings: Settings, shutdown: impl Future<Output = ()>) -> 
         tracing::warn!("configured sysid refused: {e}");
     }
 
-    let session = session_name();
     let (in_tx, mut inbound) = mpsc::channel(4096);
     let router_cfg = RouterConfig {
         peer_timeout: settings.mavlink.peer_timeout,
         tlog: Some(TlogConfig { dir: settings.data_dir.join("tlogs"), max_bytes: settings.mavlink.tlog_max_bytes }),
-        session: session.clone(),
     };
     let router = Router::start(settings.mavlink.endpoints.clone(), router_cfg, in_tx).await?;
     for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
@@ -190,11 +194,6 @@ impl Io {
     }
 }
 
-/// `neptunus-YYYYmmddTHHMMSSZ` (UTC) for this run's telemetry log.
-fn session_name() -> String {
-    let stamp = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
-    format!("neptunus-{}", stamp.replace(['-', ':'], ""))
-}
 
 fn merge_nav(old: NavSample, new: NavSample) -> NavSample {
     NavSample {

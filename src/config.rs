@@ -260,11 +260,32 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
     } else {
         BoardSource::Serial
     };
-    Ok(Settings {
-        board,
-        link,
-        data_dir,
-    })
+    let endpoints = if !args.mavlink.is_empty() {
+        args.mavlink.clone()
+    } else if let Some(urls) = &file.mavlink.endpoints {
+        urls.iter()
+            .map(|u| u.parse::<EndpointSpec>().map_err(|e| ConfigError::Invalid(format!("mavlink.endpoints: {e}"))))
+            .collect::<Result<_, _>>()?
+    } else {
+        DEFAULT_ENDPOINTS
+            .iter()
+            .map(|u| u.parse::<EndpointSpec>().map_err(|e| ConfigError::Invalid(e.to_string())))
+            .collect::<Result<_, _>>()?
+    };
+    let peer_timeout_s = file.mavlink.peer_timeout_s.unwrap_or(10.0);
+    if !(peer_timeout_s.is_finite() && peer_timeout_s > 0.0) {
+        return Err(ConfigError::Invalid(format!(
+            "mavlink.peer_timeout_s = {peer_timeout_s} — use a positive number of seconds"
+        )));
+    }
+    let mavlink = MavlinkSettings {
+        endpoints,
+        identity: args.identity.or(file.mavlink.identity).unwrap_or_default(),
+        sysid: file.mavlink.sysid,
+        peer_timeout: std::time::Duration::from_secs_f64(peer_timeout_s),
+        tlog_max_bytes: file.mavlink.tlog_max_mb.unwrap_or(64).max(1) * 1024 * 1024,
+    };
+    Ok(Settings { board, link, data_dir, mavlink })
 }
 
 /// Emulator options for `emulate-board`: flags over the file's `[emulator]`.

@@ -1,6 +1,6 @@
 //! The vehicle core with synthetic time: identity, telemetry, commands,
 //! parameters, missions and FTP — every rule a ground station relies on.
-#![allow(clippy::unwrap_used, clippy::expect_used)]
+#![allow(clippy::unwrap_used, clippy::expect_used, deprecated)]
 
 use std::time::Duration;
 
@@ -116,7 +116,7 @@ fn texts(out: &[Output]) -> Vec<String> {
         .into_iter()
         .filter_map(|(_, m)| match m {
             MavMessage::STATUSTEXT(s) => {
-                let b: &[u8] = &s.text;
+                let b: &[u8] = s.text.as_ref();
                 Some(String::from_utf8_lossy(b).trim_end_matches('\0').to_owned())
             }
             _ => None,

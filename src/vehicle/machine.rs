@@ -9,6 +9,11 @@
 //! It must never let a thruster move while disarmed: every `go()` it emits
 //! while disarmed is neutral.
 
+// Ground stations still send the legacy messages and commands MAVLink has
+// deprecated (SET_MODE, REQUEST_DATA_STREAM, PING, GET_MESSAGE_INTERVAL …);
+// an ArduSub-compatible vehicle must answer them.
+#![allow(deprecated)]
+
 use std::time::Duration;
 
 use mavlink_core::types::CharArray;
@@ -156,7 +161,7 @@ fn chars<const N: usize>(s: &str) -> CharArray<N> {
 }
 
 fn char_str<const N: usize>(c: &CharArray<N>) -> String {
-    let bytes: &[u8] = c;
+    let bytes: &[u8] = c.as_ref();
     let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
     String::from_utf8_lossy(&bytes[..end]).into_owned()
 }
@@ -213,6 +218,12 @@ impl Vehicle {
     }
     pub fn motors_us(&self) -> [u16; 3] {
         self.motors_us
+    }
+
+    /// The schedule of an endpoint (endpoint ids beyond the table share the last one).
+    fn schedule_mut(&mut self, endpoint: usize) -> &mut Schedule {
+        let last = self.schedules.len() - 1;
+        &mut self.schedules[endpoint.min(last)]
     }
 
     fn param(&self, name: &str, default: f64) -> f64 {
@@ -521,7 +532,7 @@ impl Vehicle {
             36 => {
                 let [port, vert, star] = self.motors_us;
                 let laser_pwm = if self.laser > 0 { 1900 } else { 1100 };
-                let lights_pwm = 1100 + (u16::from(self.lights) * 800) / 255;
+                let lights_pwm = (1100 + (u32::from(self.lights) * 800) / 255) as u16;
                 vec![MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
                     time_usec: (now.mono.saturating_sub(self.booted).as_micros() & 0xffff_ffff) as u32,
                     // MOT_1 starboard, MOT_2 port, MOT_3 vertical (ArduSub SimpleROV-3 numbering).
@@ -723,7 +734,7 @@ impl Vehicle {
                     .then(|| Duration::from_secs_f64(1.0 / f64::from(r.req_message_rate)));
                 for g in groups {
                     for msg_id in telemetry::stream_group(g) {
-                        self.schedules[from.endpoint.min(self.schedules.len() - 1)].set(*msg_id, interval, now.mono);
+                        self.schedule_mut(from.endpoint).set(*msg_id, interval, now.mono);
                     }
                 }
             }
@@ -861,7 +872,7 @@ impl Vehicle {
                     } else {
                         Some(Duration::from_micros(interval_us as u64))
                     };
-                    self.schedules[from.endpoint.min(self.schedules.len() - 1)].set(id, iv, now.mono);
+                    self.schedule_mut(from.endpoint).set(id, iv, now.mono);
                     R::MAV_RESULT_ACCEPTED
                 };
                 out.push(ack(result));
@@ -869,7 +880,7 @@ impl Vehicle {
             C::MAV_CMD_GET_MESSAGE_INTERVAL => {
                 let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
                 if telemetry::is_streamable(id) {
-                    let iv = self.schedules[from.endpoint.min(self.schedules.len() - 1)].interval(id);
+                    let iv = self.schedule_mut(from.endpoint).interval(id);
                     out.push(ack(R::MAV_RESULT_ACCEPTED));
                     out.push(Output::Send {
                         to: reply,
