@@ -201,7 +201,8 @@ pub struct EndpointStats {
     pub bytes_out: u64,
     pub decode: FrameStats,
     pub send_errors: u64,
-    /// Frames decoded but dropped because the inbound channel was full.
+    /// Frames decoded but dropped because the inbound channel was full (or
+    /// their sender was refused: the peer table was full).
     pub inbound_dropped: u64,
 }
 
@@ -226,6 +227,9 @@ impl Default for RouterConfig {
 const ENDPOINT_QUEUE: usize = 1024;
 /// Frames queued for one TCP/serial peer before its frames are dropped.
 const PEER_QUEUE: usize = 256;
+/// Peers per endpoint (UDP addresses or TCP clients); more are refused so
+/// that spoofed source addresses or a connection flood cannot grow memory.
+const MAX_PEERS: usize = 64;
 /// Records queued for the telemetry log thread.
 const TLOG_QUEUE: usize = 8192;
 const TLOG_FLUSH_PERIOD: Duration = Duration::from_secs(1);
@@ -491,6 +495,7 @@ const WARN_BAD_PAYLOAD: u32 = 4;
 const WARN_GARBAGE: u32 = 8;
 const WARN_SEND: u32 = 16;
 const WARN_INBOUND: u32 = 32;
+const WARN_PEERS: u32 = 64;
 
 impl EndpointCtx {
     fn new_peer(&self) -> PeerId {
@@ -509,6 +514,17 @@ impl EndpointCtx {
         self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
         if self.first_time(WARN_SEND) {
             tracing::warn!(endpoint = %self.url, "{what} (logged once; see send_errors)");
+        }
+    }
+
+    /// A new peer was refused because the table is full; its `frames` are
+    /// dropped (counted as inbound drops).
+    fn refuse_peer(&self, from: &str, frames: usize) {
+        self.counters
+            .inbound_dropped
+            .fetch_add(frames as u64, Ordering::Relaxed);
+        if self.first_time(WARN_PEERS) {
+            tracing::warn!(endpoint = %self.url, %from, "peer table full ({MAX_PEERS}): refusing new peers (logged once)");
         }
     }
 
@@ -719,23 +735,39 @@ async fn run_udp(
             () = stopped(&mut shutdown) => break,
             received = socket.recv_from(&mut buf) => match received {
                 Ok((n, from)) => {
-                    let peer = match target {
-                        Some((addr, id)) if addr == from => id,
-                        _ => {
-                            let now = Instant::now();
-                            let entry = peers.entry(from).or_insert_with(|| {
-                                let id = ctx.new_peer();
-                                tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
-                                UdpPeer { id, last_seen: now }
-                            });
-                            entry.last_seen = now;
-                            entry.id
-                        }
-                    };
-                    ctx.set_peers(fixed + peers.len());
                     let mut delta = FrameStats::default();
                     decode_datagram(&buf[..n], &mut delta, &mut frames);
-                    ctx.deliver(peer, n, &mut frames, &delta);
+                    // Only a sender of valid MAVLink becomes a peer: a port
+                    // scan or a stray packet must not start a telemetry stream.
+                    let peer = match target {
+                        Some((addr, id)) if addr == from => Some(id),
+                        _ if frames.is_empty() => None,
+                        _ => {
+                            let now = Instant::now();
+                            if let Some(known) = peers.get_mut(&from) {
+                                known.last_seen = now;
+                                Some(known.id)
+                            } else if peers.len() < MAX_PEERS {
+                                let id = ctx.new_peer();
+                                tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+                                peers.insert(from, UdpPeer { id, last_seen: now });
+                                ctx.set_peers(fixed + peers.len());
+                                Some(id)
+                            } else {
+                                None
+                            }
+                        }
+                    };
+                    match peer {
+                        Some(peer) => ctx.deliver(peer, n, &mut frames, &delta),
+                        None => {
+                            if !frames.is_empty() {
+                                ctx.refuse_peer(&from.to_string(), frames.len());
+                                frames.clear();
+                            }
+                            ctx.deliver(0, n, &mut frames, &delta);
+                        }
+                    }
                 }
                 Err(e) => {
                     // Linux reports ICMP errors from earlier sends here; they
@@ -801,6 +833,11 @@ async fn run_tcp_in(
         tokio::select! {
             () = stopped(&mut shutdown) => break,
             accepted = listener.accept() => match accepted {
+                Ok((stream, from)) if conns.len() >= MAX_PEERS => {
+                    // Each client costs a queue and a task: bound them.
+                    drop(stream);
+                    ctx.refuse_peer(&from.to_string(), 0);
+                }
                 Ok((stream, from)) => {
                     let peer = ctx.new_peer();
                     if let Err(e) = stream.set_nodelay(true) {
