@@ -14,7 +14,9 @@ use crate::config::{BoardSource, Settings};
 use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
 use crate::firmware::emulator::PtyBoard;
 use crate::firmware::link::{self, LinkError, LinkEvent};
-use crate::mavlink::endpoint::{EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle};
+use crate::mavlink::endpoint::{
+    EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle,
+};
 use crate::mavlink::frame::encode_v2;
 use crate::mavlink::tlog::TlogConfig;
 use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, To, Vehicle};
@@ -44,9 +46,14 @@ pub const NEUTRAL: Command = Command::Go {
 };
 
 /// Runs the vehicle until `shutdown` resolves.
-pub async fn run(mut settings: Settings, shutdown: impl Future<Output = ()>) -> Result<(), AppError> {
-    std::fs::create_dir_all(&settings.data_dir)
-        .map_err(|source| AppError::DataDir { path: settings.data_dir.clone(), source })?;
+pub async fn run(
+    mut settings: Settings,
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), AppError> {
+    std::fs::create_dir_all(&settings.data_dir).map_err(|source| AppError::DataDir {
+        path: settings.data_dir.clone(),
+        source,
+    })?;
     let board = match &settings.board {
         BoardSource::Simulated(opts) => {
             let board = PtyBoard::spawn(opts.clone(), None)?;
@@ -75,7 +82,10 @@ pub async fn run(mut settings: Settings, shutdown: impl Future<Output = ()>) -> 
     let (in_tx, mut inbound) = mpsc::channel(4096);
     let router_cfg = RouterConfig {
         peer_timeout: settings.mavlink.peer_timeout,
-        tlog: Some(TlogConfig { dir: settings.data_dir.join("tlogs"), max_bytes: settings.mavlink.tlog_max_bytes }),
+        tlog: Some(TlogConfig {
+            dir: settings.data_dir.join("tlogs"),
+            max_bytes: settings.mavlink.tlog_max_bytes,
+        }),
     };
     let router = Router::start(settings.mavlink.endpoints.clone(), router_cfg, in_tx).await?;
     for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
@@ -83,7 +93,11 @@ pub async fn run(mut settings: Settings, shutdown: impl Future<Output = ()>) -> 
     }
 
     let (link, mut events) = link::spawn(settings.link.clone());
-    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, settings.mavlink.endpoints.len());
+    let mut vehicle = Vehicle::new(
+        settings.mavlink.identity,
+        store,
+        settings.mavlink.endpoints.len(),
+    );
     let t0 = Instant::now();
     let clock = move || Now {
         mono: t0.elapsed(),
@@ -91,12 +105,21 @@ pub async fn run(mut settings: Settings, shutdown: impl Future<Output = ()>) -> 
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_micros() as u64),
     };
-    let mut io = Io { router: router.clone(), link: link.clone(), params: param_file, seq: 0, last_healthy: None };
+    let mut io = Io {
+        router: router.clone(),
+        link: link.clone(),
+        params: param_file,
+        seq: 0,
+        last_healthy: None,
+    };
     let mut shutdown = std::pin::pin!(shutdown);
     let mut outputs = Vec::with_capacity(64);
     let mut tick = tokio::time::interval(Duration::from_millis(10));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-    let mut report = tokio::time::interval_at(Instant::now() + Duration::from_secs(1), Duration::from_secs(5));
+    let mut report = tokio::time::interval_at(
+        Instant::now() + Duration::from_secs(1),
+        Duration::from_secs(5),
+    );
     let mut nav = NavSample::default();
     let mut status = StatusSample::default();
     loop {
@@ -174,7 +197,10 @@ impl Io {
                         To::Endpoint(e) => Route::Endpoint(e),
                         To::Peer(e, p) => Route::Peer(e, p),
                     };
-                    self.router.send(Outbound { route, bytes: bytes.into() });
+                    self.router.send(Outbound {
+                        route,
+                        bytes: bytes.into(),
+                    });
                 }
                 Output::Board(cmd) => self.link.send(cmd),
                 Output::SaveParams => {
@@ -184,7 +210,10 @@ impl Io {
                 }
                 Output::Healthy => {
                     // The link only needs to hear this every few hundred ms.
-                    if self.last_healthy.is_none_or(|t| now.mono.saturating_sub(t) >= Duration::from_millis(100)) {
+                    if self
+                        .last_healthy
+                        .is_none_or(|t| now.mono.saturating_sub(t) >= Duration::from_millis(100))
+                    {
                         self.last_healthy = Some(now.mono);
                         self.link.healthy();
                     }
@@ -193,7 +222,6 @@ impl Io {
         }
     }
 }
-
 
 fn merge_nav(old: NavSample, new: NavSample) -> NavSample {
     NavSample {

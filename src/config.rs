@@ -264,12 +264,18 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         args.mavlink.clone()
     } else if let Some(urls) = &file.mavlink.endpoints {
         urls.iter()
-            .map(|u| u.parse::<EndpointSpec>().map_err(|e| ConfigError::Invalid(format!("mavlink.endpoints: {e}"))))
+            .map(|u| {
+                u.parse::<EndpointSpec>()
+                    .map_err(|e| ConfigError::Invalid(format!("mavlink.endpoints: {e}")))
+            })
             .collect::<Result<_, _>>()?
     } else {
         DEFAULT_ENDPOINTS
             .iter()
-            .map(|u| u.parse::<EndpointSpec>().map_err(|e| ConfigError::Invalid(e.to_string())))
+            .map(|u| {
+                u.parse::<EndpointSpec>()
+                    .map_err(|e| ConfigError::Invalid(e.to_string()))
+            })
             .collect::<Result<_, _>>()?
     };
     let peer_timeout_s = file.mavlink.peer_timeout_s.unwrap_or(10.0);
@@ -285,7 +291,12 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         peer_timeout: std::time::Duration::from_secs_f64(peer_timeout_s),
         tlog_max_bytes: file.mavlink.tlog_max_mb.unwrap_or(64).max(1) * 1024 * 1024,
     };
-    Ok(Settings { board, link, data_dir, mavlink })
+    Ok(Settings {
+        board,
+        link,
+        data_dir,
+        mavlink,
+    })
 }
 
 /// Emulator options for `emulate-board`: flags over the file's `[emulator]`.

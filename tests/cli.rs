@@ -88,7 +88,12 @@ fn sim_runs_and_logs_telemetry() {
         .arg("--data-dir")
         .arg(dir.path())
         // Ephemeral ports: tests never take the well-known ones.
-        .args(["--mavlink", "udpin:127.0.0.1:0", "--mavlink", "tcpin:127.0.0.1:0"])
+        .args([
+            "--mavlink",
+            "udpin:127.0.0.1:0",
+            "--mavlink",
+            "tcpin:127.0.0.1:0",
+        ])
         .env("RUST_LOG", "info")
         .stdout(Stdio::null())
         .stderr(Stdio::piped())

@@ -10,7 +10,12 @@ use neptunus::firmware::link::LinkState;
 use neptunus::vehicle::machine::{Identity, Input, Now, Output, Sender, To, Vehicle};
 use neptunus::vehicle::params::ParamStore;
 
-const QGC: Sender = Sender { endpoint: 0, peer: 7, sysid: 255, compid: 190 };
+const QGC: Sender = Sender {
+    endpoint: 0,
+    peer: 7,
+    sysid: 255,
+    compid: 190,
+};
 
 struct Rig {
     v: Vehicle,
@@ -20,12 +25,19 @@ struct Rig {
 
 impl Rig {
     fn new() -> Self {
-        let mut r = Self { v: Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 2), t: Duration::ZERO, out: Vec::new() };
+        let mut r = Self {
+            v: Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 2),
+            t: Duration::ZERO,
+            out: Vec::new(),
+        };
         r.input(Input::Tick);
         r
     }
     fn now(&self) -> Now {
-        Now { mono: self.t, unix_us: 1_700_000_000_000_000 + self.t.as_micros() as u64 }
+        Now {
+            mono: self.t,
+            unix_us: 1_700_000_000_000_000 + self.t.as_micros() as u64,
+        }
     }
     fn input(&mut self, i: Input) -> Vec<Output> {
         let mut out = Vec::new();
@@ -40,7 +52,7 @@ impl Rig {
         let mut all = Vec::new();
         while self.t < end {
             self.t += Duration::from_millis(10);
-            if board && self.t.as_millis() % 100 == 0 {
+            if board && self.t.as_millis().is_multiple_of(100) {
                 all.extend(self.input(Input::Board(Event::Nav(NavSample {
                     heading_deg: Some(90.0),
                     depth_m: Some(1.5),
@@ -50,7 +62,7 @@ impl Rig {
                     fthr_pct: Some(0.0),
                 }))));
             }
-            if board && self.t.as_millis() % 1000 == 0 {
+            if board && self.t.as_millis().is_multiple_of(1000) {
                 all.extend(self.input(Input::Board(Event::Status(StatusSample {
                     vout_v: Some(12.0),
                     iout_a: Some(0.3),
@@ -66,7 +78,10 @@ impl Rig {
         all
     }
     fn link_up(&mut self) {
-        self.input(Input::Link { state: LinkState::Up, reason: None });
+        self.input(Input::Link {
+            state: LinkState::Up,
+            reason: None,
+        });
         self.run(Duration::from_millis(1100), true);
     }
     fn cmd(&mut self, command: MavCmd, p: [f32; 7]) -> Vec<Output> {
@@ -125,7 +140,10 @@ fn texts(out: &[Output]) -> Vec<String> {
 }
 
 fn count(out: &[Output], id: u32, to: To) -> usize {
-    sent(out).iter().filter(|(t, m)| *t == to && neptunus::dialect::neptunus::MavMessage::message_id(m) == id).count()
+    sent(out)
+        .iter()
+        .filter(|(t, m)| *t == to && neptunus::dialect::neptunus::MavMessage::message_id(m) == id)
+        .count()
 }
 
 use mavlink_core::Message as _;
@@ -148,14 +166,26 @@ fn heartbeat_at_1_hz_on_every_endpoint_as_ardusub() {
     }
     let hb = sent(&out)
         .into_iter()
-        .find_map(|(_, m)| if let MavMessage::HEARTBEAT(h) = m { Some(h) } else { None })
+        .find_map(|(_, m)| {
+            if let MavMessage::HEARTBEAT(h) = m {
+                Some(h)
+            } else {
+                None
+            }
+        })
         .unwrap();
     assert_eq!(hb.mavtype, MavType::MAV_TYPE_SUBMARINE);
     assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA);
     assert_eq!(hb.custom_mode, 19);
     assert_eq!(hb.mavlink_version, 3);
-    assert!(hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED));
-    assert!(!hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED));
+    assert!(
+        hb.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+    );
+    assert!(
+        !hb.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+    );
     // Board link down at start: critical.
     assert_eq!(hb.system_status, MavState::MAV_STATE_CRITICAL);
 }
@@ -165,7 +195,16 @@ fn generic_identity_changes_the_autopilot_field() {
     let mut v = Vehicle::new(Identity::Generic, ParamStore::defaults(), 1);
     let mut out = Vec::new();
     v.handle(Input::Tick, Now::default(), &mut out);
-    let hb = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::HEARTBEAT(h) = m { Some(h) } else { None }).unwrap();
+    let hb = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::HEARTBEAT(h) = m {
+                Some(h)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!(hb.autopilot, MavAutopilot::MAV_AUTOPILOT_GENERIC);
 }
 
@@ -174,18 +213,53 @@ fn no_attitude_or_depth_while_the_board_link_is_down() {
     let mut r = Rig::new();
     r.link_up();
     let out = r.run(Duration::from_secs(1), true);
-    assert!(count(&out, 30, To::Endpoint(0)) >= 9, "ATTITUDE at 10 Hz while up");
+    assert!(
+        count(&out, 30, To::Endpoint(0)) >= 9,
+        "ATTITUDE at 10 Hz while up"
+    );
     assert!(count(&out, 33, To::Endpoint(0)) >= 2);
-    let out = r.input(Input::Link { state: LinkState::Down, reason: Some("device closed".into()) });
-    assert!(texts(&out).iter().any(|t| t.contains("Board link down") && t.contains("device closed")), "{:?}", texts(&out));
+    let out = r.input(Input::Link {
+        state: LinkState::Down,
+        reason: Some("device closed".into()),
+    });
+    assert!(
+        texts(&out)
+            .iter()
+            .any(|t| t.contains("Board link down") && t.contains("device closed")),
+        "{:?}",
+        texts(&out)
+    );
     let out = r.run(Duration::from_secs(2), false);
-    assert_eq!(count(&out, 30, To::Endpoint(0)), 0, "stale attitude must not be re-sent");
+    assert_eq!(
+        count(&out, 30, To::Endpoint(0)),
+        0,
+        "stale attitude must not be re-sent"
+    );
     assert_eq!(count(&out, 33, To::Endpoint(0)), 0);
     assert_eq!(count(&out, 74, To::Endpoint(0)), 0);
-    let sys = sent(&out).into_iter().rev().find_map(|(_, m)| if let MavMessage::SYS_STATUS(s) = m { Some(s) } else { None }).unwrap();
-    assert!(!sys.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK));
-    assert!(!sys.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE));
-    assert!(sys.onboard_control_sensors_present.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK));
+    let sys = sent(&out)
+        .into_iter()
+        .rev()
+        .find_map(|(_, m)| {
+            if let MavMessage::SYS_STATUS(s) = m {
+                Some(s)
+            } else {
+                None
+            }
+        })
+        .unwrap();
+    assert!(
+        !sys.onboard_control_sensors_health
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK)
+    );
+    assert!(
+        !sys.onboard_control_sensors_health
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE)
+    );
+    assert!(
+        sys.onboard_control_sensors_present
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK)
+    );
 }
 
 #[test]
@@ -193,16 +267,59 @@ fn ready_when_link_up_and_fresh() {
     let mut r = Rig::new();
     r.link_up();
     let out = r.run(Duration::from_secs(1), true);
-    let sys = sent(&out).into_iter().rev().find_map(|(_, m)| if let MavMessage::SYS_STATUS(s) = m { Some(s) } else { None }).unwrap();
-    assert!(sys.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK));
-    assert!(sys.onboard_control_sensors_enabled.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK));
+    let sys = sent(&out)
+        .into_iter()
+        .rev()
+        .find_map(|(_, m)| {
+            if let MavMessage::SYS_STATUS(s) = m {
+                Some(s)
+            } else {
+                None
+            }
+        })
+        .unwrap();
+    assert!(
+        sys.onboard_control_sensors_health
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK)
+    );
+    assert!(
+        sys.onboard_control_sensors_enabled
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK)
+    );
     assert_eq!(sys.voltage_battery, 12000);
-    let gpi = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::GLOBAL_POSITION_INT(g) = m { Some(g) } else { None }).unwrap();
+    let gpi = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::GLOBAL_POSITION_INT(g) = m {
+                Some(g)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!(gpi.relative_alt, -1500);
     assert_eq!(gpi.hdg, 9000);
-    let hud = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::VFR_HUD(h) = m { Some(h) } else { None }).unwrap();
+    let hud = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::VFR_HUD(h) = m {
+                Some(h)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert!((hud.alt + 1.5).abs() < 1e-6);
-    let att = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::ATTITUDE(a) = m { Some(a) } else { None }).unwrap();
+    let att = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::ATTITUDE(a) = m {
+                Some(a)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert!((att.yaw - std::f32::consts::FRAC_PI_2).abs() < 1e-4);
 }
 
@@ -213,7 +330,11 @@ fn arming_refused_with_a_reason_while_link_down_even_forced() {
     let a = acks(&out);
     assert_eq!(a.len(), 1);
     assert_eq!(a[0].result, MavResult::MAV_RESULT_FAILED);
-    assert!(texts(&out).iter().any(|t| t.contains("board link down")), "{:?}", texts(&out));
+    assert!(
+        texts(&out).iter().any(|t| t.contains("board link down")),
+        "{:?}",
+        texts(&out)
+    );
     assert!(!r.v.armed());
 }
 
@@ -231,13 +352,29 @@ fn arm_and_disarm_are_acknowledged_once_and_idempotent() {
     }
     assert!(r.v.armed());
     let out = r.run(Duration::from_millis(1100), true);
-    let hb = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::HEARTBEAT(h) = m { Some(h) } else { None }).unwrap();
-    assert!(hb.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED));
+    let hb = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::HEARTBEAT(h) = m {
+                Some(h)
+            } else {
+                None
+            }
+        })
+        .unwrap();
+    assert!(
+        hb.base_mode
+            .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED)
+    );
     assert_eq!(hb.system_status, MavState::MAV_STATE_ACTIVE);
     let out = r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, p(&[0.0]));
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED);
     assert!(!r.v.armed());
-    assert!(out.contains(&Output::Board(Command::Go { port_us: 1500, vertical_us: 1500, starboard_us: 1500 })));
+    assert!(out.contains(&Output::Board(Command::Go {
+        port_us: 1500,
+        vertical_us: 1500,
+        starboard_us: 1500
+    })));
 }
 
 #[test]
@@ -246,7 +383,10 @@ fn board_link_loss_disarms() {
     r.link_up();
     r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, p(&[1.0]));
     assert!(r.v.armed());
-    let out = r.input(Input::Link { state: LinkState::Down, reason: Some("read failed".into()) });
+    let out = r.input(Input::Link {
+        state: LinkState::Down,
+        reason: Some("read failed".into()),
+    });
     assert!(!r.v.armed());
     assert!(texts(&out).iter().any(|t| t.contains("Disarmed")));
 }
@@ -258,13 +398,23 @@ fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason()
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED);
     let out = r.cmd(MavCmd::MAV_CMD_DO_SET_MODE, p(&[1.0, 16.0]));
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_FAILED);
-    assert!(texts(&out).iter().any(|t| t.contains("POSHOLD") && t.contains("position")), "{:?}", texts(&out));
+    assert!(
+        texts(&out)
+            .iter()
+            .any(|t| t.contains("POSHOLD") && t.contains("position")),
+        "{:?}",
+        texts(&out)
+    );
     let out = r.cmd(MavCmd::MAV_CMD_DO_SET_MODE, p(&[1.0, 2.0]));
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_FAILED);
     assert!(texts(&out).iter().any(|t| t.contains("ALT_HOLD")));
     assert_eq!(r.v.mode(), 19);
     // SET_MODE message: acknowledged with command 11.
-    let out = r.msg(MavMessage::SET_MODE(SET_MODE_DATA { custom_mode: 19, target_system: 1, base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED }));
+    let out = r.msg(MavMessage::SET_MODE(SET_MODE_DATA {
+        custom_mode: 19,
+        target_system: 1,
+        base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+    }));
     let a = acks(&out);
     assert_eq!(a.len(), 1);
     assert_eq!(a[0].command as u32, 11);
@@ -279,11 +429,20 @@ fn unknown_commands_are_unsupported_at_once_and_nan_means_not_given() {
     assert_eq!(a.len(), 1);
     assert_eq!(a[0].result, MavResult::MAV_RESULT_UNSUPPORTED);
     let out = r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, NAN7);
-    assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED, "NaN p1 = disarm");
+    assert_eq!(
+        acks(&out)[0].result,
+        MavResult::MAV_RESULT_ACCEPTED,
+        "NaN p1 = disarm"
+    );
     // Addressed to another system: not ours, no answer.
     let out = r.input(Input::Mavlink {
         from: QGC,
-        msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA { command: MavCmd::MAV_CMD_NAV_TAKEOFF, target_system: 9, target_component: 1, ..Default::default() }),
+        msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            command: MavCmd::MAV_CMD_NAV_TAKEOFF,
+            target_system: 9,
+            target_component: 1,
+            ..Default::default()
+        }),
     });
     assert!(acks(&out).is_empty());
 }
@@ -301,10 +460,22 @@ fn message_interval_set_get_off_and_default() {
     let n1 = count(&out, 30, To::Endpoint(1));
     assert!((99..=101).contains(&n1), "10 Hz on endpoint 1: {n1}");
     let out = r.cmd(MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL, p(&[30.0]));
-    let iv = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::MESSAGE_INTERVAL(i) = m { Some(i) } else { None }).unwrap();
+    let iv = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::MESSAGE_INTERVAL(i) = m {
+                Some(i)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!((iv.message_id, iv.interval_us), (30, 50_000));
     r.cmd(MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL, p(&[30.0, -1.0]));
-    assert_eq!(count(&r.run(Duration::from_secs(2), true), 30, To::Endpoint(0)), 0);
+    assert_eq!(
+        count(&r.run(Duration::from_secs(2), true), 30, To::Endpoint(0)),
+        0
+    );
     r.cmd(MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL, p(&[30.0, 0.0]));
     let n = count(&r.run(Duration::from_secs(2), true), 30, To::Endpoint(0));
     assert!((19..=21).contains(&n), "default 10 Hz: {n}");
@@ -333,14 +504,35 @@ fn request_message_answers_every_request() {
     let mut r = Rig::new();
     let out = r.cmd(MavCmd::MAV_CMD_REQUEST_MESSAGE, p(&[148.0]));
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED);
-    let av = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::AUTOPILOT_VERSION(a) = m { Some(a) } else { None }).unwrap();
-    assert!(av.capabilities.contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2));
-    assert!(av.capabilities.contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST));
-    assert!(!av.capabilities.contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MISSION_FENCE));
+    let av = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::AUTOPILOT_VERSION(a) = m {
+                Some(a)
+            } else {
+                None
+            }
+        })
+        .unwrap();
+    assert!(
+        av.capabilities
+            .contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MAVLINK2)
+    );
+    assert!(
+        av.capabilities
+            .contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
+    );
+    assert!(
+        !av.capabilities
+            .contains(MavProtocolCapability::MAV_PROTOCOL_CAPABILITY_MISSION_FENCE)
+    );
     assert_eq!(av.flight_sw_version >> 16, (4 << 8) | 5);
     let out = r.cmd(MavCmd::MAV_CMD_REQUEST_MESSAGE, p(&[435.0, 0.0]));
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED);
-    let modes = sent(&out).into_iter().filter(|(_, m)| matches!(m, MavMessage::AVAILABLE_MODES(_))).count();
+    let modes = sent(&out)
+        .into_iter()
+        .filter(|(_, m)| matches!(m, MavMessage::AVAILABLE_MODES(_)))
+        .count();
     assert!(modes >= 9);
     for id in [397.0, 395.0] {
         let out = r.cmd(MavCmd::MAV_CMD_REQUEST_MESSAGE, p(&[id]));
@@ -349,9 +541,17 @@ fn request_message_answers_every_request() {
         assert_eq!(a[0].result, MavResult::MAV_RESULT_UNSUPPORTED);
     }
     let out = r.cmd(MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, p(&[1.0]));
-    assert!(sent(&out).iter().any(|(_, m)| matches!(m, MavMessage::AUTOPILOT_VERSION(_))));
+    assert!(
+        sent(&out)
+            .iter()
+            .any(|(_, m)| matches!(m, MavMessage::AUTOPILOT_VERSION(_)))
+    );
     let out = r.cmd(MavCmd::MAV_CMD_REQUEST_PROTOCOL_VERSION, p(&[1.0]));
-    assert!(sent(&out).iter().any(|(_, m)| matches!(m, MavMessage::PROTOCOL_VERSION(_))));
+    assert!(
+        sent(&out)
+            .iter()
+            .any(|(_, m)| matches!(m, MavMessage::PROTOCOL_VERSION(_)))
+    );
     // Replies go to the requester only.
     assert!(sent(&out).iter().all(|(to, _)| *to == To::Peer(0, 7)));
 }
@@ -360,11 +560,20 @@ fn request_message_answers_every_request() {
 fn parameter_list_read_and_set() {
     let mut r = Rig::new();
     let total = ParamStore::defaults().len();
-    r.msg(MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA { target_system: 1, target_component: 0 }));
+    r.msg(MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+        target_system: 1,
+        target_component: 0,
+    }));
     let out = r.run(Duration::from_secs(3), false);
     let mut seen: Vec<u16> = sent(&out)
         .into_iter()
-        .filter_map(|(_, m)| if let MavMessage::PARAM_VALUE(v) = m { Some(v) } else { None })
+        .filter_map(|(_, m)| {
+            if let MavMessage::PARAM_VALUE(v) = m {
+                Some(v)
+            } else {
+                None
+            }
+        })
         .map(|v| {
             assert_eq!(v.param_count as usize, total);
             v.param_index
@@ -380,7 +589,16 @@ fn parameter_list_read_and_set() {
         target_component: 1,
         param_id: "SYSID_MYGCS".into(),
     }));
-    let v = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::PARAM_VALUE(v) = m { Some(v) } else { None }).unwrap();
+    let v = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::PARAM_VALUE(v) = m {
+                Some(v)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!(v.param_value, 255.0);
     assert_eq!(v.param_type, MavParamType::MAV_PARAM_TYPE_INT16);
 
@@ -392,7 +610,10 @@ fn parameter_list_read_and_set() {
         param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
     }));
     assert!(out.contains(&Output::SaveParams));
-    let echo = sent(&out).into_iter().find(|(_, m)| matches!(m, MavMessage::PARAM_VALUE(_))).unwrap();
+    let echo = sent(&out)
+        .into_iter()
+        .find(|(_, m)| matches!(m, MavMessage::PARAM_VALUE(_)))
+        .unwrap();
     assert_eq!(echo.0, To::All, "echo is broadcast");
     if let MavMessage::PARAM_VALUE(v) = echo.1 {
         assert!((v.param_value - 0.7).abs() < 1e-6);
@@ -406,27 +627,89 @@ fn parameter_list_read_and_set() {
         param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
     }));
     assert!(!out.contains(&Output::SaveParams));
-    let v = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::PARAM_VALUE(v) = m { Some(v) } else { None }).unwrap();
+    let v = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::PARAM_VALUE(v) = m {
+                Some(v)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert!((v.param_value - 0.7).abs() < 1e-6);
-    assert!(texts(&out).iter().any(|t| t.contains("JS_GAIN_DEFAULT")), "{:?}", texts(&out));
+    assert!(
+        texts(&out).iter().any(|t| t.contains("JS_GAIN_DEFAULT")),
+        "{:?}",
+        texts(&out)
+    );
 }
 
 #[test]
 fn missions_are_empty_and_ftp_is_refused_fast() {
     let mut r = Rig::new();
-    for ty in [MavMissionType::MAV_MISSION_TYPE_MISSION, MavMissionType::MAV_MISSION_TYPE_FENCE, MavMissionType::MAV_MISSION_TYPE_RALLY] {
-        let out = r.msg(MavMessage::MISSION_REQUEST_LIST(MISSION_REQUEST_LIST_DATA { target_system: 1, target_component: 1, mission_type: ty }));
-        let c = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::MISSION_COUNT(c) = m { Some(c) } else { None }).unwrap();
+    for ty in [
+        MavMissionType::MAV_MISSION_TYPE_MISSION,
+        MavMissionType::MAV_MISSION_TYPE_FENCE,
+        MavMissionType::MAV_MISSION_TYPE_RALLY,
+    ] {
+        let out = r.msg(MavMessage::MISSION_REQUEST_LIST(
+            MISSION_REQUEST_LIST_DATA {
+                target_system: 1,
+                target_component: 1,
+                mission_type: ty,
+            },
+        ));
+        let c = sent(&out)
+            .into_iter()
+            .find_map(|(_, m)| {
+                if let MavMessage::MISSION_COUNT(c) = m {
+                    Some(c)
+                } else {
+                    None
+                }
+            })
+            .unwrap();
         assert_eq!((c.count, c.mission_type, c.target_system), (0, ty, 255));
     }
-    let out = r.msg(MavMessage::MISSION_COUNT(MISSION_COUNT_DATA { count: 3, target_system: 1, target_component: 1, ..Default::default() }));
-    let a = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::MISSION_ACK(a) = m { Some(a) } else { None }).unwrap();
+    let out = r.msg(MavMessage::MISSION_COUNT(MISSION_COUNT_DATA {
+        count: 3,
+        target_system: 1,
+        target_component: 1,
+        ..Default::default()
+    }));
+    let a = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::MISSION_ACK(a) = m {
+                Some(a)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!(a.mavtype, MavMissionResult::MAV_MISSION_UNSUPPORTED);
     let mut payload = [0u8; 251];
     payload[0] = 5; // seq 5
     payload[3] = 4; // OpenFileRO
-    let out = r.msg(MavMessage::FILE_TRANSFER_PROTOCOL(FILE_TRANSFER_PROTOCOL_DATA { target_network: 0, target_system: 1, target_component: 1, payload }));
-    let f = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = m { Some(f) } else { None }).unwrap();
+    let out = r.msg(MavMessage::FILE_TRANSFER_PROTOCOL(
+        FILE_TRANSFER_PROTOCOL_DATA {
+            target_network: 0,
+            target_system: 1,
+            target_component: 1,
+            payload,
+        },
+    ));
+    let f = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::FILE_TRANSFER_PROTOCOL(f) = m {
+                Some(f)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!(u16::from_le_bytes([f.payload[0], f.payload[1]]), 6);
     assert_eq!(f.payload[3], 129, "NAK");
     assert_eq!(f.payload[5], 4, "req_opcode");
@@ -437,13 +720,36 @@ fn missions_are_empty_and_ftp_is_refused_fast() {
 fn timesync_and_ping_are_answered() {
     let mut r = Rig::new();
     r.t = Duration::from_secs(3);
-    let out = r.msg(MavMessage::TIMESYNC(TIMESYNC_DATA { tc1: 0, ts1: 42, target_system: 0, target_component: 0 }));
-    let t = sent(&out).into_iter().find_map(|(_, m)| if let MavMessage::TIMESYNC(t) = m { Some(t) } else { None }).unwrap();
+    let out = r.msg(MavMessage::TIMESYNC(TIMESYNC_DATA {
+        tc1: 0,
+        ts1: 42,
+        target_system: 0,
+        target_component: 0,
+    }));
+    let t = sent(&out)
+        .into_iter()
+        .find_map(|(_, m)| {
+            if let MavMessage::TIMESYNC(t) = m {
+                Some(t)
+            } else {
+                None
+            }
+        })
+        .unwrap();
     assert_eq!(t.ts1, 42);
     assert_eq!(t.tc1, 3_000_000_000);
     assert_eq!(t.target_system, 255);
-    let out = r.msg(MavMessage::PING(PING_DATA { time_usec: 9, seq: 3, target_system: 0, target_component: 0 }));
-    assert!(sent(&out).iter().any(|(_, m)| matches!(m, MavMessage::PING(p) if p.seq == 3 && p.target_system == 255)));
+    let out = r.msg(MavMessage::PING(PING_DATA {
+        time_usec: 9,
+        seq: 3,
+        target_system: 0,
+        target_component: 0,
+    }));
+    assert!(
+        sent(&out)
+            .iter()
+            .any(|(_, m)| matches!(m, MavMessage::PING(p) if p.seq == 3 && p.target_system == 255))
+    );
 }
 
 #[test]
@@ -457,8 +763,15 @@ fn lights_laser_and_tilt_by_servo_mount_and_illuminator_commands() {
     let out = r.cmd(MavCmd::MAV_CMD_DO_SET_SERVO, p(&[8.0, 1700.0]));
     assert!(out.contains(&Output::Board(Command::Tilt(1700))));
     let out = r.cmd(MavCmd::MAV_CMD_DO_SET_SERVO, p(&[1.0, 1700.0]));
-    assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_DENIED, "thrusters are not servos");
-    assert!(!out.iter().any(|o| matches!(o, Output::Board(Command::Go { .. }))));
+    assert_eq!(
+        acks(&out)[0].result,
+        MavResult::MAV_RESULT_DENIED,
+        "thrusters are not servos"
+    );
+    assert!(
+        !out.iter()
+            .any(|o| matches!(o, Output::Board(Command::Go { .. })))
+    );
     let out = r.cmd(MavCmd::MAV_CMD_DO_MOUNT_CONTROL, p(&[-4500.0]));
     assert!(out.contains(&Output::Board(Command::Tilt(1250))));
     let out = r.cmd(MavCmd::MAV_CMD_ILLUMINATOR_ON_OFF, p(&[0.0]));
@@ -474,7 +787,23 @@ mod properties {
     use proptest::prelude::*;
 
     fn any_cmd() -> impl Strategy<Value = (u16, [f32; 7])> {
-        (prop_oneof![Just(400u16), Just(176), Just(183), Just(205), Just(511), Just(512), Just(405), Just(406)], prop::array::uniform7(prop_oneof![any::<f32>(), Just(f32::NAN), -3000.0f32..3000.0]))
+        (
+            prop_oneof![
+                Just(400u16),
+                Just(176),
+                Just(183),
+                Just(205),
+                Just(511),
+                Just(512),
+                Just(405),
+                Just(406)
+            ],
+            prop::array::uniform7(prop_oneof![
+                any::<f32>(),
+                Just(f32::NAN),
+                -3000.0f32..3000.0
+            ]),
+        )
     }
 
     proptest! {

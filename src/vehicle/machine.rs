@@ -70,17 +70,29 @@ pub struct Now {
 /// What the core reacts to.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Input {
-    Mavlink { from: Sender, msg: MavMessage },
+    Mavlink {
+        from: Sender,
+        msg: MavMessage,
+    },
     Board(Event),
-    Link { state: LinkState, reason: Option<String> },
+    Link {
+        state: LinkState,
+        reason: Option<String>,
+    },
     /// Periodic (the app ticks at 100 Hz): telemetry, timeouts.
     Tick,
 }
 
 /// What the core asks the I/O around it to do.
+// Outputs live briefly in a reused Vec; boxing every message would cost an
+// allocation per send for no gain.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Output {
-    Send { to: To, msg: MavMessage },
+    Send {
+        to: To,
+        msg: MavMessage,
+    },
     Board(Command),
     /// Parameters changed: persist them.
     SaveParams,
@@ -89,7 +101,17 @@ pub enum Output {
 }
 
 /// How the vehicle presents itself.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
 #[serde(rename_all = "lowercase")]
 pub enum Identity {
     /// ArduSub-compatible (autopilot ARDUPILOTMEGA): QGC's Sub plugin, pymavlink's mode map.
@@ -103,20 +125,47 @@ pub enum Identity {
 pub const MODES: &[(u32, &str, Option<&str>)] = &[
     (19, "MANUAL", None),
     (0, "STABILIZE", Some("heading hold is not implemented yet")),
-    (1, "ACRO", Some("rate control is not implemented on this vehicle")),
+    (
+        1,
+        "ACRO",
+        Some("rate control is not implemented on this vehicle"),
+    ),
     (2, "ALT_HOLD", Some("depth hold is not implemented yet")),
-    (3, "AUTO", Some("needs a position estimate, which this vehicle does not have")),
-    (4, "GUIDED", Some("needs a position estimate, which this vehicle does not have")),
-    (7, "CIRCLE", Some("needs a position estimate, which this vehicle does not have")),
+    (
+        3,
+        "AUTO",
+        Some("needs a position estimate, which this vehicle does not have"),
+    ),
+    (
+        4,
+        "GUIDED",
+        Some("needs a position estimate, which this vehicle does not have"),
+    ),
+    (
+        7,
+        "CIRCLE",
+        Some("needs a position estimate, which this vehicle does not have"),
+    ),
     (9, "SURFACE", Some("surfacing is not implemented yet")),
-    (16, "POSHOLD", Some("needs a position estimate, which this vehicle does not have")),
+    (
+        16,
+        "POSHOLD",
+        Some("needs a position estimate, which this vehicle does not have"),
+    ),
     (20, "MOTOR_DETECT", Some("not available on this vehicle")),
-    (21, "SURFTRAK", Some("needs a rangefinder, which this vehicle does not have")),
+    (
+        21,
+        "SURFTRAK",
+        Some("needs a rangefinder, which this vehicle does not have"),
+    ),
 ];
 pub const MODE_MANUAL: u32 = 19;
 
 pub fn mode_name(mode: u32) -> &'static str {
-    MODES.iter().find(|m| m.0 == mode).map_or("UNKNOWN", |m| m.1)
+    MODES
+        .iter()
+        .find(|m| m.0 == mode)
+        .map_or("UNKNOWN", |m| m.1)
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -261,7 +310,12 @@ impl Vehicle {
         if bytes.len() <= 50 {
             out.push(Output::Send {
                 to: To::All,
-                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA { severity, text: chars(text), id: 0, chunk_seq: 0 }),
+                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                    severity,
+                    text: chars(text),
+                    id: 0,
+                    chunk_seq: 0,
+                }),
             });
             return;
         }
@@ -283,12 +337,22 @@ impl Vehicle {
 
     fn send_neutral(&mut self, out: &mut Vec<Output>) {
         self.motors_us = [1500; 3];
-        out.push(Output::Board(Command::Go { port_us: 1500, vertical_us: 1500, starboard_us: 1500 }));
+        out.push(Output::Board(Command::Go {
+            port_us: 1500,
+            vertical_us: 1500,
+            starboard_us: 1500,
+        }));
     }
 
     // ---- board ----
 
-    fn on_link(&mut self, state: LinkState, reason: Option<String>, now: Now, out: &mut Vec<Output>) {
+    fn on_link(
+        &mut self,
+        state: LinkState,
+        reason: Option<String>,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
         let was = self.link;
         self.link = state;
         self.link_reason = reason.clone();
@@ -304,10 +368,18 @@ impl Vehicle {
             self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Board link up", out);
         } else if state == LinkState::Down && was != LinkState::Down {
             let why = reason.unwrap_or_else(|| "unknown".into());
-            self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, &format!("Board link down: {why}"), out);
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!("Board link down: {why}"),
+                out,
+            );
             if self.armed {
                 self.armed = false;
-                self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, "Disarmed: board link lost", out);
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_CRITICAL,
+                    "Disarmed: board link lost",
+                    out,
+                );
             }
             let _ = now;
         }
@@ -316,7 +388,13 @@ impl Vehicle {
     fn on_board(&mut self, ev: Event, now: Now) {
         let t = Some(now.mono);
         match ev {
-            Event::Nav(NavSample { heading_deg, depth_m, pitch_deg, roll_deg, .. }) => {
+            Event::Nav(NavSample {
+                heading_deg,
+                depth_m,
+                pitch_deg,
+                roll_deg,
+                ..
+            }) => {
                 if let Some(h) = heading_deg {
                     if let Some((pt, ph)) = self.prev_heading {
                         let dt = now.mono.saturating_sub(pt).as_secs_f64();
@@ -375,7 +453,10 @@ impl Vehicle {
             self.schedules[ep].due(now.mono, &mut due);
             for id in &due {
                 for msg in self.build(*id, now) {
-                    out.push(Output::Send { to: To::Endpoint(ep), msg });
+                    out.push(Output::Send {
+                        to: To::Endpoint(ep),
+                        msg,
+                    });
                 }
             }
         }
@@ -393,7 +474,9 @@ impl Vehicle {
 
     fn sensors(&self, now: Now) -> (MavSysStatusSensor, MavSysStatusSensor, MavSysStatusSensor) {
         use MavSysStatusSensor as S;
-        let imu = S::MAV_SYS_STATUS_SENSOR_3D_GYRO | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL | S::MAV_SYS_STATUS_SENSOR_3D_MAG;
+        let imu = S::MAV_SYS_STATUS_SENSOR_3D_GYRO
+            | S::MAV_SYS_STATUS_SENSOR_3D_ACCEL
+            | S::MAV_SYS_STATUS_SENSOR_3D_MAG;
         let depth = S::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE;
         let motors = S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
         let battery = S::MAV_SYS_STATUS_SENSOR_BATTERY;
@@ -422,7 +505,12 @@ impl Vehicle {
 
     fn battery_ok(&self, now: Now) -> bool {
         let low = self.param("BATT_LOW_VOLT", 10.5);
-        self.fresh(&self.status, now) && self.status.value.vout_v.is_some_and(|v| low <= 0.0 || v > low)
+        self.fresh(&self.status, now)
+            && self
+                .status
+                .value
+                .vout_v
+                .is_some_and(|v| low <= 0.0 || v > low)
     }
 
     /// Why the vehicle cannot arm, if it cannot.
@@ -430,14 +518,19 @@ impl Vehicle {
         if self.link != LinkState::Up {
             return Some(format!(
                 "board link down ({})",
-                self.link_reason.clone().unwrap_or_else(|| "no telemetry".into())
+                self.link_reason
+                    .clone()
+                    .unwrap_or_else(|| "no telemetry".into())
             ));
         }
         if !self.fresh(&self.depth_m, now) || !self.fresh(&self.heading_deg, now) {
             return Some("no fresh depth and attitude from the board".into());
         }
         if !self.battery_ok(now) {
-            return Some(format!("battery below BATT_LOW_VOLT {:.1} V", self.param("BATT_LOW_VOLT", 10.5)));
+            return Some(format!(
+                "battery below BATT_LOW_VOLT {:.1} V",
+                self.param("BATT_LOW_VOLT", 10.5)
+            ));
         }
         let disarm_mapped = (0..32).any(|i| {
             [format!("BTN{i}_FUNCTION"), format!("BTN{i}_SFUNCTION")]
@@ -451,7 +544,9 @@ impl Vehicle {
     }
 
     fn battery_remaining(&self) -> i8 {
-        let Some(v) = self.status.value.vout_v else { return -1 };
+        let Some(v) = self.status.value.vout_v else {
+            return -1;
+        };
         let empty = self.param("BATT_LOW_VOLT", 10.5);
         let full = 12.6_f64.max(empty + 0.1);
         // A voltage-based estimate: the board has no coulomb counter.
@@ -460,7 +555,9 @@ impl Vehicle {
 
     fn heartbeat(&self) -> MavMessage {
         use MavModeFlag as F;
-        let mut base = F::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | F::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED | F::MAV_MODE_FLAG_STABILIZE_ENABLED;
+        let mut base = F::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+            | F::MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+            | F::MAV_MODE_FLAG_STABILIZE_ENABLED;
         if self.armed {
             base |= F::MAV_MODE_FLAG_SAFETY_ARMED;
         }
@@ -499,13 +596,20 @@ impl Vehicle {
                     onboard_control_sensors_enabled: enabled,
                     onboard_control_sensors_health: health,
                     load: 0,
-                    voltage_battery: s.vout_v.map_or(u16::MAX, |v| (v * 1000.0).round().clamp(0.0, 65534.0) as u16),
-                    current_battery: s.btti_a.map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+                    voltage_battery: s.vout_v.map_or(u16::MAX, |v| {
+                        (v * 1000.0).round().clamp(0.0, 65534.0) as u16
+                    }),
+                    current_battery: s
+                        .btti_a
+                        .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
                     battery_remaining: self.battery_remaining(),
                     ..Default::default()
                 })]
             }
-            2 => vec![MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA { time_unix_usec: now.unix_us, time_boot_ms: boot_ms })],
+            2 => vec![MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
+                time_unix_usec: now.unix_us,
+                time_boot_ms: boot_ms,
+            })],
             30 if self.fresh(&self.heading_deg, now) => {
                 let yaw = (heading + 180.0).rem_euclid(360.0) - 180.0;
                 vec![MavMessage::ATTITUDE(ATTITUDE_DATA {
@@ -518,23 +622,30 @@ impl Vehicle {
                     yawspeed: self.yaw_rate_rps as f32,
                 })]
             }
-            33 if self.fresh(&self.depth_m, now) => vec![MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
-                time_boot_ms: boot_ms,
-                lat: 0,
-                lon: 0,
-                alt: (-depth * 1000.0).round() as i32,
-                relative_alt: (-depth * 1000.0).round() as i32,
-                vx: 0,
-                vy: 0,
-                vz: 0,
-                hdg: if self.fresh(&self.heading_deg, now) { (heading * 100.0).round().rem_euclid(36000.0) as u16 } else { u16::MAX },
-            })],
+            33 if self.fresh(&self.depth_m, now) => {
+                vec![MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
+                    time_boot_ms: boot_ms,
+                    lat: 0,
+                    lon: 0,
+                    alt: (-depth * 1000.0).round() as i32,
+                    relative_alt: (-depth * 1000.0).round() as i32,
+                    vx: 0,
+                    vy: 0,
+                    vz: 0,
+                    hdg: if self.fresh(&self.heading_deg, now) {
+                        (heading * 100.0).round().rem_euclid(36000.0) as u16
+                    } else {
+                        u16::MAX
+                    },
+                })]
+            }
             36 => {
                 let [port, vert, star] = self.motors_us;
                 let laser_pwm = if self.laser > 0 { 1900 } else { 1100 };
                 let lights_pwm = (1100 + (u32::from(self.lights) * 800) / 255) as u16;
                 vec![MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
-                    time_usec: (now.mono.saturating_sub(self.booted).as_micros() & 0xffff_ffff) as u32,
+                    time_usec: (now.mono.saturating_sub(self.booted).as_micros() & 0xffff_ffff)
+                        as u32,
                     // MOT_1 starboard, MOT_2 port, MOT_3 vertical (ArduSub SimpleROV-3 numbering).
                     servo1_raw: star,
                     servo2_raw: port,
@@ -546,7 +657,8 @@ impl Vehicle {
                 })]
             }
             74 if self.fresh(&self.heading_deg, now) || self.fresh(&self.depth_m, now) => {
-                let throttle = ((i32::from(self.motors_us[1]) - 1500).unsigned_abs() / 5).min(100) as u16;
+                let throttle =
+                    ((i32::from(self.motors_us[1]) - 1500).unsigned_abs() / 5).min(100) as u16;
                 vec![MavMessage::VFR_HUD(VFR_HUD_DATA {
                     airspeed: 0.0,
                     groundspeed: 0.0,
@@ -569,13 +681,17 @@ impl Vehicle {
             147 => {
                 let s = &self.status.value;
                 let mut voltages = [u16::MAX; 10];
-                voltages[0] = s.vout_v.map_or(u16::MAX, |v| (v * 1000.0).round().clamp(0.0, 65534.0) as u16);
+                voltages[0] = s.vout_v.map_or(u16::MAX, |v| {
+                    (v * 1000.0).round().clamp(0.0, 65534.0) as u16
+                });
                 vec![MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
                     current_consumed: self.consumed_mah.round() as i32,
                     energy_consumed: -1,
                     temperature: i16::MAX,
                     voltages,
-                    current_battery: s.btti_a.map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+                    current_battery: s
+                        .btti_a
+                        .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
                     id: 0,
                     battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
                     mavtype: MavBatteryType::MAV_BATTERY_TYPE_UNKNOWN,
@@ -586,7 +702,11 @@ impl Vehicle {
             251 => {
                 let tilt_min = self.param("NEPT_TILT_MIN_US", 1000.0);
                 let tilt_max = self.param("NEPT_TILT_MAX_US", 2000.0);
-                let tilt = if tilt_max > tilt_min { (f64::from(self.tilt_us) - tilt_min) / (tilt_max - tilt_min) } else { 0.5 };
+                let tilt = if tilt_max > tilt_min {
+                    (f64::from(self.tilt_us) - tilt_min) / (tilt_max - tilt_min)
+                } else {
+                    0.5
+                };
                 [
                     ("Lights1", f64::from(self.lights) / 255.0),
                     ("PilotGain", self.gain),
@@ -596,7 +716,11 @@ impl Vehicle {
                 ]
                 .iter()
                 .map(|(name, v)| {
-                    MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA { time_boot_ms: boot_ms, value: *v as f32, name: chars(name) })
+                    MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                        time_boot_ms: boot_ms,
+                        value: *v as f32,
+                        name: chars(name),
+                    })
                 })
                 .collect()
             }
@@ -607,7 +731,9 @@ impl Vehicle {
 
     fn autopilot_version(&self) -> MavMessage {
         use MavProtocolCapability as C;
-        let mut caps = C::MAV_PROTOCOL_CAPABILITY_MAVLINK2 | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT | C::MAV_PROTOCOL_CAPABILITY_MISSION_INT;
+        let mut caps = C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | C::MAV_PROTOCOL_CAPABILITY_MISSION_INT;
         #[allow(deprecated)]
         let param_float = C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT;
         caps |= param_float;
@@ -655,7 +781,8 @@ impl Vehicle {
     // ---- MAVLink in ----
 
     fn for_us(&self, target_system: u8, target_component: u8) -> bool {
-        (target_system == 0 || target_system == self.sysid()) && (target_component == 0 || target_component == COMPONENT_ID)
+        (target_system == 0 || target_system == self.sysid())
+            && (target_component == 0 || target_component == COMPONENT_ID)
     }
 
     fn on_mavlink(&mut self, from: Sender, msg: MavMessage, now: Now, out: &mut Vec<Output>) {
@@ -664,14 +791,18 @@ impl Vehicle {
                 if !self.for_us(c.target_system, c.target_component) {
                     return;
                 }
-                let params = [c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7];
+                let params = [
+                    c.param1, c.param2, c.param3, c.param4, c.param5, c.param6, c.param7,
+                ];
                 self.command(from, c.command, params, now, out);
             }
             MavMessage::COMMAND_INT(c) => {
                 if !self.for_us(c.target_system, c.target_component) {
                     return;
                 }
-                let params = [c.param1, c.param2, c.param3, c.param4, c.x as f32, c.y as f32, c.z];
+                let params = [
+                    c.param1, c.param2, c.param3, c.param4, c.x as f32, c.y as f32, c.z,
+                ];
                 self.command(from, c.command, params, now, out);
             }
             MavMessage::SET_MODE(m) => {
@@ -679,7 +810,10 @@ impl Vehicle {
                     return;
                 }
                 let result = self.set_mode(m.custom_mode, out);
-                out.push(Output::Send { to: from.reply(), msg: ack_set_mode(result, from) });
+                out.push(Output::Send {
+                    to: from.reply(),
+                    msg: ack_set_mode(result, from),
+                });
             }
             MavMessage::PARAM_REQUEST_LIST(p) => {
                 if !self.for_us(p.target_system, p.target_component) {
@@ -688,7 +822,8 @@ impl Vehicle {
                 // A repeated request restarts the list for that peer.
                 let to = from.reply();
                 self.param_queue.retain(|(t, _)| *t != to);
-                self.param_queue.extend((0..self.params.len()).map(|i| (to, i)));
+                self.param_queue
+                    .extend((0..self.params.len()).map(|i| (to, i)));
             }
             MavMessage::PARAM_REQUEST_READ(p) => {
                 if !self.for_us(p.target_system, p.target_component) {
@@ -700,7 +835,10 @@ impl Vehicle {
                     super::params::index_of(&char_str(&p.param_id))
                 };
                 if let Some(msg) = index.and_then(|i| self.param_value(i)) {
-                    out.push(Output::Send { to: from.reply(), msg });
+                    out.push(Output::Send {
+                        to: from.reply(),
+                        msg,
+                    });
                 }
             }
             MavMessage::PARAM_SET(p) => {
@@ -709,7 +847,11 @@ impl Vehicle {
                 }
                 let name = char_str(&p.param_id);
                 let Some(index) = super::params::index_of(&name) else {
-                    self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Param {name}: no such parameter"), out);
+                    self.statustext(
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &format!("Param {name}: no such parameter"),
+                        out,
+                    );
                     return;
                 };
                 match self.params.set(&name, f64::from(p.param_value)) {
@@ -717,7 +859,11 @@ impl Vehicle {
                         self.on_param_changed(&name);
                         out.push(Output::SaveParams);
                     }
-                    Err(e) => self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Param refused: {e}"), out),
+                    Err(e) => self.statustext(
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &format!("Param refused: {e}"),
+                        out,
+                    ),
                 }
                 // Echo the value now in force (the old one if refused) to everyone.
                 if let Some(msg) = self.param_value(index) {
@@ -729,12 +875,17 @@ impl Vehicle {
                     return;
                 }
                 let id = r.req_stream_id as u8;
-                let groups: Vec<u8> = if id == 0 { telemetry::ALL_GROUPS.to_vec() } else { vec![id] };
+                let groups: Vec<u8> = if id == 0 {
+                    telemetry::ALL_GROUPS.to_vec()
+                } else {
+                    vec![id]
+                };
                 let interval = (r.start_stop != 0 && r.req_message_rate > 0)
                     .then(|| Duration::from_secs_f64(1.0 / f64::from(r.req_message_rate)));
                 for g in groups {
                     for msg_id in telemetry::stream_group(g) {
-                        self.schedule_mut(from.endpoint).set(*msg_id, interval, now.mono);
+                        self.schedule_mut(from.endpoint)
+                            .set(*msg_id, interval, now.mono);
                     }
                 }
             }
@@ -757,51 +908,63 @@ impl Vehicle {
                 if !self.for_us(m.target_system, m.target_component) {
                     return;
                 }
-                out.push(self.mission_ack(from, m.mission_type, MavMissionResult::MAV_MISSION_UNSUPPORTED));
+                out.push(self.mission_ack(
+                    from,
+                    m.mission_type,
+                    MavMissionResult::MAV_MISSION_UNSUPPORTED,
+                ));
             }
             MavMessage::MISSION_CLEAR_ALL(m) => {
                 if !self.for_us(m.target_system, m.target_component) {
                     return;
                 }
-                out.push(self.mission_ack(from, m.mission_type, MavMissionResult::MAV_MISSION_ACCEPTED));
+                out.push(self.mission_ack(
+                    from,
+                    m.mission_type,
+                    MavMissionResult::MAV_MISSION_ACCEPTED,
+                ));
             }
             MavMessage::FILE_TRANSFER_PROTOCOL(f) => {
                 if !self.for_us(f.target_system, f.target_component) {
                     return;
                 }
-                out.push(Output::Send { to: from.reply(), msg: ftp_reply(&f.payload, from) });
+                out.push(Output::Send {
+                    to: from.reply(),
+                    msg: ftp_reply(&f.payload, from),
+                });
             }
-            MavMessage::TIMESYNC(t) => {
-                if t.tc1 == 0 {
-                    out.push(Output::Send {
-                        to: from.reply(),
-                        msg: MavMessage::TIMESYNC(TIMESYNC_DATA {
-                            tc1: now.mono.as_nanos().min(i64::MAX as u128) as i64,
-                            ts1: t.ts1,
-                            target_system: from.sysid,
-                            target_component: from.compid,
-                        }),
-                    });
-                }
+            MavMessage::TIMESYNC(t) if t.tc1 == 0 => {
+                out.push(Output::Send {
+                    to: from.reply(),
+                    msg: MavMessage::TIMESYNC(TIMESYNC_DATA {
+                        tc1: now.mono.as_nanos().min(i64::MAX as u128) as i64,
+                        ts1: t.ts1,
+                        target_system: from.sysid,
+                        target_component: from.compid,
+                    }),
+                });
             }
-            MavMessage::PING(p) => {
-                if p.target_system == 0 && p.target_component == 0 {
-                    out.push(Output::Send {
-                        to: from.reply(),
-                        msg: MavMessage::PING(PING_DATA {
-                            time_usec: p.time_usec,
-                            seq: p.seq,
-                            target_system: from.sysid,
-                            target_component: from.compid,
-                        }),
-                    });
-                }
+            MavMessage::PING(p) if p.target_system == 0 && p.target_component == 0 => {
+                out.push(Output::Send {
+                    to: from.reply(),
+                    msg: MavMessage::PING(PING_DATA {
+                        time_usec: p.time_usec,
+                        seq: p.seq,
+                        target_system: from.sysid,
+                        target_component: from.compid,
+                    }),
+                });
             }
             _ => {}
         }
     }
 
-    fn mission_ack(&self, from: Sender, mission_type: MavMissionType, result: MavMissionResult) -> Output {
+    fn mission_ack(
+        &self,
+        from: Sender,
+        mission_type: MavMissionType,
+        result: MavMissionResult,
+    ) -> Output {
         Output::Send {
             to: from.reply(),
             msg: MavMessage::MISSION_ACK(MISSION_ACK_DATA {
@@ -823,11 +986,19 @@ impl Vehicle {
     fn set_mode(&mut self, mode: u32, out: &mut Vec<Output>) -> MavResult {
         match MODES.iter().find(|m| m.0 == mode) {
             None => {
-                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Mode {mode} does not exist"), out);
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("Mode {mode} does not exist"),
+                    out,
+                );
                 MavResult::MAV_RESULT_FAILED
             }
             Some((_, name, Some(why))) => {
-                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Mode {name} refused: {why}"), out);
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("Mode {name} refused: {why}"),
+                    out,
+                );
                 MavResult::MAV_RESULT_FAILED
             }
             Some((m, name, None)) => {
@@ -846,12 +1017,20 @@ impl Vehicle {
         use MavCmd as C;
         use MavResult as R;
         let reply = from.reply();
-        let ack = |result: MavResult| Output::Send { to: reply, msg: ack(cmd, result, from) };
+        let ack = |result: MavResult| Output::Send {
+            to: reply,
+            msg: ack(cmd, result, from),
+        };
         match cmd {
             C::MAV_CMD_COMPONENT_ARM_DISARM => {
                 let arm = given(p[0]).unwrap_or(0.0) >= 0.5;
-                let force = given(p[1]).is_some_and(|v| (v - 2989.0).abs() < 0.5 || (v - 21196.0).abs() < 0.5);
-                let result = if arm { self.arm(force, now, out) } else { self.disarm("commanded", out) };
+                let force = given(p[1])
+                    .is_some_and(|v| (v - 2989.0).abs() < 0.5 || (v - 21196.0).abs() < 0.5);
+                let result = if arm {
+                    self.arm(force, now, out)
+                } else {
+                    self.disarm("commanded", out)
+                };
                 out.push(ack(result));
             }
             C::MAV_CMD_DO_SET_MODE => {
@@ -885,7 +1064,8 @@ impl Vehicle {
                     out.push(Output::Send {
                         to: reply,
                         msg: MavMessage::MESSAGE_INTERVAL(MESSAGE_INTERVAL_DATA {
-                            interval_us: iv.map_or(-1, |d| d.as_micros().min(i32::MAX as u128) as i32),
+                            interval_us: iv
+                                .map_or(-1, |d| d.as_micros().min(i32::MAX as u128) as i32),
                             message_id: id as u16,
                         }),
                     });
@@ -899,7 +1079,9 @@ impl Vehicle {
                     435 => self.available_modes(given(p[1]).unwrap_or(0.0) as u32),
                     22 => {
                         // PARAM_VALUE by index (param2).
-                        self.param_value(given(p[1]).unwrap_or(-1.0).max(0.0) as usize).into_iter().collect()
+                        self.param_value(given(p[1]).unwrap_or(-1.0).max(0.0) as usize)
+                            .into_iter()
+                            .collect()
                     }
                     300 => vec![protocol_version()],
                     _ => self.build(id, now),
@@ -913,14 +1095,24 @@ impl Vehicle {
             }
             C::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES => {
                 out.push(ack(R::MAV_RESULT_ACCEPTED));
-                out.push(Output::Send { to: reply, msg: self.autopilot_version() });
+                out.push(Output::Send {
+                    to: reply,
+                    msg: self.autopilot_version(),
+                });
             }
             C::MAV_CMD_REQUEST_PROTOCOL_VERSION => {
                 out.push(ack(R::MAV_RESULT_ACCEPTED));
-                out.push(Output::Send { to: reply, msg: protocol_version() });
+                out.push(Output::Send {
+                    to: reply,
+                    msg: protocol_version(),
+                });
             }
             C::MAV_CMD_DO_SET_SERVO => {
-                let result = self.set_servo(given(p[0]).unwrap_or(0.0) as u32, given(p[1]).unwrap_or(0.0), out);
+                let result = self.set_servo(
+                    given(p[0]).unwrap_or(0.0) as u32,
+                    given(p[1]).unwrap_or(0.0),
+                    out,
+                );
                 out.push(ack(result));
             }
             C::MAV_CMD_DO_MOUNT_CONTROL => {
@@ -943,7 +1135,9 @@ impl Vehicle {
             C::MAV_CMD_DO_ILLUMINATOR_CONFIGURE => {
                 let result = match given(p[1]) {
                     Some(pct) if (0.0..=100.0).contains(&pct) => {
-                        let level = (f64::from(pct) / 100.0 * self.param("NEPT_LIGHTS_MAX", 255.0)).round().clamp(0.0, 255.0) as u8;
+                        let level = (f64::from(pct) / 100.0 * self.param("NEPT_LIGHTS_MAX", 255.0))
+                            .round()
+                            .clamp(0.0, 255.0) as u8;
                         self.set_lights(level, out);
                         R::MAV_RESULT_ACCEPTED
                     }
@@ -960,12 +1154,22 @@ impl Vehicle {
             return MavResult::MAV_RESULT_ACCEPTED;
         }
         if self.link != LinkState::Up {
-            let why = self.prearm_failure(now).unwrap_or_else(|| "board link down".into());
-            self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, &format!("Arm: {why}"), out);
+            let why = self
+                .prearm_failure(now)
+                .unwrap_or_else(|| "board link down".into());
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!("Arm: {why}"),
+                out,
+            );
             return MavResult::MAV_RESULT_FAILED;
         }
         if !force && let Some(why) = self.prearm_failure(now) {
-            self.statustext(MavSeverity::MAV_SEVERITY_CRITICAL, &format!("PreArm: {why}"), out);
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!("PreArm: {why}"),
+                out,
+            );
             return MavResult::MAV_RESULT_FAILED;
         }
         self.armed = true;
@@ -977,7 +1181,11 @@ impl Vehicle {
     fn disarm(&mut self, why: &str, out: &mut Vec<Output>) -> MavResult {
         if self.armed {
             self.armed = false;
-            self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Disarmed ({why})"), out);
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_INFO,
+                &format!("Disarmed ({why})"),
+                out,
+            );
         }
         self.send_neutral(out);
         MavResult::MAV_RESULT_ACCEPTED
@@ -1001,16 +1209,25 @@ impl Vehicle {
 
     /// DO_SET_SERVO: the output's SERVOn_FUNCTION says what it drives.
     fn set_servo(&mut self, servo: u32, pwm: f32, out: &mut Vec<Output>) -> MavResult {
-        let function = self.params.get(&format!("SERVO{servo}_FUNCTION")).map(|f| f as i64);
+        let function = self
+            .params
+            .get(&format!("SERVO{servo}_FUNCTION"))
+            .map(|f| f as i64);
         let pwm = f64::from(pwm);
         if !(800.0..=2200.0).contains(&pwm) {
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &format!("Servo {servo}: {pwm} µs out of range"), out);
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &format!("Servo {servo}: {pwm} µs out of range"),
+                out,
+            );
             return MavResult::MAV_RESULT_DENIED;
         }
         let frac = ((pwm - 1100.0) / 800.0).clamp(0.0, 1.0);
         match function {
             Some(59) => {
-                let level = (frac * self.param("NEPT_LIGHTS_MAX", 255.0)).round().clamp(0.0, 255.0) as u8;
+                let level = (frac * self.param("NEPT_LIGHTS_MAX", 255.0))
+                    .round()
+                    .clamp(0.0, 255.0) as u8;
                 self.set_lights(level, out);
                 MavResult::MAV_RESULT_ACCEPTED
             }

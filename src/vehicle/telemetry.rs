@@ -11,17 +11,17 @@ use std::time::Duration;
 /// Message ids Neptunus can stream, with ArduSub's default rate in Hz
 /// (0 = not streamed unless asked for).
 pub const STREAMABLE: &[(u32, f64)] = &[
-    (0, 1.0),    // HEARTBEAT
-    (1, 2.0),    // SYS_STATUS
-    (2, 3.0),    // SYSTEM_TIME
-    (30, 10.0),  // ATTITUDE
-    (33, 3.0),   // GLOBAL_POSITION_INT
-    (36, 2.0),   // SERVO_OUTPUT_RAW
-    (74, 10.0),  // VFR_HUD
-    (137, 2.0),  // SCALED_PRESSURE2
-    (147, 3.0),  // BATTERY_STATUS
-    (251, 2.0),  // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
-    (512, 1.0),  // CONTROL_STATUS
+    (0, 1.0),   // HEARTBEAT
+    (1, 2.0),   // SYS_STATUS
+    (2, 3.0),   // SYSTEM_TIME
+    (30, 10.0), // ATTITUDE
+    (33, 3.0),  // GLOBAL_POSITION_INT
+    (36, 2.0),  // SERVO_OUTPUT_RAW
+    (74, 10.0), // VFR_HUD
+    (137, 2.0), // SCALED_PRESSURE2
+    (147, 3.0), // BATTERY_STATUS
+    (251, 2.0), // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
+    (512, 1.0), // CONTROL_STATUS
 ];
 
 /// Legacy REQUEST_DATA_STREAM groups, as ArduPilot maps them for a submarine.
@@ -74,7 +74,13 @@ impl Schedule {
         let mut s = Self::default();
         for (id, _) in STREAMABLE {
             if let Some(iv) = default_interval(*id) {
-                s.slots.insert(*id, Slot { interval: iv, next_due: now });
+                s.slots.insert(
+                    *id,
+                    Slot {
+                        interval: iv,
+                        next_due: now,
+                    },
+                );
             }
         }
         s
@@ -88,8 +94,17 @@ impl Schedule {
             }
             Some(iv) => {
                 let iv = iv.max(MIN_INTERVAL);
-                let next_due = self.slots.get(&msg_id).map_or(now, |s| s.next_due.min(now + iv));
-                self.slots.insert(msg_id, Slot { interval: iv, next_due });
+                let next_due = self
+                    .slots
+                    .get(&msg_id)
+                    .map_or(now, |s| s.next_due.min(now + iv));
+                self.slots.insert(
+                    msg_id,
+                    Slot {
+                        interval: iv,
+                        next_due,
+                    },
+                );
             }
         }
     }
