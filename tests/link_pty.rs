@@ -246,8 +246,12 @@ async fn thrust_commands_coalesce_and_pacing_prevents_overrun() {
     })
     .await
     .expect("newest thrust command reaches the board");
-    let stats = link.stats();
-    assert!(stats.thrust_coalesced > 0, "{stats:?}");
+    // The link publishes its figures every 100 ms: wait for them rather than read a stale copy.
+    let mut stats = link.subscribe();
+    timeout(LONG, stats.wait_for(|s| s.thrust_coalesced > 0))
+        .await
+        .expect("thrust commands were coalesced")
+        .unwrap();
     assert_eq!(
         board.control().snapshot().overruns,
         0,
