@@ -19,7 +19,7 @@ use crate::mavlink::endpoint::{
 };
 use crate::mavlink::frame::encode_v2;
 use crate::mavlink::tlog::TlogConfig;
-use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, To, Vehicle};
+use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, SimTruth, To, Vehicle};
 use crate::vehicle::params::ParamFile;
 
 /// Errors starting the vehicle.
@@ -120,6 +120,8 @@ pub async fn run(
         Instant::now() + Duration::from_secs(1),
         Duration::from_secs(5),
     );
+    // On the simulator, its ground truth is published too (marked as such).
+    let mut truth = board.as_ref().map(|b| b.control().subscribe());
     let mut nav = NavSample::default();
     let mut status = StatusSample::default();
     loop {
@@ -146,6 +148,29 @@ pub async fn run(
                     vehicle.handle(Input::Mavlink { from, msg: frame.msg }, now, &mut outputs);
                 }
             },
+            changed = async {
+                match truth.as_mut() {
+                    Some(rx) => rx.changed().await,
+                    None => std::future::pending().await,
+                }
+            } => {
+                if changed.is_err() {
+                    truth = None;
+                } else if let Some(rx) = truth.as_mut() {
+                    let s = rx.borrow_and_update().sim;
+                    let t = SimTruth {
+                        north_m: s.north_m,
+                        east_m: s.east_m,
+                        depth_m: s.depth_m,
+                        heading_rad: s.heading_deg.to_radians(),
+                        surge_mps: s.surge_mps,
+                        sway_mps: s.sway_mps,
+                        heave_mps: s.heave_mps,
+                        yaw_rate_rps: s.yaw_rate_dps.to_radians(),
+                    };
+                    vehicle.handle(Input::SimTruth(t), now, &mut outputs);
+                }
+            }
             _ = report.tick() => {
                 let s = link.stats();
                 tracing::info!(

@@ -18,6 +18,9 @@ use std::time::Duration;
 
 use mavlink_core::types::CharArray;
 
+mod driving;
+
+use super::input::Profiles;
 use super::params::ParamStore;
 use super::telemetry::{self, Schedule};
 use crate::dialect::neptunus::*;
@@ -81,6 +84,21 @@ pub enum Input {
     },
     /// Periodic (the app ticks at 100 Hz): telemetry, timeouts.
     Tick,
+    /// Ground truth from the simulator (only when running on it).
+    SimTruth(SimTruth),
+}
+
+/// The simulated vehicle's true state, in plain units.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SimTruth {
+    pub north_m: f64,
+    pub east_m: f64,
+    pub depth_m: f64,
+    pub heading_rad: f64,
+    pub surge_mps: f64,
+    pub sway_mps: f64,
+    pub heave_mps: f64,
+    pub yaw_rate_rps: f64,
 }
 
 /// What the core asks the I/O around it to do.
@@ -124,6 +142,7 @@ pub enum Identity {
 /// ArduSub's modes: number, name, and whether Neptunus can honour it now.
 pub const MODES: &[(u32, &str, Option<&str>)] = &[
     (19, "MANUAL", None),
+    (MODE_MANUAL_THRUSTERS, "MANUAL_THRUSTERS", None),
     (0, "STABILIZE", Some("heading hold is not implemented yet")),
     (
         1,
@@ -160,6 +179,8 @@ pub const MODES: &[(u32, &str, Option<&str>)] = &[
     ),
 ];
 pub const MODE_MANUAL: u32 = 19;
+/// Neptunus' own mode: each thruster driven directly (NEPTUNUS_THRUSTERS).
+pub const MODE_MANUAL_THRUSTERS: u32 = 100;
 
 pub fn mode_name(mode: u32) -> &'static str {
     MODES
@@ -203,6 +224,11 @@ pub struct Vehicle {
     statustext_id: u16,
     booted: Duration,
     started: bool,
+    pilot: driving::Pilot,
+    profiles: Profiles,
+    sim_truth: Stamped<SimTruth>,
+    tilt_accum: f64,
+    last_tick: Option<Duration>,
 }
 
 fn chars<const N: usize>(s: &str) -> CharArray<N> {
@@ -250,7 +276,23 @@ impl Vehicle {
             statustext_id: 0,
             booted: Duration::ZERO,
             started: false,
+            pilot: driving::Pilot::default(),
+            sim_truth: Stamped::default(),
+            profiles: Profiles::builtin(),
+            tilt_accum: 0.0,
+            last_tick: None,
         }
+    }
+
+    /// Ground-station conventions (default: the profiles built into the binary).
+    pub fn with_profiles(mut self, profiles: Profiles) -> Self {
+        self.profiles = profiles;
+        self
+    }
+
+    /// Pilot input refused because it came from a station not allowed to drive.
+    pub fn refused_inputs(&self) -> u64 {
+        self.pilot.refused
     }
 
     pub fn params(&self) -> &ParamStore {
@@ -295,6 +337,12 @@ impl Vehicle {
             Input::Tick => self.tick(now, out),
             Input::Link { state, reason } => self.on_link(state, reason, now, out),
             Input::Board(ev) => self.on_board(ev, now),
+            Input::SimTruth(t) => {
+                self.sim_truth = Stamped {
+                    value: t,
+                    at: Some(now.mono),
+                }
+            }
             Input::Mavlink { from, msg } => self.on_mavlink(from, msg, now, out),
         }
     }
@@ -375,6 +423,8 @@ impl Vehicle {
             );
             if self.armed {
                 self.armed = false;
+                self.pilot.hold = None;
+                self.stop_pilot();
                 self.statustext(
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     "Disarmed: board link lost",
@@ -444,9 +494,11 @@ impl Vehicle {
 
     fn tick(&mut self, now: Now, out: &mut Vec<Output>) {
         out.push(Output::Healthy);
-        if !self.armed && self.motors_us != [1500; 3] {
-            self.send_neutral(out);
-        }
+        let dt = self
+            .last_tick
+            .map_or(Duration::ZERO, |t| now.mono.saturating_sub(t));
+        self.last_tick = Some(now.mono);
+        self.drive_tick(now, dt, out);
         let mut due = Vec::new();
         for ep in 0..self.schedules.len() {
             due.clear();
@@ -712,7 +764,10 @@ impl Vehicle {
                     ("PilotGain", self.gain),
                     ("CamTilt", tilt),
                     ("Laser", f64::from(self.laser) / 255.0),
-                    ("InputHold", 0.0),
+                    (
+                        "InputHold",
+                        if self.pilot.hold.is_some() { 1.0 } else { 0.0 },
+                    ),
                 ]
                 .iter()
                 .map(|(name, v)| {
@@ -725,6 +780,25 @@ impl Vehicle {
                 .collect()
             }
             148 => vec![self.autopilot_version()],
+            44101
+                if self
+                    .sim_truth
+                    .at
+                    .is_some_and(|t| now.mono.saturating_sub(t) <= FRESH) =>
+            {
+                let t = self.sim_truth.value;
+                vec![MavMessage::NEPTUNUS_SIM_STATE(NEPTUNUS_SIM_STATE_DATA {
+                    time_boot_ms: boot_ms,
+                    x: t.north_m as f32,
+                    y: t.east_m as f32,
+                    z: t.depth_m as f32,
+                    psi: t.heading_rad as f32,
+                    u: t.surge_mps as f32,
+                    v: t.sway_mps as f32,
+                    w: t.heave_mps as f32,
+                    r: t.yaw_rate_rps as f32,
+                })]
+            }
             _ => Vec::new(),
         }
     }
@@ -805,6 +879,9 @@ impl Vehicle {
                 ];
                 self.command(from, c.command, params, now, out);
             }
+            MavMessage::MANUAL_CONTROL(m) => self.on_manual_control(from, &m, now, out),
+            MavMessage::RC_CHANNELS_OVERRIDE(r) => self.on_rc_override(from, &r, now, out),
+            MavMessage::NEPTUNUS_THRUSTERS(t) => self.on_thrusters_message(from, &t, now, out),
             MavMessage::SET_MODE(m) => {
                 if m.target_system != self.sysid() && m.target_system != 0 {
                     return;
@@ -1005,6 +1082,7 @@ impl Vehicle {
                 if self.mode != *m {
                     self.mode = *m;
                     // A mode change is a safety-mode stop.
+                    self.stop_pilot();
                     self.send_neutral(out);
                     self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {name}"), out);
                 }
@@ -1107,6 +1185,10 @@ impl Vehicle {
                     msg: protocol_version(),
                 });
             }
+            C::MAV_CMD_DO_MOTOR_TEST => {
+                let result = self.motor_test(p, now, out);
+                out.push(ack(result));
+            }
             C::MAV_CMD_DO_SET_SERVO => {
                 let result = self.set_servo(
                     given(p[0]).unwrap_or(0.0) as u32,
@@ -1179,6 +1261,8 @@ impl Vehicle {
     }
 
     fn disarm(&mut self, why: &str, out: &mut Vec<Output>) -> MavResult {
+        self.pilot.hold = None;
+        self.stop_pilot();
         if self.armed {
             self.armed = false;
             self.statustext(

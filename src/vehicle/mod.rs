@@ -9,6 +9,8 @@
 //! Nothing here opens a socket, reads a clock or sleeps; time comes in as an
 //! argument and effects go out as values.
 
+pub mod input;
 pub mod machine;
+pub mod mixer;
 pub mod params;
 pub mod telemetry;

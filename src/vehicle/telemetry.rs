@@ -11,17 +11,18 @@ use std::time::Duration;
 /// Message ids Neptunus can stream, with ArduSub's default rate in Hz
 /// (0 = not streamed unless asked for).
 pub const STREAMABLE: &[(u32, f64)] = &[
-    (0, 1.0),   // HEARTBEAT
-    (1, 2.0),   // SYS_STATUS
-    (2, 3.0),   // SYSTEM_TIME
-    (30, 10.0), // ATTITUDE
-    (33, 3.0),  // GLOBAL_POSITION_INT
-    (36, 2.0),  // SERVO_OUTPUT_RAW
-    (74, 10.0), // VFR_HUD
-    (137, 2.0), // SCALED_PRESSURE2
-    (147, 3.0), // BATTERY_STATUS
-    (251, 2.0), // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
-    (512, 1.0), // CONTROL_STATUS
+    (0, 1.0),      // HEARTBEAT
+    (1, 2.0),      // SYS_STATUS
+    (2, 3.0),      // SYSTEM_TIME
+    (30, 10.0),    // ATTITUDE
+    (33, 3.0),     // GLOBAL_POSITION_INT
+    (36, 2.0),     // SERVO_OUTPUT_RAW
+    (74, 10.0),    // VFR_HUD
+    (137, 2.0),    // SCALED_PRESSURE2
+    (147, 3.0),    // BATTERY_STATUS
+    (251, 2.0),    // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
+    (512, 1.0),    // CONTROL_STATUS
+    (44101, 10.0), // NEPTUNUS_SIM_STATE (only while simulating)
 ];
 
 /// Legacy REQUEST_DATA_STREAM groups, as ArduPilot maps them for a submarine.

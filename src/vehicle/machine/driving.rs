@@ -1,0 +1,463 @@
+//! Driving: pilot input (MANUAL_CONTROL, RC_CHANNELS_OVERRIDE, the
+//! per-thruster message, motor test, buttons) turned into one `go()`.
+//!
+//! Every path that can move a thruster ends in [`Vehicle::update_thrusters`],
+//! which is the single place that decides the three pulse widths: neutral
+//! unless armed, the board link up, and the input fresh and allowed.
+
+use std::time::Duration;
+
+use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, Now, Output, Sender, Vehicle};
+use crate::dialect::neptunus::*;
+use crate::firmware::codec::Command;
+use crate::firmware::link::LinkState;
+use crate::vehicle::input::{self, RcAxis, Sticks};
+use crate::vehicle::mixer::{self, Demand, MixerConfig, NEUTRAL_US};
+use crate::vehicle::params::BTN_FUNCTION_LASER_TOGGLE;
+
+/// A thruster command that has not changed is re-sent this often, so a board
+/// that lost it (dead-man trip, reset) gets it back.
+const RESEND: Duration = Duration::from_secs(1);
+/// Motor test stops this long after its last command (ArduSub: ≥ 2 Hz).
+const MOTOR_TEST_HOLD: Duration = Duration::from_millis(500);
+/// Refused pilot input is reported at most this often.
+const REFUSAL_REPORT: Duration = Duration::from_secs(5);
+
+/// One motor under MAV_CMD_DO_MOTOR_TEST.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct MotorTest {
+    /// Index into [port, vertical, starboard].
+    slot: usize,
+    pwm_us: u16,
+    until: Duration,
+}
+
+/// Pilot input state.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(super) struct Pilot {
+    /// Latest normalised sticks (before gain).
+    pub sticks: Demand,
+    /// Latched trims of input hold.
+    pub hold: Option<Demand>,
+    /// Per-thruster commands [port, vertical, starboard] in MANUAL_THRUSTERS.
+    pub thrusters: [f64; 3],
+    pub last_input: Option<Duration>,
+    pub buttons: u32,
+    pub shift: bool,
+    pub motor_test: Option<MotorTest>,
+    /// Camera tilt rate from an RC override, −1..1.
+    pub tilt_rate: f64,
+    pub refused: u64,
+    pub refusal_reported: Option<Duration>,
+    pub last_go: Option<Duration>,
+}
+
+impl Vehicle {
+    /// Whether `sysid` may drive: SYSID_MYGCS or one of NEPT_GCS_ALLOWn.
+    /// (Control authority between several allowed stations is the next step.)
+    pub(super) fn may_drive(&self, sysid: u8) -> bool {
+        self.params.gcs_allowed(sysid)
+    }
+
+    fn refuse_input(&mut self, from: Sender, what: &str, now: Now, out: &mut Vec<Output>) {
+        self.pilot.refused += 1;
+        let due = self
+            .pilot
+            .refusal_reported
+            .is_none_or(|t| now.mono.saturating_sub(t) >= REFUSAL_REPORT);
+        if due {
+            self.pilot.refusal_reported = Some(now.mono);
+            let n = self.pilot.refused;
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &format!(
+                    "Ignoring {what} from sysid {}: not an allowed GCS ({n} refused)",
+                    from.sysid
+                ),
+                out,
+            );
+        }
+    }
+
+    pub(super) fn on_manual_control(
+        &mut self,
+        from: Sender,
+        m: &MANUAL_CONTROL_DATA,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        if m.target != self.sysid() {
+            return;
+        }
+        if !self.may_drive(from.sysid) {
+            self.refuse_input(from, "MANUAL_CONTROL", now, out);
+            return;
+        }
+        let profile = self.profiles.for_sysid(from.sysid).clone();
+        let s: Sticks = input::sticks_from_manual_control(m.x, m.y, m.z, m.r, &profile);
+        let d = &mut self.pilot.sticks;
+        if let Some(v) = s.forward {
+            d.surge = v;
+        }
+        if let Some(v) = s.heave_down {
+            d.heave = v;
+        }
+        if let Some(v) = s.yaw {
+            d.yaw = v;
+        }
+        self.pilot.last_input = Some(now.mono);
+        let buttons = u32::from(m.buttons) | (u32::from(m.buttons2) << 16);
+        self.on_buttons(from, buttons, &profile, now, out);
+        self.update_thrusters(now, out);
+    }
+
+    pub(super) fn on_rc_override(
+        &mut self,
+        from: Sender,
+        r: &RC_CHANNELS_OVERRIDE_DATA,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        if r.target_system != self.sysid() {
+            return;
+        }
+        if !self.may_drive(from.sysid) {
+            self.refuse_input(from, "RC override", now, out);
+            return;
+        }
+        let profile = self.profiles.for_sysid(from.sysid).clone();
+        let ch = [
+            r.chan1_raw,
+            r.chan2_raw,
+            r.chan3_raw,
+            r.chan4_raw,
+            r.chan5_raw,
+            r.chan6_raw,
+            r.chan7_raw,
+            r.chan8_raw,
+            r.chan9_raw,
+            r.chan10_raw,
+            r.chan11_raw,
+            r.chan12_raw,
+            r.chan13_raw,
+            r.chan14_raw,
+            r.chan15_raw,
+            r.chan16_raw,
+            r.chan17_raw,
+            r.chan18_raw,
+        ];
+        let u = input::rc_override(&ch, &profile);
+        let apply = |slot: &mut f64, a: Option<RcAxis>| match a {
+            Some(RcAxis::Set(v)) => *slot = v,
+            Some(RcAxis::Release) => *slot = 0.0,
+            None => {}
+        };
+        apply(&mut self.pilot.sticks.surge, u.forward);
+        apply(&mut self.pilot.sticks.heave, u.heave_down);
+        apply(&mut self.pilot.sticks.yaw, u.yaw);
+        apply(&mut self.pilot.tilt_rate, u.tilt_rate);
+        if let Some(RcAxis::Set(level)) = u.lights {
+            let max = f64::from(self.params.lights_max());
+            let level = (level * max).round().clamp(0.0, 255.0) as u8;
+            if level != self.lights {
+                self.set_lights(level, out);
+            }
+        }
+        self.pilot.last_input = Some(now.mono);
+        self.update_thrusters(now, out);
+    }
+
+    pub(super) fn on_thrusters_message(
+        &mut self,
+        from: Sender,
+        t: &NEPTUNUS_THRUSTERS_DATA,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        if t.target_system != self.sysid()
+            || (t.target_component != 0 && t.target_component != super::COMPONENT_ID)
+        {
+            return;
+        }
+        if !self.may_drive(from.sysid) {
+            self.refuse_input(from, "NEPTUNUS_THRUSTERS", now, out);
+            return;
+        }
+        for (slot, v) in self
+            .pilot
+            .thrusters
+            .iter_mut()
+            .zip([t.port, t.vertical, t.starboard])
+        {
+            if !v.is_nan() {
+                *slot = f64::from(v).clamp(-1.0, 1.0);
+            }
+        }
+        self.pilot.last_input = Some(now.mono);
+        self.update_thrusters(now, out);
+    }
+
+    /// MAV_CMD_DO_MOTOR_TEST: p1 motor (1-based, ArduSub numbering: 1 starboard,
+    /// 2 port, 3 vertical), p2 throttle type (0 percent, 1 PWM), p3 value,
+    /// p4 timeout s. Needs arming; stops 0.5 s after the last command.
+    pub(super) fn motor_test(&mut self, p: [f32; 7], now: Now, out: &mut Vec<Output>) -> MavResult {
+        if !self.armed {
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "Motor test: arm first",
+                out,
+            );
+            return MavResult::MAV_RESULT_FAILED;
+        }
+        let motor = p[0];
+        let slot = match motor.round() as i64 {
+            1 => 2,
+            2 => 0,
+            3 => 1,
+            _ => {
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("Motor test: no motor {motor}"),
+                    out,
+                );
+                return MavResult::MAV_RESULT_DENIED;
+            }
+        };
+        let (lo, hi) = (self.params.mot_pwm_min(), self.params.mot_pwm_max());
+        let value = f64::from(p[2]);
+        let pwm = match p[1].round() as i64 {
+            0 if value.is_finite() => {
+                f64::from(lo) + (f64::from(hi) - f64::from(lo)) * value.clamp(0.0, 100.0) / 100.0
+            }
+            1 if value.is_finite() => value,
+            _ => return MavResult::MAV_RESULT_DENIED,
+        };
+        let hold = if p[3].is_finite() && p[3] > 0.0 {
+            Duration::from_secs_f32(p[3]).min(MOTOR_TEST_HOLD)
+        } else {
+            MOTOR_TEST_HOLD
+        };
+        let pwm_us = pwm.round().clamp(f64::from(lo), f64::from(hi)) as u16;
+        self.pilot.motor_test = Some(MotorTest {
+            slot,
+            pwm_us,
+            until: now.mono + hold,
+        });
+        self.update_thrusters(now, out);
+        MavResult::MAV_RESULT_ACCEPTED
+    }
+
+    fn input_fresh(&self, now: Now) -> bool {
+        let timeout = Duration::from_secs_f32(self.params.fs_pilot_timeout_s().clamp(0.1, 3.0));
+        self.pilot
+            .last_input
+            .is_some_and(|t| now.mono.saturating_sub(t) <= timeout)
+    }
+
+    fn mixer(&self) -> MixerConfig {
+        MixerConfig::from_params(&self.params, self.gain)
+    }
+
+    /// The one place that decides what the thrusters get.
+    pub(super) fn update_thrusters(&mut self, now: Now, out: &mut Vec<Output>) {
+        if let Some(t) = self.pilot.motor_test
+            && (now.mono >= t.until || !self.armed)
+        {
+            self.pilot.motor_test = None;
+        }
+        let target = if !self.armed || self.link != LinkState::Up {
+            [NEUTRAL_US; 3]
+        } else if let Some(t) = self.pilot.motor_test {
+            let mut us = [NEUTRAL_US; 3];
+            us[t.slot] = t.pwm_us;
+            us
+        } else if !self.input_fresh(now) {
+            // Pilot input lost: neutral first (the failsafe action comes on top).
+            [NEUTRAL_US; 3]
+        } else if self.mode == MODE_MANUAL {
+            let mut d = self.pilot.sticks;
+            if let Some(h) = self.pilot.hold {
+                d.surge = (d.surge + h.surge).clamp(-1.0, 1.0);
+                d.heave = (d.heave + h.heave).clamp(-1.0, 1.0);
+                d.yaw = (d.yaw + h.yaw).clamp(-1.0, 1.0);
+            }
+            d.heave *= f64::from(self.params.js_thr_gain());
+            mixer::mix(&d, &self.mixer())
+        } else if self.mode == MODE_MANUAL_THRUSTERS {
+            let cfg = self.mixer();
+            let dirs = cfg.directions;
+            let [p, v, s] = self.pilot.thrusters;
+            [
+                mixer::thruster_us(p, dirs[0], &cfg),
+                mixer::thruster_us(v, dirs[1], &cfg),
+                mixer::thruster_us(s, dirs[2], &cfg),
+            ]
+        } else {
+            [NEUTRAL_US; 3]
+        };
+        let resend = target != [NEUTRAL_US; 3]
+            && self
+                .pilot
+                .last_go
+                .is_none_or(|t| now.mono.saturating_sub(t) >= RESEND);
+        if target != self.motors_us || resend {
+            self.motors_us = target;
+            self.pilot.last_go = Some(now.mono);
+            out.push(Output::Board(Command::Go {
+                port_us: target[0],
+                vertical_us: target[1],
+                starboard_us: target[2],
+            }));
+        }
+    }
+
+    /// Called every tick: timeouts and rates.
+    pub(super) fn drive_tick(&mut self, now: Now, dt: Duration, out: &mut Vec<Output>) {
+        if self.pilot.tilt_rate != 0.0 && self.input_fresh(now) {
+            // Full stick slews the camera over its whole range in about 2 s.
+            let span = f64::from(self.params.tilt_max_us()) - f64::from(self.params.tilt_min_us());
+            let step = self.pilot.tilt_rate * span / 2.0 * dt.as_secs_f64();
+            self.tilt_accum += step;
+            if self.tilt_accum.abs() >= 1.0 {
+                let delta = self.tilt_accum.trunc();
+                self.tilt_accum -= delta;
+                self.set_tilt_us(f64::from(self.tilt_us) + delta, out);
+            }
+        }
+        self.update_thrusters(now, out);
+    }
+
+    /// Clears pilot state at a safety-mode stop (mode change, disarm, transfer).
+    pub(super) fn stop_pilot(&mut self) {
+        self.pilot.sticks = Demand::default();
+        self.pilot.thrusters = [0.0; 3];
+        self.pilot.motor_test = None;
+        self.pilot.tilt_rate = 0.0;
+    }
+
+    fn on_buttons(
+        &mut self,
+        from: Sender,
+        now_mask: u32,
+        profile: &input::Profile,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        let (pressed, released) = input::edges(self.pilot.buttons, now_mask);
+        self.pilot.buttons = now_mask;
+        for i in 0..32usize {
+            let bit = 1u32 << i;
+            if pressed & bit != 0 {
+                let f = self.button_function(i, self.pilot.shift, profile);
+                self.button_press(from, f, now, out);
+            } else if released & bit != 0 {
+                let f = self.button_function(i, false, profile);
+                if f == 1 {
+                    self.pilot.shift = false;
+                }
+            }
+        }
+    }
+
+    /// BTNn_FUNCTION / BTNn_SFUNCTION where set away from ArduSub's default,
+    /// otherwise the sender's profile default.
+    fn button_function(&self, i: usize, shifted: bool, profile: &input::Profile) -> u8 {
+        let param = self.params.btn_function(i, shifted);
+        let ardusub = input::Profile::ardusub_default().button_function(i, shifted);
+        if param != ardusub {
+            param
+        } else {
+            profile.button_function(i, shifted)
+        }
+    }
+
+    fn button_press(&mut self, from: Sender, function: u8, now: Now, out: &mut Vec<Output>) {
+        let sev = MavSeverity::MAV_SEVERITY_INFO;
+        match function {
+            0 => {}
+            1 => self.pilot.shift = true,
+            2 => {
+                if self.armed {
+                    self.disarm("button", out);
+                } else {
+                    self.arm(false, now, out);
+                }
+            }
+            3 => {
+                self.arm(false, now, out);
+            }
+            4 => {
+                self.disarm("button", out);
+            }
+            5..=13 => {
+                let mode = match function {
+                    5 => 19,
+                    6 => 0,
+                    7 => 2,
+                    8 => 16,
+                    9 => 3,
+                    10 => 7,
+                    11 => 4,
+                    12 => 1,
+                    _ => 21,
+                };
+                self.set_mode(mode, out);
+            }
+            21 => self.set_tilt_us(1500.0, out),
+            22 | 23 => {
+                let step = (f64::from(self.params.tilt_max_us())
+                    - f64::from(self.params.tilt_min_us()))
+                    / 10.0;
+                let sign = if function == 22 { 1.0 } else { -1.0 };
+                self.set_tilt_us(f64::from(self.tilt_us) + sign * step, out);
+            }
+            31..=33 => {
+                let max = u16::from(self.params.lights_max());
+                let steps = self.params.js_lights_steps().max(1);
+                let step = (max / steps).max(1);
+                let level = u16::from(self.lights);
+                let level = match function {
+                    31 if level >= max => 0,
+                    31 | 32 => (level + step).min(max),
+                    _ => level.saturating_sub(step),
+                };
+                self.set_lights(level.min(255) as u8, out);
+            }
+            41..=43 => {
+                let (lo, hi) = (
+                    f64::from(self.params.js_gain_min()),
+                    f64::from(self.params.js_gain_max()),
+                );
+                let steps = f64::from(self.params.js_gain_steps().max(2) - 1);
+                let step = (hi - lo) / steps;
+                self.gain = match function {
+                    41 if (self.gain - hi).abs() < 1e-6 => lo,
+                    41 => hi,
+                    42 => (self.gain + step).min(hi),
+                    _ => (self.gain - step).max(lo),
+                };
+                let pct = (self.gain * 100.0).round();
+                self.statustext(sev, &format!("#Gain is {pct:.0}%"), out);
+            }
+            48 => {
+                if self.pilot.hold.take().is_some() {
+                    self.statustext(sev, "#Input Hold Disabled", out);
+                } else {
+                    self.pilot.hold = Some(self.pilot.sticks);
+                    self.statustext(sev, "#Input Hold Set", out);
+                }
+            }
+            f if f == BTN_FUNCTION_LASER_TOGGLE => {
+                self.laser = if self.laser > 0 { 0 } else { 255 };
+                out.push(Output::Board(Command::Laser(self.laser)));
+            }
+            other => {
+                tracing::debug!(
+                    function = other,
+                    sysid = from.sysid,
+                    "button function not implemented on this vehicle"
+                );
+            }
+        }
+    }
+}
