@@ -312,8 +312,10 @@ fn dead_man_inactive_without_dms_before_180_s() {
 #[test]
 fn queue_overrun_drops_oldest() {
     let (mut b, _) = booted(EmulatorOptions::default());
+    // Short frames back to back arrive faster (≈ 0.8 ms each on the wire)
+    // than the board's loop takes them (1 ms): the queue fills up.
     let mut burst = Vec::new();
-    for n in 1..=7u8 {
+    for n in 1..=60u8 {
         burst.extend(encoded(&Command::Lights(n), Framing::Crc8));
     }
     let mut out = Vec::new();

@@ -63,6 +63,8 @@ const NEUTRAL_US: i32 = 1500;
 const SIM_STEP: Duration = Duration::from_millis(10);
 /// The board works through one queued command per loop iteration.
 const LOOP_PERIOD: Duration = Duration::from_millis(1);
+/// One byte at 115200 baud, 8N1.
+const BYTE_TIME: Duration = Duration::from_nanos(86_806);
 const DEAD_MAN_TIMEOUT: Duration = Duration::from_secs(2);
 const DEAD_MAN_AUTO_ARM: Duration = Duration::from_secs(180);
 
@@ -218,6 +220,7 @@ pub struct Board {
     sim_time: Duration,
     frame: Vec<u8>,
     frame_overflow: bool,
+    wire_credit: Duration,
     queue: VecDeque<String>,
     last_loop: Duration,
     next_nav: Duration,
@@ -260,6 +263,7 @@ impl Board {
             sim_time: Duration::ZERO,
             frame: Vec::with_capacity(FRAME_BUFFER_BYTES),
             frame_overflow: false,
+            wire_credit: Duration::ZERO,
             queue: VecDeque::with_capacity(COMMAND_QUEUE_SLOTS),
             last_loop: Duration::ZERO,
             next_nav: Duration::ZERO,
@@ -331,6 +335,20 @@ impl Board {
         }
         self.tick(now, out);
         for &b in bytes {
+            // A UART delivers a byte per 10 bit times; the board's loop runs
+            // meanwhile. Bytes that reach us in one burst (the emulator task
+            // was scheduled late) still took that long on a real wire.
+            self.wire_credit += BYTE_TIME;
+            while self.wire_credit >= LOOP_PERIOD {
+                self.wire_credit -= LOOP_PERIOD;
+                match self.queue.pop_front() {
+                    Some(cmd) => self.execute(&cmd, out),
+                    None => {
+                        self.wire_credit = Duration::ZERO;
+                        break;
+                    }
+                }
+            }
             if b == b';' {
                 if self.frame_overflow {
                     self.frame.clear();

@@ -41,6 +41,9 @@ pub struct LinkConfig {
     pub boot_wait: Duration,
     pub backoff_min: Duration,
     pub backoff_max: Duration,
+    /// Extra time after each frame's wire time before the next is written,
+    /// so the board's loop takes each command before the next arrives.
+    pub frame_gap: Duration,
 }
 
 impl LinkConfig {
@@ -56,6 +59,7 @@ impl LinkConfig {
             boot_wait: Duration::from_millis(1500),
             backoff_min: Duration::from_millis(200),
             backoff_max: Duration::from_secs(5),
+            frame_gap: Duration::from_millis(2),
         }
     }
 
@@ -384,7 +388,7 @@ async fn run(
                     stats.thrust_written += 1;
                 }
                 // The board needs the wire time plus a loop iteration per frame.
-                next_write = now + cfg.wire_time(frame.len()) + Duration::from_millis(1);
+                next_write = now + cfg.wire_time(frame.len()) + cfg.frame_gap;
             }
 
             // Telemetry watchdog.
