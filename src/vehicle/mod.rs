@@ -2,6 +2,7 @@
 //! and decides every byte sent to the board and to ground stations.
 //!
 //! - [`machine`]: the state machine, `Vehicle::handle(input, now) -> outputs`.
+//! - [`mixer`]: the thrust allocation, demand to `go()` pulse widths.
 //! - [`params`]: the MAVLink parameter set (ArduSub names and types where
 //!   the meaning is the same), its validation and its file storage.
 //! - [`telemetry`]: the per-endpoint telemetry schedule.
@@ -10,5 +11,6 @@
 //! argument and effects go out as values.
 
 pub mod machine;
+pub mod mixer;
 pub mod params;
 pub mod telemetry;
