@@ -3,6 +3,8 @@
 //!
 //! - [`machine`]: the state machine, `Vehicle::handle(input, now) -> outputs`.
 //! - [`mixer`]: the thrust allocation, demand to `go()` pulse widths.
+//! - [`input`]: ground-station conventions (profiles), MANUAL_CONTROL and
+//!   RC override to normalised sticks, button edges.
 //! - [`params`]: the MAVLink parameter set (ArduSub names and types where
 //!   the meaning is the same), its validation and its file storage.
 //! - [`telemetry`]: the per-endpoint telemetry schedule.
@@ -10,6 +12,7 @@
 //! Nothing here opens a socket, reads a clock or sleeps; time comes in as an
 //! argument and effects go out as values.
 
+pub mod input;
 pub mod machine;
 pub mod mixer;
 pub mod params;
