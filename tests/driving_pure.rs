@@ -166,10 +166,11 @@ fn any_config() -> impl Strategy<Value = MixerConfig> {
 }
 
 proptest! {
+    /// `f64::ANY` includes NaN, ±∞ and subnormals (`any::<f64>()` does not).
     #[test]
     fn mixer_output_always_in_range(
-        surge in any::<f64>(), heave in any::<f64>(), yaw in any::<f64>(),
-        u in any::<f64>(), dir in any::<i8>(), c in any_config(),
+        surge in prop::num::f64::ANY, heave in prop::num::f64::ANY, yaw in prop::num::f64::ANY,
+        u in prop::num::f64::ANY, dir in any::<i8>(), c in any_config(),
     ) {
         for us in mix(&d(surge, heave, yaw), &c) {
             prop_assert!((c.pwm_min_us..=c.pwm_max_us).contains(&us), "{us} outside {c:?}");
