@@ -65,6 +65,22 @@ pub struct RunArgs {
 pub enum CliCommand {
     /// Run the OpenROV board emulator on a new pseudo-terminal and print its path.
     EmulateBoard(EmulateArgs),
+    /// Ground-station profiles (conventions per sender).
+    Profiles {
+        #[command(subcommand)]
+        command: ProfilesCommand,
+    },
+}
+
+/// `neptunus profiles …`
+#[derive(Debug, Subcommand)]
+pub enum ProfilesCommand {
+    /// Load and validate profiles; print each with its sysids, or the first
+    /// error as file:line:column.
+    Check {
+        /// Directory of *.toml profiles [default: the built-in set].
+        dir: Option<PathBuf>,
+    },
 }
 
 /// Options of `emulate-board`.

@@ -4,7 +4,8 @@ use std::io::Write as _;
 
 use anyhow::Context as _;
 use clap::Parser as _;
-use neptunus::config::{self, Cli, CliCommand};
+use neptunus::config::{self, Cli, CliCommand, ProfilesCommand};
+use neptunus::vehicle::input::{Profile, Profiles, ZConvention};
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
@@ -23,16 +24,21 @@ fn main() -> std::process::ExitCode {
 }
 
 fn real_main(cli: Cli) -> anyhow::Result<()> {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("cannot start the async runtime")?;
+    let runtime = || {
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .context("cannot start the async runtime")
+    };
     match cli.command {
+        Some(CliCommand::Profiles {
+            command: ProfilesCommand::Check { dir },
+        }) => profiles_check(dir.as_deref())?,
         Some(CliCommand::EmulateBoard(args)) => {
             init_logging(None)?;
             let opts = config::resolve_emulator(&args, cli.run.config.as_deref())?;
-            runtime.block_on(neptunus::app::emulate_board(
+            runtime()?.block_on(neptunus::app::emulate_board(
                 opts,
                 args.link.clone(),
                 |path| {
@@ -53,9 +59,43 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
             })?;
             init_logging(Some(&settings.data_dir))?;
             tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
-            runtime.block_on(neptunus::app::run(settings, shutdown_signal()))?;
+            runtime()?.block_on(neptunus::app::run(settings, shutdown_signal()))?;
         }
     }
+    Ok(())
+}
+
+/// `neptunus profiles check [DIR]`: one line per profile, then the fallback.
+fn profiles_check(dir: Option<&std::path::Path>) -> anyhow::Result<()> {
+    let (source, profiles) = match dir {
+        Some(d) => (d.display().to_string(), Profiles::load_dir(d)?),
+        None => ("built-in".to_owned(), Profiles::try_builtin()?),
+    };
+    let line = |p: &Profile| {
+        let sysids = if p.sysids.is_empty() {
+            "none".to_owned()
+        } else {
+            p.sysids
+                .iter()
+                .map(u8::to_string)
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        let z = match p.z_convention {
+            ZConvention::ZeroToThousand => "zero_to_thousand",
+            ZConvention::Centered => "centered",
+        };
+        format!(
+            "{:<16} sysids {:<40} z {:<16} deadband {:.2} expo {:.2}",
+            p.name, sysids, z, p.deadband, p.expo
+        )
+    };
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{} profiles ({source}):", profiles.profiles().len())?;
+    for p in profiles.profiles() {
+        writeln!(out, "  {}", line(p))?;
+    }
+    writeln!(out, "  {} (any other sender)", line(profiles.fallback()))?;
     Ok(())
 }
 

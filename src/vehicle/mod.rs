@@ -2,6 +2,9 @@
 //! and decides every byte sent to the board and to ground stations.
 //!
 //! - [`machine`]: the state machine, `Vehicle::handle(input, now) -> outputs`.
+//! - [`mixer`]: the thrust allocation, demand to `go()` pulse widths.
+//! - [`input`]: ground-station conventions (profiles), MANUAL_CONTROL and
+//!   RC override to normalised sticks, button edges.
 //! - [`params`]: the MAVLink parameter set (ArduSub names and types where
 //!   the meaning is the same), its validation and its file storage.
 //! - [`telemetry`]: the per-endpoint telemetry schedule.
