@@ -940,16 +940,17 @@ async fn run_board(
         }
         let t = now();
         board.tick(t, &mut out);
-        for r in board.take_records() {
-            // Nobody listening is fine: records are for tests and tools.
-            let _ = records.send(r);
-        }
+        // The snapshot first: whoever sees a record must find the state it led to.
         if t.saturating_sub(last_snapshot) >= Duration::from_millis(100)
             || board.executed_total != last_executed
         {
             last_snapshot = t;
             last_executed = board.executed_total;
             let _ = snapshots.send(board.snapshot());
+        }
+        for r in board.take_records() {
+            // Nobody listening is fine: records are for tests and tools.
+            let _ = records.send(r);
         }
     }
 }
