@@ -180,3 +180,19 @@ def udp_vehicle(make_vehicle):
     v = make_vehicle([f"udpin:127.0.0.1:{port}"])
     v.udp_port = port
     return v
+
+
+@pytest.fixture
+def pymav(make_vehicle):
+    """(vehicle, connection): the ArduSub-script way — pymavlink listens with
+    `udpin:` and the vehicle sends to it (`--mavlink udpout:`). The client
+    socket is bound before the vehicle starts."""
+    port = free_udp_port()
+    conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}")
+    try:
+        v = make_vehicle([f"udpout:127.0.0.1:{port}"])
+        hb = conn.wait_heartbeat(timeout=10)
+        assert hb is not None, "no HEARTBEAT on the udpin socket the vehicle sends to"
+        yield v, conn
+    finally:
+        conn.close()

@@ -86,3 +86,40 @@ class GcsHeartbeat:
     def __exit__(self, *exc):
         self.stop_event.set()
         self.thread.join(timeout=5)
+
+
+def bounded(fn, timeout: float, what: str):
+    """Run a blocking library call that has no timeout of its own (e.g.
+    pymavlink's motors_armed_wait) in a daemon thread; fail after `timeout`."""
+    result: dict = {}
+
+    def run():
+        try:
+            result["value"] = fn()
+        except BaseException as e:  # re-raised in the test thread
+            result["error"] = e
+
+    t = threading.Thread(target=run, name=f"bounded:{what}", daemon=True)
+    t.start()
+    t.join(timeout)
+    if t.is_alive():
+        raise AssertionError(f"{what} did not return within {timeout} s")
+    if "error" in result:
+        raise result["error"]
+    return result.get("value")
+
+
+def wait_ack(conn, command: int, timeout: float = 5.0, texts: list | None = None):
+    """The COMMAND_ACK for `command` from the vehicle; STATUSTEXTs seen on
+    the way are appended to `texts`."""
+    dl = Deadline(timeout)
+    while not dl.expired():
+        m = conn.recv_match(type=["COMMAND_ACK", "STATUSTEXT"], blocking=True, timeout=min(dl.left(), 0.5))
+        if m is None or not from_vehicle(m):
+            continue
+        if m.get_type() == "STATUSTEXT":
+            if texts is not None:
+                texts.append(m.text)
+        elif m.command == command:
+            return m
+    raise AssertionError(f"no COMMAND_ACK for command {command} within {timeout} s")
