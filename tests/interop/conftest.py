@@ -22,28 +22,13 @@ os.environ.setdefault("MAVLINK20", "1")  # speak MAVLink 2 from the first frame
 
 from pymavlink import mavutil  # noqa: E402
 
-from mavhelpers import Deadline, from_vehicle, recv  # noqa: E402
+from mavhelpers import Deadline, free_tcp_port, free_udp_port, from_vehicle, recv  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(os.environ.get("NEPTUNUS_BIN", REPO / "target" / "debug" / "neptunus"))
 STANDBY = mavutil.mavlink.MAV_STATE_STANDBY
 READY_TIMEOUT_S = 20.0
 STOP_TIMEOUT_S = 10.0
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A port the OS considers free right now (bind port 0 on loopback)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def free_udp_port() -> int:
-    return free_port(socket.SOCK_DGRAM)
-
-
-def free_tcp_port() -> int:
-    return free_port(socket.SOCK_STREAM)
 
 
 def wait_connect_tcp(port: int, timeout: float) -> None:

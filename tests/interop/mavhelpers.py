@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import socket
 import threading
 import time
 
@@ -11,6 +12,21 @@ os.environ.setdefault("MAVLINK20", "1")  # MAVLink 2 from the first frame
 from pymavlink import mavutil  # noqa: E402
 
 mavlink = mavutil.mavlink
+
+
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A port the OS considers free right now (bind port 0 on loopback)."""
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def free_udp_port() -> int:
+    return free_port(socket.SOCK_DGRAM)
+
+
+def free_tcp_port() -> int:
+    return free_port(socket.SOCK_STREAM)
 
 
 class Deadline:
