@@ -3,8 +3,8 @@ driven by the real ground-station libraries.
 
 Every vehicle gets a fresh data directory and ports picked by the OS (bind
 port 0, read the port back). Readiness is a condition polled with a deadline:
-a HEARTBEAT from (1, 1) with system_status STANDBY on the vehicle's control
-TCP endpoint. Nothing sleeps to wait for timing.
+a HEARTBEAT from (1, 1) with system_status STANDBY and a SYS_STATUS with
+PREARM_CHECK healthy, on the vehicle's control TCP endpoint. Nothing sleeps to wait for timing.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from mavhelpers import Deadline, free_tcp_port, free_udp_port, from_vehicle, rec
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(os.environ.get("NEPTUNUS_BIN", REPO / "target" / "debug" / "neptunus"))
 STANDBY = mavutil.mavlink.MAV_STATE_STANDBY
+PREARM_CHECK = mavutil.mavlink.MAV_SYS_STATUS_PREARM_CHECK
 READY_TIMEOUT_S = 20.0
 STOP_TIMEOUT_S = 10.0
 
@@ -80,17 +81,28 @@ class Vehicle:
         return self
 
     def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
+        """Ready = a HEARTBEAT with system_status STANDBY (board link up) and a
+        SYS_STATUS whose health has PREARM_CHECK (fresh telemetry: QGC's
+        "Ready"), both from (1, 1)."""
         dl = Deadline(timeout)
         wait_connect_tcp(self.control_port, timeout)
         conn = mavutil.mavlink_connection(self.control_url, source_system=254, source_component=191, retries=0)
+        standby = prearm = False
         try:
-            while not dl.expired():
+            while not (standby and prearm):
+                if dl.expired():
+                    raise TimeoutError(
+                        f"vehicle not ready within {timeout} s (STANDBY heartbeat: {standby}, PREARM_CHECK healthy: {prearm})"
+                    )
                 if self.proc.poll() is not None:
                     raise RuntimeError(f"neptunus exited with {self.proc.returncode} before it was ready")
-                hb = recv(conn, "HEARTBEAT", min(dl.left(), 1.0), from_vehicle)
-                if hb is not None and hb.system_status == STANDBY:
-                    return
-            raise TimeoutError(f"no HEARTBEAT with system_status STANDBY within {timeout} s")
+                m = recv(conn, ["HEARTBEAT", "SYS_STATUS"], min(dl.left(), 1.0), from_vehicle)
+                if m is None:
+                    continue
+                if m.get_type() == "HEARTBEAT":
+                    standby = m.system_status == STANDBY
+                else:
+                    prearm = bool(m.onboard_control_sensors_health & PREARM_CHECK)
         finally:
             conn.close()
 
