@@ -186,6 +186,9 @@ fn no_attitude_or_depth_while_the_board_link_is_down() {
     assert!(!sys.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK));
     assert!(!sys.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE));
     assert!(sys.onboard_control_sensors_present.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK));
+    // No fence: GEOFENCE healthy (as ArduPilot), else MAVProxy reports a breach.
+    assert!(sys.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE));
+    assert!(!sys.onboard_control_sensors_present.contains(MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE));
 }
 
 #[test]

@@ -94,3 +94,7 @@ def test_mavproxy_params_arm_disarm(mavproxy):
     mp.send("disarm")
     mp.expect(r"COMPONENT_ARM_DISARM: ACCEPTED", 30, "disarm ack")
     mp.expect(r"DISARMED", 30, "disarmed heartbeat")
+
+    # MAVProxy's fence module reads a clear GEOFENCE health bit as a breach.
+    mp.log.flush()
+    assert "fence breach" not in mp.log_path.read_text()
