@@ -45,13 +45,9 @@ class MavProxy:
         self.child.sendline(line)
 
     def close(self):
-        if self.child.isalive():
-            self.child.sendline("set requireexit True")
-            self.child.sendline("exit")
-            try:
-                self.child.expect(pexpect.EOF, timeout=10)
-            except pexpect.TIMEOUT:
-                pass
+        # `exit` is only honoured with `set requireexit`, and even then MAVProxy
+        # lingers; a hang-up, then SIGINT, then SIGKILL (pexpect's terminate).
+        self.child.terminate(force=True)
         self.child.close(force=True)
         self.log.close()
 
