@@ -260,6 +260,15 @@ fn no_attitude_or_depth_while_the_board_link_is_down() {
         sys.onboard_control_sensors_present
             .contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK)
     );
+    // No fence: GEOFENCE healthy (as ArduPilot), else MAVProxy reports a breach.
+    assert!(
+        sys.onboard_control_sensors_health
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE)
+    );
+    assert!(
+        !sys.onboard_control_sensors_present
+            .contains(MavSysStatusSensor::MAV_SYS_STATUS_GEOFENCE)
+    );
 }
 
 #[test]

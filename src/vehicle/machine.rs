@@ -536,7 +536,9 @@ impl Vehicle {
         let prearm = S::MAV_SYS_STATUS_PREARM_CHECK;
         let present = imu | depth | motors | battery | rc | prearm;
         let enabled = present;
-        let mut health = S::empty();
+        // GEOFENCE is healthy though absent, as ArduPilot reports it: MAVProxy's
+        // fence module announces "fence breach" when this bit is clear.
+        let mut health = S::MAV_SYS_STATUS_GEOFENCE;
         if self.fresh(&self.heading_deg, now) {
             health |= imu;
         }
@@ -577,6 +579,9 @@ impl Vehicle {
         }
         if !self.fresh(&self.depth_m, now) || !self.fresh(&self.heading_deg, now) {
             return Some("no fresh depth and attitude from the board".into());
+        }
+        if !self.fresh(&self.status, now) || self.status.value.vout_v.is_none() {
+            return Some("no fresh battery voltage from the board".into());
         }
         if !self.battery_ok(now) {
             return Some(format!(
