@@ -378,6 +378,61 @@ mod properties {
     use super::*;
     use proptest::prelude::*;
 
+    fn rc(ch: [u16; 10]) -> MavMessage {
+        MavMessage::RC_CHANNELS_OVERRIDE(RC_CHANNELS_OVERRIDE_DATA {
+            chan1_raw: ch[0],
+            chan2_raw: ch[1],
+            chan3_raw: ch[2],
+            chan4_raw: ch[3],
+            chan5_raw: ch[4],
+            chan6_raw: ch[5],
+            chan7_raw: ch[6],
+            chan8_raw: ch[7],
+            chan9_raw: ch[8],
+            chan10_raw: ch[9],
+            target_system: 1,
+            target_component: 1,
+            ..Default::default()
+        })
+    }
+
+    fn channel() -> impl Strategy<Value = u16> {
+        prop_oneof![
+            Just(0u16),
+            Just(u16::MAX),
+            Just(65534),
+            900u16..2100,
+            any::<u16>()
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// RC overrides with any channel values, mixed with arming: go() stays
+        /// within MOT_PWM_MIN..MAX and is neutral whenever disarmed.
+        #[test]
+        fn rc_override_values_stay_in_range(
+            steps in prop::collection::vec((prop::array::uniform10(channel()), any::<bool>(), 0u64..300), 1..40)
+        ) {
+            let mut r = Rig::new();
+            for (ch, arm, wait_ms) in steps {
+                let mut out = if arm {
+                    r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+                } else {
+                    r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7])
+                };
+                out.extend(r.input(Input::Mavlink { from: GCS, msg: rc(ch) }));
+                out.extend(r.run(Duration::from_millis(wait_ms)));
+                for g in gos(&out) {
+                    prop_assert!(g.iter().all(|us| (1100..=1900).contains(us)), "{:?}", g);
+                    if !arm {
+                        prop_assert_eq!(g, [1500; 3]);
+                    }
+                }
+            }
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]
         /// Whatever the sticks, buttons and senders: every go() is within
