@@ -11,13 +11,14 @@ use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 use crate::config::{BoardSource, Settings};
+use crate::dialect::neptunus::MavMessage;
 use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
 use crate::firmware::emulator::PtyBoard;
 use crate::firmware::link::{self, LinkError, LinkEvent};
 use crate::mavlink::endpoint::{
     EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle,
 };
-use crate::mavlink::frame::encode_v2;
+use crate::mavlink::frame::{encode_command_ack_raw, encode_v2};
 use crate::mavlink::tlog::TlogConfig;
 use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, SimTruth, To, Vehicle};
 use crate::vehicle::params::ParamFile;
@@ -145,7 +146,16 @@ pub async fn run(
                 None => break,
                 Some(Inbound { endpoint, peer, frame }) => {
                     let from = Sender { endpoint, peer, sysid: frame.sysid, compid: frame.compid };
-                    vehicle.handle(Input::Mavlink { from, msg: frame.msg }, now, &mut outputs);
+                    let input = match (frame.unknown_command, &frame.msg) {
+                        (Some(command), MavMessage::COMMAND_LONG(c)) => Input::UnknownCommand {
+                            from,
+                            command,
+                            target_system: c.target_system,
+                            target_component: c.target_component,
+                        },
+                        _ => Input::Mavlink { from, msg: frame.msg },
+                    };
+                    vehicle.handle(input, now, &mut outputs);
                 }
             },
             changed = async {
@@ -201,6 +211,14 @@ pub async fn run(
     Ok(())
 }
 
+fn route(to: To) -> Route {
+    match to {
+        To::All => Route::All,
+        To::Endpoint(e) => Route::Endpoint(e),
+        To::Peer(e, p) => Route::Peer(e, p),
+    }
+}
+
 /// Carries the core's outputs to the router, the link and the parameter file.
 struct Io {
     router: RouterHandle,
@@ -217,13 +235,30 @@ impl Io {
                 Output::Send { to, msg } => {
                     let bytes = encode_v2(vehicle.sysid(), COMPONENT_ID, self.seq, &msg);
                     self.seq = self.seq.wrapping_add(1);
-                    let route = match to {
-                        To::All => Route::All,
-                        To::Endpoint(e) => Route::Endpoint(e),
-                        To::Peer(e, p) => Route::Peer(e, p),
-                    };
                     self.router.send(Outbound {
-                        route,
+                        route: route(to),
+                        bytes: bytes.into(),
+                    });
+                }
+                Output::AckUnknown {
+                    to,
+                    command,
+                    result,
+                    target_system,
+                    target_component,
+                } => {
+                    let bytes = encode_command_ack_raw(
+                        vehicle.sysid(),
+                        COMPONENT_ID,
+                        self.seq,
+                        command,
+                        result,
+                        target_system,
+                        target_component,
+                    );
+                    self.seq = self.seq.wrapping_add(1);
+                    self.router.send(Outbound {
+                        route: route(to),
                         bytes: bytes.into(),
                     });
                 }

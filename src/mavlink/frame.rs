@@ -18,6 +18,7 @@ use mavlink_core::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, calc
 use serde::Serialize;
 
 pub use crate::dialect::neptunus::MavMessage;
+use crate::dialect::neptunus::{COMMAND_ACK_DATA, COMMAND_LONG_DATA, MavCmd, MavResult};
 
 const STX_V1: u8 = mavlink_core::MAV_STX;
 const STX_V2: u8 = mavlink_core::MAV_STX_V2;
@@ -45,6 +46,11 @@ pub struct Frame {
     pub signed: bool,
     /// The frame's exact bytes, for the telemetry log and signature checks.
     pub raw: Vec<u8>,
+    /// A COMMAND_LONG or COMMAND_INT whose command number our dialect does
+    /// not define: `msg` is a COMMAND_LONG with the targets and the placeholder
+    /// MAV_CMD_NEPTUNUS_UNKNOWN_COMMAND, and this is the number really sent,
+    /// so the vehicle can still answer MAV_RESULT_UNSUPPORTED at once.
+    pub unknown_command: Option<u16>,
 }
 
 /// What a decoder has seen. Counters only grow.
@@ -313,7 +319,36 @@ fn examine(buf: &[u8]) -> Candidate {
             msg,
             signed: signature_len != 0,
             raw: bytes.to_vec(),
+            unknown_command: None,
         })),
+        Err(mavlink_core::error::ParserError::InvalidEnum {
+            enum_type: "MavCmd",
+            ..
+        }) if msg_id == COMMAND_LONG_ID || msg_id == COMMAND_INT_ID => {
+            // Both messages keep command (u16), target_system and
+            // target_component at payload bytes 28..32; MAVLink 2 may have
+            // truncated trailing zeros.
+            let mut payload = [0u8; 35];
+            let given = &bytes[header_len..crc_at];
+            payload[..given.len().min(35)].copy_from_slice(&given[..given.len().min(35)]);
+            let command = u16::from_le_bytes([payload[28], payload[29]]);
+            Candidate::Valid(Box::new(Frame {
+                version,
+                sysid,
+                compid,
+                seq,
+                msg_id,
+                msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                    command: MavCmd::MAV_CMD_NEPTUNUS_UNKNOWN_COMMAND,
+                    target_system: payload[30],
+                    target_component: payload[31],
+                    ..Default::default()
+                }),
+                signed: signature_len != 0,
+                raw: bytes.to_vec(),
+                unknown_command: Some(command),
+            }))
+        }
         Err(mavlink_core::error::ParserError::UnknownMessage { .. }) => Candidate::Bad {
             kind: BadKind::Unknown,
             len,
@@ -323,6 +358,41 @@ fn examine(buf: &[u8]) -> Candidate {
             len,
         },
     }
+}
+
+const COMMAND_INT_ID: u32 = 75;
+const COMMAND_LONG_ID: u32 = 76;
+const COMMAND_ACK_ID: u32 = 77;
+
+/// COMMAND_ACK for a command number our dialect cannot represent (the
+/// generated `MavCmd` enum has no value for it): encoded with a placeholder,
+/// then the command bytes patched and the CRC recomputed.
+pub fn encode_command_ack_raw(
+    sysid: u8,
+    compid: u8,
+    seq: u8,
+    command: u16,
+    result: MavResult,
+    target_system: u8,
+    target_component: u8,
+) -> Vec<u8> {
+    // A non-zero placeholder keeps MAVLink 2 from truncating the command bytes away.
+    let msg = MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
+        command: MavCmd::MAV_CMD_NAV_WAYPOINT,
+        result,
+        progress: 0,
+        result_param2: 0,
+        target_system,
+        target_component,
+    });
+    let mut frame = encode_v2(sysid, compid, seq, &msg);
+    let [lo, hi] = command.to_le_bytes();
+    frame[V2_HEADER_LEN] = lo;
+    frame[V2_HEADER_LEN + 1] = hi;
+    let crc_at = frame.len() - CRC_LEN;
+    let crc = calculate_crc(&frame[1..crc_at], MavMessage::extra_crc(COMMAND_ACK_ID));
+    frame[crc_at..].copy_from_slice(&crc.to_le_bytes());
+    frame
 }
 
 #[cfg(test)]

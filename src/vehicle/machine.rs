@@ -86,6 +86,13 @@ pub enum Input {
     Tick,
     /// Ground truth from the simulator (only when running on it).
     SimTruth(SimTruth),
+    /// A COMMAND_LONG/COMMAND_INT whose number our dialect does not define.
+    UnknownCommand {
+        from: Sender,
+        command: u16,
+        target_system: u8,
+        target_component: u8,
+    },
 }
 
 /// The simulated vehicle's true state, in plain units.
@@ -116,6 +123,14 @@ pub enum Output {
     SaveParams,
     /// The core is alive: the link may feed the board's dead-man switch.
     Healthy,
+    /// COMMAND_ACK for a command number the dialect cannot represent.
+    AckUnknown {
+        to: To,
+        command: u16,
+        result: MavResult,
+        target_system: u8,
+        target_component: u8,
+    },
 }
 
 /// How the vehicle presents itself.
@@ -337,6 +352,22 @@ impl Vehicle {
             Input::Tick => self.tick(now, out),
             Input::Link { state, reason } => self.on_link(state, reason, now, out),
             Input::Board(ev) => self.on_board(ev, now),
+            Input::UnknownCommand {
+                from,
+                command,
+                target_system,
+                target_component,
+            } => {
+                if self.for_us(target_system, target_component) {
+                    out.push(Output::AckUnknown {
+                        to: from.reply(),
+                        command,
+                        result: MavResult::MAV_RESULT_UNSUPPORTED,
+                        target_system: from.sysid,
+                        target_component: from.compid,
+                    });
+                }
+            }
             Input::SimTruth(t) => {
                 self.sim_truth = Stamped {
                     value: t,
