@@ -454,6 +454,9 @@ fn watch_go_frames(
 /// Latencies of one path.
 struct Outcome {
     latencies: Vec<Duration>,
+    /// Latencies of datagrams sent at least [`line_busy`] after the one
+    /// before: the serial line was free, nothing waited for pacing.
+    line_free: Vec<Duration>,
     sent: usize,
     /// No `go()` of its own, but the next datagram's arrived: superseded
     /// while waiting for the line (the link's coalescing).
@@ -499,32 +502,39 @@ impl Outcome {
                 Some(t - s.at)
             })
             .collect();
+        let busy = line_busy();
         let mut out = Outcome {
             latencies: matched.iter().flatten().copied().collect(),
+            line_free: (1..sent.len())
+                .filter(|&i| sent[i].at - sent[i - 1].at >= busy)
+                .filter_map(|i| matched[i])
+                .collect(),
             sent: sent.len(),
             coalesced: 0,
             lost: 0,
         };
         for i in 0..matched.len() {
-            if matched[i].is_none() {
-                if matched.get(i + 1).is_some_and(Option::is_some) {
-                    out.coalesced += 1;
-                } else {
-                    out.lost += 1;
-                }
+            if matched[i].is_some() {
+                continue;
+            }
+            // Superseded if a newer command made it to the board soon after:
+            // the link wrote the newest one instead (by design).
+            let superseded = (i + 1..matched.len())
+                .take_while(|&j| sent[j].at - sent[i].at < Duration::from_millis(100))
+                .any(|j| matched[j].is_some());
+            if superseded {
+                out.coalesced += 1;
+            } else {
+                out.lost += 1;
             }
         }
         out.latencies.sort();
+        out.line_free.sort();
         out
     }
 
     fn pct_ms(&self, q: f64) -> f64 {
-        if self.latencies.is_empty() {
-            return f64::NAN;
-        }
-        let rank =
-            ((q * self.latencies.len() as f64).ceil() as usize).clamp(1, self.latencies.len());
-        self.latencies[rank - 1].as_secs_f64() * 1e3
+        pct_ms(&self.latencies, q)
     }
 
     fn print(&self, name: &str) {
@@ -539,6 +549,24 @@ impl Outcome {
             self.lost
         );
     }
+}
+
+/// Nearest-rank percentile of sorted durations, in ms.
+fn pct_ms(sorted: &[Duration], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1].as_secs_f64() * 1e3
+}
+
+/// How long the link keeps the serial line after writing a `go()` frame
+/// (its wire time at 115200 baud plus the frame gap): a datagram arriving
+/// sooner after the previous one waits for the line.
+fn line_busy() -> Duration {
+    let link = neptunus::firmware::link::LinkConfig::new("/dev/null");
+    let go = codec::encoded(&floor_go(0), Framing::Crc8);
+    link.wire_time(go.len()) + link.frame_gap
 }
 
 /// Waits for frames to stop arriving, then takes everything received.
@@ -859,6 +887,19 @@ fn report(cfg: &Config, floor: &Outcome, nep: &Outcome, stream_cpu: Option<f64>,
             o.lost
         );
     }
+    for (name, o) in [
+        ("  floor, line free", floor),
+        ("  neptunus, line free", nep),
+    ] {
+        println!(
+            "  {:<28} {:>9.3} {:>9.3} {:>9.3} {:>8}",
+            name,
+            pct_ms(&o.line_free, 0.5),
+            pct_ms(&o.line_free, 0.99),
+            pct_ms(&o.line_free, 1.0),
+            o.line_free.len(),
+        );
+    }
     let added_p50 = nep.pct_ms(0.5) - floor.pct_ms(0.5);
     let added_p99 = nep.pct_ms(0.99) - floor.pct_ms(0.99);
     println!(
@@ -867,6 +908,15 @@ fn report(cfg: &Config, floor: &Outcome, nep: &Outcome, stream_cpu: Option<f64>,
         added_p50,
         added_p99,
         nep.pct_ms(0.5) / floor.pct_ms(0.5)
+    );
+    println!(
+        "  line free: sent >= {:.2} ms after the previous datagram (a go() frame's wire time at 115200 baud + the link's frame gap), so nothing waited for the serial line",
+        line_busy().as_secs_f64() * 1e3
+    );
+    println!(
+        "  added over the floor, line free: p50 {:.3} ms, p99 {:.3} ms",
+        pct_ms(&nep.line_free, 0.5) - pct_ms(&floor.line_free, 0.5),
+        pct_ms(&nep.line_free, 0.99) - pct_ms(&floor.line_free, 0.99)
     );
     if let Some(cpu) = stream_cpu {
         println!(
