@@ -156,6 +156,17 @@ pub enum BoardRecord {
     Executed(String),
 }
 
+/// A [`BoardRecord`] with the moment the emulator task woke to handle the
+/// bytes (or timer) that produced it. For a `Frame`, that is when the read
+/// that completed the frame returned: as close to the pty as the emulator
+/// gets, for latency measurements that must not include the delay of a
+/// broadcast receiver being scheduled.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TimedRecord {
+    pub at: std::time::Instant,
+    pub record: BoardRecord,
+}
+
 /// A snapshot of the board and the simulated vehicle.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BoardSnapshot {
@@ -808,6 +819,7 @@ pub struct BoardControl {
     stall: watch::Sender<bool>,
     snapshot: watch::Receiver<BoardSnapshot>,
     records: broadcast::Sender<BoardRecord>,
+    timed: broadcast::Sender<TimedRecord>,
 }
 
 impl BoardControl {
@@ -822,6 +834,11 @@ impl BoardControl {
     /// Frames received and commands executed from now on.
     pub fn records(&self) -> broadcast::Receiver<BoardRecord> {
         self.records.subscribe()
+    }
+    /// As [`BoardControl::records`], each with the time the emulator woke to
+    /// handle it (benchmarks).
+    pub fn timed_records(&self) -> broadcast::Receiver<TimedRecord> {
+        self.timed.subscribe()
     }
     /// A receiver that changes with every snapshot.
     pub fn subscribe(&self) -> watch::Receiver<BoardSnapshot> {
@@ -852,6 +869,7 @@ impl PtyBoard {
         let (stall_tx, stall_rx) = watch::channel(false);
         let (snap_tx, snap_rx) = watch::channel(board.snapshot());
         let (records_tx, _) = broadcast::channel(4096);
+        let (timed_tx, _) = broadcast::channel(4096);
         let (stop_tx, stop_rx) = oneshot::channel();
         let task = tokio::spawn(run_board(
             pty,
@@ -859,6 +877,7 @@ impl PtyBoard {
             stall_rx,
             snap_tx,
             records_tx.clone(),
+            timed_tx.clone(),
             stop_rx,
         ));
         Ok(Self {
@@ -867,6 +886,7 @@ impl PtyBoard {
                 stall: stall_tx,
                 snapshot: snap_rx,
                 records: records_tx,
+                timed: timed_tx,
             },
             stop: Some(stop_tx),
             task,
@@ -903,6 +923,7 @@ async fn run_board(
     mut stall: watch::Receiver<bool>,
     snapshots: watch::Sender<BoardSnapshot>,
     records: broadcast::Sender<BoardRecord>,
+    timed: broadcast::Sender<TimedRecord>,
     mut stop: oneshot::Receiver<()>,
 ) {
     let origin = tokio::time::Instant::now();
@@ -938,6 +959,7 @@ async fn run_board(
             },
             _ = tokio::time::sleep_until(deadline) => {}
         }
+        let woke_at = std::time::Instant::now();
         let t = now();
         board.tick(t, &mut out);
         // The snapshot first: whoever sees a record must find the state it led to.
@@ -948,7 +970,14 @@ async fn run_board(
             last_executed = board.executed_total;
             let _ = snapshots.send(board.snapshot());
         }
+        let timed_wanted = timed.receiver_count() > 0;
         for r in board.take_records() {
+            if timed_wanted {
+                let _ = timed.send(TimedRecord {
+                    at: woke_at,
+                    record: r.clone(),
+                });
+            }
             // Nobody listening is fine: records are for tests and tools.
             let _ = records.send(r);
         }

@@ -1,0 +1,963 @@
+//! End-to-end latency, CPU and memory of the `neptunus` binary.
+//!
+//! Three measurements, printed as a table with the targets:
+//!
+//! 1. **Receive → `go()`**: `neptunus --serial <pty> --mavlink udpin:…` runs
+//!    as a child process against a board emulator ([`PtyBoard`]) inside this
+//!    bench, so the real serial path runs. The bench arms it and sends
+//!    MANUAL_CONTROL datagrams over loopback UDP, each changing the thruster
+//!    command, and timestamps every send; the latency of a datagram is the
+//!    time until the emulator reads the `go()` frame carrying *its* values
+//!    (matched by content, not by order).
+//! 2. **Floor**: the same datagrams to a minimal forwarder thread in this
+//!    bench (UDP receive → one fixed-size `go()` frame written to a second
+//!    emulator's pty), measured the same way. What Neptunus adds is its
+//!    figures minus the floor's.
+//! 3. **CPU and RSS**: `neptunus --sim` driven at 25 Hz for `LATENCY_SOAK_S`
+//!    seconds (default 60), read from `/proc/<pid>/stat` and `/status`.
+//!
+//! The binary under test is `$NEPTUNUS_BIN`, else `target/release/neptunus`,
+//! else `target/debug/neptunus` (with a warning): build it first with
+//! `cargo build --release`. Figures are printed, never asserted.
+//!
+//! Knobs (environment): `LATENCY_COUNT` datagrams per path (default
+//! 10000), `LATENCY_PERIOD_US` between datagrams (default 5000),
+//! `LATENCY_SOAK_S` (default 60).
+
+#![allow(
+    clippy::print_stdout,
+    reason = "a bench binary's output is its figures"
+)]
+
+use std::collections::HashMap;
+use std::fs::File;
+use std::io::{Read as _, Write as _};
+use std::net::UdpSocket;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc as std_mpsc;
+use std::thread;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use neptunus::dialect::neptunus::*;
+use neptunus::firmware::codec::{self, Framing};
+use neptunus::firmware::emulator::{BoardRecord, EmulatorOptions, PtyBoard};
+use neptunus::mavlink::frame::{FrameStats, decode_datagram, encode_v2};
+
+const TARGET_ADDED_P99_MS: f64 = 0.2;
+const TARGET_CPU_PCT: f64 = 2.0;
+const TARGET_RSS_MB: f64 = 20.0;
+/// Stick positions cycled through; every one maps to a distinct `go()`, and
+/// neighbours differ, so every datagram changes the thruster command.
+const STICK_STEPS: usize = 64;
+
+struct Config {
+    count: usize,
+    period: Duration,
+    soak: Duration,
+}
+
+impl Config {
+    fn from_env() -> anyhow::Result<Self> {
+        fn var(name: &str, default: u64) -> anyhow::Result<u64> {
+            match std::env::var(name) {
+                Ok(v) => v
+                    .trim()
+                    .parse()
+                    .with_context(|| format!("{name}={v:?} is not a whole number")),
+                Err(_) => Ok(default),
+            }
+        }
+        Ok(Self {
+            count: var("LATENCY_COUNT", 10_000)? as usize,
+            period: Duration::from_micros(var("LATENCY_PERIOD_US", 5_000)?.max(100)),
+            soak: Duration::from_secs(var("LATENCY_SOAK_S", 60)?.max(1)),
+        })
+    }
+}
+
+fn main() -> anyhow::Result<()> {
+    let cfg = Config::from_env()?;
+    let bin = neptunus_bin()?;
+    println!("neptunus binary: {}", bin.display());
+    println!(
+        "{} datagrams per path, one every {:.1} ms; soak {} s",
+        cfg.count,
+        cfg.period.as_secs_f64() * 1e3,
+        cfg.soak.as_secs()
+    );
+    // The emulators run here; one worker keeps the bench off the second core
+    // as much as it can (the machine may have only two).
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()?;
+
+    println!("\n[1/3] floor: UDP → forwarder thread → pty …");
+    let floor = floor_run(&rt, &cfg)?;
+    floor.print("floor");
+    println!("\n[2/3] neptunus --serial <pty> …");
+    let (nep, stream_cpu) = neptunus_run(&rt, &bin, &cfg)?;
+    nep.print("neptunus");
+    println!("\n[3/3] neptunus --sim, MANUAL_CONTROL at 25 Hz …");
+    let soak = soak_run(&bin, &cfg)?;
+
+    report(&cfg, &floor, &nep, stream_cpu, &soak);
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------
+// The binary under test
+// ---------------------------------------------------------------------------
+
+fn neptunus_bin() -> anyhow::Result<PathBuf> {
+    if let Ok(p) = std::env::var("NEPTUNUS_BIN") {
+        let p = PathBuf::from(p);
+        if !p.is_file() {
+            bail!(
+                "NEPTUNUS_BIN={} is not a file — point it at a built neptunus binary",
+                p.display()
+            );
+        }
+        return Ok(p);
+    }
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(PathBuf::from)
+        .map(|t| if t.is_relative() { root.join(t) } else { t })
+        .unwrap_or_else(|| root.join("target"));
+    let release = target.join("release/neptunus");
+    let debug = target.join("debug/neptunus");
+    let bin = if release.is_file() {
+        release
+    } else if debug.is_file() {
+        println!(
+            "WARNING: {} not found, measuring the debug build — run `cargo build --release` first for meaningful figures",
+            release.display()
+        );
+        debug
+    } else {
+        bail!(
+            "no neptunus binary at {} — run `cargo build --release` before `cargo bench --bench latency`, or set NEPTUNUS_BIN",
+            release.display()
+        );
+    };
+    // A binary older than the sources measures something else.
+    if let (Ok(built), Some(newest)) = (
+        std::fs::metadata(&bin).and_then(|m| m.modified()),
+        newest_mtime(&root.join("src")),
+    ) && newest > built
+    {
+        println!(
+            "WARNING: {} is older than the sources — rebuild with `cargo build --release`",
+            bin.display()
+        );
+    }
+    Ok(bin)
+}
+
+fn newest_mtime(dir: &Path) -> Option<std::time::SystemTime> {
+    let mut newest = None;
+    for entry in std::fs::read_dir(dir).ok()?.flatten() {
+        let path = entry.path();
+        let t = if path.is_dir() {
+            newest_mtime(&path)
+        } else {
+            entry.metadata().and_then(|m| m.modified()).ok()
+        };
+        newest = newest.max(t);
+    }
+    newest
+}
+
+/// The child process, killed with SIGTERM (then SIGKILL) on drop.
+struct Vehicle {
+    child: Child,
+    stderr_path: PathBuf,
+}
+
+impl Vehicle {
+    fn spawn(bin: &Path, args: &[&str], dir: &Path) -> anyhow::Result<Self> {
+        let stderr_path = dir.join("neptunus.stderr");
+        let stderr = File::create(&stderr_path)?;
+        let child = Command::new(bin)
+            .args(args)
+            .arg("--data-dir")
+            .arg(dir.join("data"))
+            .env("RUST_LOG", "warn")
+            .stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(stderr)
+            .spawn()
+            .with_context(|| format!("cannot start {}", bin.display()))?;
+        Ok(Self { child, stderr_path })
+    }
+
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Its stderr, for error messages.
+    fn stderr_tail(&self) -> String {
+        let text = std::fs::read_to_string(&self.stderr_path).unwrap_or_default();
+        let lines: Vec<&str> = text.lines().collect();
+        lines[lines.len().saturating_sub(10)..].join("\n")
+    }
+}
+
+impl Drop for Vehicle {
+    fn drop(&mut self) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+        let end = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < end {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A loopback port nobody uses right now, for `udpin:` (the vehicle binds it).
+fn free_udp_port() -> anyhow::Result<u16> {
+    Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
+}
+
+// ---------------------------------------------------------------------------
+// The ground station side
+// ---------------------------------------------------------------------------
+
+fn manual_control(x: i16) -> MavMessage {
+    MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
+        x,
+        y: 0,
+        z: 500,
+        r: 0,
+        target: 1,
+        ..Default::default()
+    })
+}
+
+fn gcs_heartbeat() -> MavMessage {
+    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+        mavtype: MavType::MAV_TYPE_GCS,
+        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
+        system_status: MavState::MAV_STATE_ACTIVE,
+        mavlink_version: 3,
+        ..Default::default()
+    })
+}
+
+/// A bare UDP ground station (sysid 255) talking to a `udpin:` vehicle.
+struct Gcs {
+    sock: UdpSocket,
+    seq: u8,
+}
+
+impl Gcs {
+    fn connect(port: u16) -> anyhow::Result<Self> {
+        let sock = UdpSocket::bind("127.0.0.1:0")?;
+        sock.connect(("127.0.0.1", port))?;
+        sock.set_read_timeout(Some(Duration::from_millis(100)))?;
+        Ok(Self { sock, seq: 0 })
+    }
+
+    fn send(&mut self, msg: &MavMessage) -> anyhow::Result<()> {
+        let bytes = encode_v2(255, 190, self.seq, msg);
+        self.seq = self.seq.wrapping_add(1);
+        // Before the vehicle has bound its port, loopback answers with
+        // ECONNREFUSED on a connected socket; that is not an error here.
+        match self.sock.send(&bytes) {
+            Ok(_) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => Ok(()),
+            Err(e) => Err(e.into()),
+        }
+    }
+
+    fn recv(&self) -> Vec<MavMessage> {
+        let mut buf = [0u8; 4096];
+        let mut out = Vec::new();
+        if let Ok(n) = self.sock.recv(&mut buf) {
+            let mut stats = FrameStats::default();
+            decode_datagram(&buf[..n], &mut stats, &mut out);
+        }
+        out.into_iter()
+            .filter(|f| f.sysid == 1)
+            .map(|f| f.msg)
+            .collect()
+    }
+
+    /// Heartbeats until the vehicle reports itself ready to arm, then arms it.
+    fn arm(&mut self, vehicle: &mut Vehicle) -> anyhow::Result<()> {
+        let end = Instant::now() + Duration::from_secs(30);
+        let mut next_hb = Instant::now();
+        let mut ready = false;
+        while !ready {
+            if let Ok(Some(status)) = vehicle.child.try_wait() {
+                bail!(
+                    "neptunus exited ({status}) before it was ready:\n{}",
+                    vehicle.stderr_tail()
+                );
+            }
+            if Instant::now() > end {
+                bail!(
+                    "neptunus did not report PREARM_CHECK healthy within 30 s:\n{}",
+                    vehicle.stderr_tail()
+                );
+            }
+            if Instant::now() >= next_hb {
+                next_hb += Duration::from_secs(1);
+                self.send(&gcs_heartbeat())?;
+            }
+            ready = self.recv().iter().any(|m| {
+                matches!(m, MavMessage::SYS_STATUS(s) if s.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK))
+            });
+        }
+        let arm = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: 1.0,
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            target_system: 1,
+            target_component: 1,
+            ..Default::default()
+        });
+        self.send(&arm)?;
+        let end = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < end {
+            for m in self.recv() {
+                if let MavMessage::COMMAND_ACK(a) = m
+                    && a.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM
+                {
+                    if a.result == MavResult::MAV_RESULT_ACCEPTED {
+                        return Ok(());
+                    }
+                    bail!("arming refused: {:?}", a.result);
+                }
+            }
+        }
+        bail!("no COMMAND_ACK for arming within 5 s")
+    }
+
+    /// Reads (and drops) telemetry on a clone of the socket until `stop`,
+    /// so the vehicle's datagrams never pile up; returns how many arrived.
+    fn drain(&self, stop: Arc<AtomicBool>) -> anyhow::Result<thread::JoinHandle<u64>> {
+        let sock = self.sock.try_clone()?;
+        Ok(thread::spawn(move || {
+            let mut buf = [0u8; 4096];
+            let mut n = 0;
+            while !stop.load(Ordering::Relaxed) {
+                if sock.recv(&mut buf).is_ok() {
+                    n += 1;
+                }
+            }
+            n
+        }))
+    }
+}
+
+/// One datagram sent: when, and the MAVLink sequence number it carried.
+#[derive(Clone, Copy)]
+struct Sent {
+    at: Instant,
+    seq: u8,
+    stick: usize,
+}
+
+/// Sends `count` MANUAL_CONTROL datagrams on a fixed schedule (a late one
+/// does not make the next ones early), cycling through `sticks`, with a GCS
+/// heartbeat each second if `heartbeats`.
+fn paced_send(
+    gcs: &mut Gcs,
+    sticks: &[i16],
+    count: usize,
+    period: Duration,
+    heartbeats: bool,
+) -> anyhow::Result<Vec<Sent>> {
+    let mut sent = Vec::with_capacity(count);
+    let start = Instant::now() + period;
+    let mut next_hb = start;
+    for i in 0..count {
+        let due = start + period * i as u32;
+        if heartbeats && Instant::now() >= next_hb {
+            next_hb += Duration::from_secs(1);
+            gcs.send(&gcs_heartbeat())?;
+        }
+        let now = Instant::now();
+        if due > now {
+            thread::sleep(due - now);
+        }
+        let stick = i % sticks.len();
+        let bytes = encode_v2(255, 190, gcs.seq, &manual_control(sticks[stick]));
+        let at = Instant::now();
+        gcs.sock.send(&bytes)?;
+        sent.push(Sent {
+            at,
+            seq: gcs.seq,
+            stick,
+        });
+        gcs.seq = gcs.seq.wrapping_add(1);
+    }
+    Ok(sent)
+}
+
+// ---------------------------------------------------------------------------
+// Timing go() frames at the emulator
+// ---------------------------------------------------------------------------
+
+/// A `go()` frame's text without its CRC byte and padding, e.g. `go(1300,1500,1700)`.
+fn go_text(frame: &[u8]) -> Option<String> {
+    let text = frame.get(1..)?;
+    if !text.starts_with(b"go(") {
+        return None;
+    }
+    let s: String = String::from_utf8_lossy(text)
+        .chars()
+        .filter(|c| !c.is_whitespace() && *c != ';')
+        .collect();
+    Some(s)
+}
+
+/// Forwards every `go()` frame the board reads, with the time the emulator
+/// woke to read it, to a std channel (so blocking code can consume it).
+fn watch_go_frames(
+    rt: &tokio::runtime::Runtime,
+    board: &PtyBoard,
+) -> std_mpsc::Receiver<(Instant, String)> {
+    let mut records = board.control().timed_records();
+    let (tx, rx) = std_mpsc::channel();
+    rt.spawn(async move {
+        loop {
+            match records.recv().await {
+                Ok(r) => {
+                    if let BoardRecord::Frame(f) = &r.record
+                        && let Some(text) = go_text(f)
+                        && tx.send((r.at, text)).is_err()
+                    {
+                        break;
+                    }
+                }
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => {
+                    tracing::warn!("latency bench lagged {n} board records");
+                }
+                Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
+            }
+        }
+    });
+    rx
+}
+
+/// Latencies of one path.
+struct Outcome {
+    latencies: Vec<Duration>,
+    /// Latencies of datagrams sent at least [`line_busy`] after the one
+    /// before: the serial line was free, nothing waited for pacing.
+    line_free: Vec<Duration>,
+    sent: usize,
+    /// No `go()` of its own, but the next datagram's arrived: superseded
+    /// while waiting for the line (the link's coalescing).
+    coalesced: usize,
+    /// No `go()` and the next datagram's did not arrive either.
+    lost: usize,
+}
+
+impl Outcome {
+    /// Matches every send with the first frame of its content that arrived
+    /// after it and before the next send of the same content.
+    fn match_up(
+        sent: &[Sent],
+        key: impl Fn(&Sent) -> String,
+        frames: &[(Instant, String)],
+    ) -> Self {
+        let mut arrivals: HashMap<&str, Vec<Instant>> = HashMap::new();
+        for (at, text) in frames {
+            arrivals.entry(text.as_str()).or_default().push(*at);
+        }
+        for v in arrivals.values_mut() {
+            v.sort();
+        }
+        let keys: Vec<String> = sent.iter().map(&key).collect();
+        let mut next_same: Vec<Option<Instant>> = vec![None; sent.len()];
+        let mut last_seen: HashMap<&str, usize> = HashMap::new();
+        for (i, k) in keys.iter().enumerate().rev() {
+            if let Some(&j) = last_seen.get(k.as_str()) {
+                next_same[i] = Some(sent[j].at);
+            }
+            last_seen.insert(k.as_str(), i);
+        }
+        let matched: Vec<Option<Duration>> = sent
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                let times = arrivals.get(keys[i].as_str())?;
+                let first = times.partition_point(|t| *t < s.at);
+                let t = *times.get(first)?;
+                if next_same[i].is_some_and(|limit| t >= limit) {
+                    return None;
+                }
+                Some(t - s.at)
+            })
+            .collect();
+        let busy = line_busy();
+        let mut out = Outcome {
+            latencies: matched.iter().flatten().copied().collect(),
+            line_free: (1..sent.len())
+                .filter(|&i| sent[i].at - sent[i - 1].at >= busy)
+                .filter_map(|i| matched[i])
+                .collect(),
+            sent: sent.len(),
+            coalesced: 0,
+            lost: 0,
+        };
+        for i in 0..matched.len() {
+            if matched[i].is_some() {
+                continue;
+            }
+            // Superseded if a newer command made it to the board soon after:
+            // the link wrote the newest one instead (by design).
+            let superseded = (i + 1..matched.len())
+                .take_while(|&j| sent[j].at - sent[i].at < Duration::from_millis(100))
+                .any(|j| matched[j].is_some());
+            if superseded {
+                out.coalesced += 1;
+            } else {
+                out.lost += 1;
+            }
+        }
+        out.latencies.sort();
+        out.line_free.sort();
+        out
+    }
+
+    fn pct_ms(&self, q: f64) -> f64 {
+        pct_ms(&self.latencies, q)
+    }
+
+    fn print(&self, name: &str) {
+        println!(
+            "  {name}: {} of {} matched, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms; coalesced {}, lost {}",
+            self.latencies.len(),
+            self.sent,
+            self.pct_ms(0.5),
+            self.pct_ms(0.99),
+            self.pct_ms(1.0),
+            self.coalesced,
+            self.lost
+        );
+    }
+}
+
+/// Nearest-rank percentile of sorted durations, in ms.
+fn pct_ms(sorted: &[Duration], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1].as_secs_f64() * 1e3
+}
+
+/// How long the link keeps the serial line after writing a `go()` frame
+/// (its wire time at 115200 baud plus the frame gap): a datagram arriving
+/// sooner after the previous one waits for the line.
+fn line_busy() -> Duration {
+    let link = neptunus::firmware::link::LinkConfig::new("/dev/null");
+    let go = codec::encoded(&floor_go(0), Framing::Crc8);
+    link.wire_time(go.len()) + link.frame_gap
+}
+
+/// Waits for frames to stop arriving, then takes everything received.
+fn collect_frames(rx: &std_mpsc::Receiver<(Instant, String)>) -> Vec<(Instant, String)> {
+    let mut frames = Vec::new();
+    while let Ok(f) = rx.recv_timeout(Duration::from_millis(300)) {
+        frames.push(f);
+    }
+    frames
+}
+
+// ---------------------------------------------------------------------------
+// 1. Floor
+// ---------------------------------------------------------------------------
+
+fn floor_run(rt: &tokio::runtime::Runtime, cfg: &Config) -> anyhow::Result<Outcome> {
+    let dir = tempfile::tempdir()?;
+    let link = dir.path().join("floor-board");
+    let board = {
+        let _rt = rt.enter();
+        PtyBoard::spawn(EmulatorOptions::default(), Some(link.clone()))?
+    };
+    let frames_rx = watch_go_frames(rt, &board);
+
+    // The forwarder: one datagram in, one go() frame out, nothing else. The
+    // datagram's MAVLink sequence number (byte 4) picks the frame's values,
+    // so the frame can be matched to the datagram by content.
+    let sock = UdpSocket::bind("127.0.0.1:0")?;
+    sock.set_read_timeout(Some(Duration::from_millis(100)))?;
+    let port = sock.local_addr()?.port();
+    let mut tty = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&link)
+        .with_context(|| format!("cannot open the floor pty {}", link.display()))?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let forwarded = Arc::new(AtomicU64::new(0));
+    let forwarder = {
+        let stop = stop.clone();
+        let forwarded = forwarded.clone();
+        thread::spawn(move || -> std::io::Result<()> {
+            let mut buf = [0u8; 512];
+            let mut frame = Vec::with_capacity(32);
+            while !stop.load(Ordering::Relaxed) {
+                let Ok(n) = sock.recv(&mut buf) else { continue };
+                if n < 5 {
+                    continue;
+                }
+                frame.clear();
+                codec::encode(&floor_go(buf[4]), Framing::Crc8, &mut frame);
+                tty.write_all(&frame)?;
+                forwarded.fetch_add(1, Ordering::Relaxed);
+            }
+            Ok(())
+        })
+    };
+    // The board's echoes to the forwarder pile up unread in the tty; the
+    // emulator drops what does not fit, as a UART nobody reads would.
+
+    let mut gcs = Gcs::connect(port)?;
+    // Warm-up: the same pacing, not measured.
+    paced_send(&mut gcs, &[0], 200, cfg.period, false)?;
+    let _ = collect_frames(&frames_rx);
+    let sent = paced_send(&mut gcs, &[0], cfg.count, cfg.period, false)?;
+    let frames = collect_frames(&frames_rx);
+    stop.store(true, Ordering::Relaxed);
+    match forwarder.join() {
+        Ok(r) => r.context("floor forwarder")?,
+        Err(_) => bail!("floor forwarder panicked"),
+    }
+    drop(board);
+    let key = |s: &Sent| {
+        let mut f = Vec::new();
+        codec::encode(&floor_go(s.seq), Framing::Crc8, &mut f);
+        go_text(&f).unwrap_or_default()
+    };
+    Ok(Outcome::match_up(&sent, key, &frames))
+}
+
+fn floor_go(seq: u8) -> codec::Command {
+    codec::Command::Go {
+        port_us: 1500,
+        vertical_us: 1500,
+        starboard_us: 1000 + u16::from(seq),
+    }
+}
+
+// ---------------------------------------------------------------------------
+// 2. Neptunus on a pty
+// ---------------------------------------------------------------------------
+
+fn neptunus_run(
+    rt: &tokio::runtime::Runtime,
+    bin: &Path,
+    cfg: &Config,
+) -> anyhow::Result<(Outcome, Option<f64>)> {
+    let dir = tempfile::tempdir()?;
+    let link = dir.path().join("board");
+    let board = {
+        let _rt = rt.enter();
+        PtyBoard::spawn(EmulatorOptions::default(), Some(link.clone()))?
+    };
+    let frames_rx = watch_go_frames(rt, &board);
+    let port = free_udp_port()?;
+    let link_arg = link.to_string_lossy().into_owned();
+    let endpoint = format!("udpin:127.0.0.1:{port}");
+    let mut vehicle = Vehicle::spawn(
+        bin,
+        &["--serial", &link_arg, "--mavlink", &endpoint],
+        dir.path(),
+    )?;
+    let mut gcs = Gcs::connect(port)?;
+    gcs.arm(&mut vehicle)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let drain = gcs.drain(stop.clone())?;
+
+    // Learn which go() each stick position produces (full forward at gain
+    // 0.5 is go(1300,1500,1700)); forward only, away from any deadzone.
+    let sticks: Vec<i16> = (0..STICK_STEPS).map(|k| 1000 - 10 * k as i16).collect();
+    let _ = collect_frames(&frames_rx);
+    let mut learned: Vec<String> = Vec::with_capacity(sticks.len());
+    for &x in &sticks {
+        gcs.send(&manual_control(x))?;
+        let (_, text) = frames_rx
+            .recv_timeout(Duration::from_secs(2))
+            .with_context(|| format!("no go() on the serial line after MANUAL_CONTROL x={x}"))?;
+        if learned.contains(&text) {
+            bail!("MANUAL_CONTROL x={x} gave {text}, as another stick position did");
+        }
+        learned.push(text);
+        thread::sleep(Duration::from_millis(20));
+    }
+    println!(
+        "  stick → go(): x={} → {}, …, x={} → {}",
+        sticks[0],
+        learned[0],
+        sticks[STICK_STEPS - 1],
+        learned[STICK_STEPS - 1]
+    );
+    // Warm-up at the measured pacing, not measured.
+    paced_send(&mut gcs, &sticks, 200, cfg.period, true)?;
+    let _ = collect_frames(&frames_rx);
+
+    let cpu_before = proc_cpu_ticks(vehicle.pid())?;
+    let t0 = Instant::now();
+    let sent = paced_send(&mut gcs, &sticks, cfg.count, cfg.period, true)?;
+    let cpu = proc_cpu_ticks(vehicle.pid())?.saturating_sub(cpu_before) as f64
+        / clock_ticks_per_s()
+        / t0.elapsed().as_secs_f64()
+        * 100.0;
+    let frames = collect_frames(&frames_rx);
+    stop.store(true, Ordering::Relaxed);
+    let _ = drain.join();
+    if let Ok(Some(status)) = vehicle.child.try_wait() {
+        bail!(
+            "neptunus exited ({status}) during the run:\n{}",
+            vehicle.stderr_tail()
+        );
+    }
+    drop(vehicle);
+    drop(board);
+    let key = |s: &Sent| learned[s.stick].clone();
+    Ok((Outcome::match_up(&sent, key, &frames), Some(cpu)))
+}
+
+// ---------------------------------------------------------------------------
+// 3. CPU and memory
+// ---------------------------------------------------------------------------
+
+struct Soak {
+    cpu_pct: f64,
+    rss_mb: f64,
+    hwm_mb: f64,
+    telemetry_per_s: f64,
+    window: Duration,
+}
+
+fn soak_run(bin: &Path, cfg: &Config) -> anyhow::Result<Soak> {
+    let dir = tempfile::tempdir()?;
+    let port = free_udp_port()?;
+    let endpoint = format!("udpin:127.0.0.1:{port}");
+    let mut vehicle = Vehicle::spawn(bin, &["--sim", "--mavlink", &endpoint], dir.path())?;
+    let mut gcs = Gcs::connect(port)?;
+    gcs.arm(&mut vehicle)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let drain = gcs.drain(stop.clone())?;
+
+    // A pilot sweeping the stick slowly: the thruster command changes often,
+    // as it does when driving.
+    let stick = |t: f64| (600.0 * (std::f64::consts::TAU * t / 10.0).sin()) as i16;
+    let period = Duration::from_millis(40);
+    let start = Instant::now();
+    let mut i: u32 = 0;
+    let mut next_hb = start;
+    let mut drive_until = |until: Instant, gcs: &mut Gcs| -> anyhow::Result<()> {
+        loop {
+            let due = start + period * i;
+            if due >= until {
+                return Ok(());
+            }
+            let now = Instant::now();
+            if due > now {
+                thread::sleep(due - now);
+            }
+            if Instant::now() >= next_hb {
+                next_hb += Duration::from_secs(1);
+                gcs.send(&gcs_heartbeat())?;
+            }
+            gcs.send(&manual_control(stick((due - start).as_secs_f64())))?;
+            i += 1;
+        }
+    };
+    // Settle (start-up allocations, first telemetry), then the window.
+    drive_until(start + Duration::from_secs(2), &mut gcs)?;
+    let ticks_before = proc_cpu_ticks(vehicle.pid())?;
+    let t0 = Instant::now();
+    drive_until(t0 + cfg.soak, &mut gcs)?;
+    let ticks = proc_cpu_ticks(vehicle.pid())?.saturating_sub(ticks_before);
+    let window = t0.elapsed();
+    let (rss_kb, hwm_kb) = proc_memory_kb(vehicle.pid())?;
+    stop.store(true, Ordering::Relaxed);
+    let datagrams = drain.join().unwrap_or(0);
+    if let Ok(Some(status)) = vehicle.child.try_wait() {
+        bail!(
+            "neptunus --sim exited ({status}) during the soak:\n{}",
+            vehicle.stderr_tail()
+        );
+    }
+    let soak = Soak {
+        cpu_pct: ticks as f64 / clock_ticks_per_s() / window.as_secs_f64() * 100.0,
+        rss_mb: rss_kb as f64 / 1024.0,
+        hwm_mb: hwm_kb as f64 / 1024.0,
+        telemetry_per_s: datagrams as f64 / start.elapsed().as_secs_f64(),
+        window,
+    };
+    println!(
+        "  {:.0} s window: CPU {:.2} % of one core, VmRSS {:.1} MB, VmHWM {:.1} MB, {:.0} telemetry datagrams/s",
+        soak.window.as_secs_f64(),
+        soak.cpu_pct,
+        soak.rss_mb,
+        soak.hwm_mb,
+        soak.telemetry_per_s
+    );
+    Ok(soak)
+}
+
+/// utime + stime of a process (all its threads), in clock ticks.
+fn proc_cpu_ticks(pid: u32) -> anyhow::Result<u64> {
+    let mut stat = String::new();
+    File::open(format!("/proc/{pid}/stat"))?.read_to_string(&mut stat)?;
+    // The command name (field 2) may contain spaces; fields after its `)`.
+    let rest = stat
+        .rsplit_once(')')
+        .map(|(_, r)| r)
+        .context("unexpected /proc/<pid>/stat format")?;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    // Fields 14 and 15 of stat(5); `rest` starts at field 3.
+    let utime: u64 = fields.get(11).context("no utime")?.parse()?;
+    let stime: u64 = fields.get(12).context("no stime")?.parse()?;
+    Ok(utime + stime)
+}
+
+/// VmRSS and VmHWM in kB.
+fn proc_memory_kb(pid: u32) -> anyhow::Result<(u64, u64)> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+    let field = |name: &str| -> anyhow::Result<u64> {
+        let line = status
+            .lines()
+            .find(|l| l.starts_with(name))
+            .with_context(|| format!("no {name} in /proc/{pid}/status"))?;
+        Ok(line
+            .split_whitespace()
+            .nth(1)
+            .context("empty field")?
+            .parse()?)
+    };
+    Ok((field("VmRSS:")?, field("VmHWM:")?))
+}
+
+fn clock_ticks_per_s() -> f64 {
+    Command::new("getconf")
+        .arg("CLK_TCK")
+        .output()
+        .ok()
+        .and_then(|o| String::from_utf8(o.stdout).ok())
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(100.0)
+}
+
+// ---------------------------------------------------------------------------
+// The table
+// ---------------------------------------------------------------------------
+
+fn report(cfg: &Config, floor: &Outcome, nep: &Outcome, stream_cpu: Option<f64>, soak: &Soak) {
+    let yes = |ok: bool| if ok { "yes" } else { "NO" };
+    println!();
+    println!(
+        "Receive → go() on the board's pty, {} MANUAL_CONTROL datagrams each, one every {:.1} ms",
+        cfg.count,
+        cfg.period.as_secs_f64() * 1e3
+    );
+    println!(
+        "  {:<28} {:>9} {:>9} {:>9} {:>8} {:>9} {:>5}",
+        "path", "p50 ms", "p99 ms", "max ms", "matched", "coalesced", "lost"
+    );
+    for (name, o) in [
+        ("floor (UDP→pty forwarder)", floor),
+        ("neptunus --serial", nep),
+    ] {
+        println!(
+            "  {:<28} {:>9.3} {:>9.3} {:>9.3} {:>8} {:>9} {:>5}",
+            name,
+            o.pct_ms(0.5),
+            o.pct_ms(0.99),
+            o.pct_ms(1.0),
+            o.latencies.len(),
+            o.coalesced,
+            o.lost
+        );
+    }
+    for (name, o) in [
+        ("  floor, line free", floor),
+        ("  neptunus, line free", nep),
+    ] {
+        println!(
+            "  {:<28} {:>9.3} {:>9.3} {:>9.3} {:>8}",
+            name,
+            pct_ms(&o.line_free, 0.5),
+            pct_ms(&o.line_free, 0.99),
+            pct_ms(&o.line_free, 1.0),
+            o.line_free.len(),
+        );
+    }
+    let added_p50 = nep.pct_ms(0.5) - floor.pct_ms(0.5);
+    let added_p99 = nep.pct_ms(0.99) - floor.pct_ms(0.99);
+    println!(
+        "  {:<28} {:>9.3} {:>9.3}   (neptunus p50 {:.1}× the floor's)",
+        "added by neptunus",
+        added_p50,
+        added_p99,
+        nep.pct_ms(0.5) / floor.pct_ms(0.5)
+    );
+    println!(
+        "  line free: sent >= {:.2} ms after the previous datagram (a go() frame's wire time at 115200 baud + the link's frame gap), so nothing waited for the serial line",
+        line_busy().as_secs_f64() * 1e3
+    );
+    println!(
+        "  added over the floor, line free: p50 {:.3} ms, p99 {:.3} ms",
+        pct_ms(&nep.line_free, 0.5) - pct_ms(&floor.line_free, 0.5),
+        pct_ms(&nep.line_free, 0.99) - pct_ms(&floor.line_free, 0.99)
+    );
+    if let Some(cpu) = stream_cpu {
+        println!(
+            "  neptunus CPU while streaming at {:.0} Hz: {cpu:.1} % of one core",
+            1.0 / cfg.period.as_secs_f64()
+        );
+    }
+    println!();
+    println!(
+        "  {:<44} {:>14} {:>10} {:>4}",
+        "target", "measured", "limit", "met"
+    );
+    println!(
+        "  {:<44} {:>11.3} ms {:>7.1} ms {:>4}",
+        "p99 latency added over the floor",
+        added_p99,
+        TARGET_ADDED_P99_MS,
+        yes(added_p99 <= TARGET_ADDED_P99_MS)
+    );
+    println!(
+        "  {:<44} {:>12.2} % {:>8.0} % {:>4}",
+        format!(
+            "CPU, --sim, 25 Hz MANUAL_CONTROL, {:.0} s",
+            soak.window.as_secs_f64()
+        ),
+        soak.cpu_pct,
+        TARGET_CPU_PCT,
+        yes(soak.cpu_pct <= TARGET_CPU_PCT)
+    );
+    println!(
+        "  {:<44} {:>11.1} MB {:>7.0} MB {:>4}",
+        "RSS at the end of the soak (VmRSS)",
+        soak.rss_mb,
+        TARGET_RSS_MB,
+        yes(soak.rss_mb <= TARGET_RSS_MB)
+    );
+    println!(
+        "  {:<44} {:>11.1} MB {:>7.0} MB {:>4}",
+        "peak RSS (VmHWM)",
+        soak.hwm_mb,
+        TARGET_RSS_MB,
+        yes(soak.hwm_mb <= TARGET_RSS_MB)
+    );
+}
