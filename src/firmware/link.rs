@@ -44,6 +44,9 @@ pub struct LinkConfig {
     /// Extra time after each frame's wire time before the next is written,
     /// so the board's loop takes each command before the next arrives.
     pub frame_gap: Duration,
+    /// How far ahead of the board (in wire time plus gaps) writes may run:
+    /// about two `go()` frames, well inside the board's buffer and queue.
+    pub max_ahead: Duration,
 }
 
 impl LinkConfig {
@@ -60,6 +63,7 @@ impl LinkConfig {
             backoff_min: Duration::from_millis(200),
             backoff_max: Duration::from_secs(5),
             frame_gap: Duration::from_millis(2),
+            max_ahead: Duration::from_millis(8),
         }
     }
 
@@ -339,7 +343,12 @@ async fn run(
             None,
             &events,
         );
-        let mut next_write = Instant::now();
+        // When the board will have taken everything written so far (a virtual
+        // finish time: each frame costs its wire time plus `frame_gap`). A
+        // frame may go out while that is at most `max_ahead` away, so a
+        // command after a ping is written at once, while a burst is held back
+        // before it can fill the board's 80-byte buffer or 5-slot queue.
+        let mut line_free_at = Instant::now();
         let mut next_ping = Instant::now();
         let mut next_stats = Instant::now();
         let mut buf = [0u8; 1024];
@@ -373,7 +382,7 @@ async fn run(
                     stats.pings_written += 1;
                 }
             }
-            if now >= next_write
+            if line_free_at.saturating_duration_since(now) <= cfg.max_ahead
                 && session.handshaken
                 && let Some(cmd) = outbox.pop()
             {
@@ -387,8 +396,7 @@ async fn run(
                 if cmd.is_thrust() {
                     stats.thrust_written += 1;
                 }
-                // The board needs the wire time plus a loop iteration per frame.
-                next_write = now + cfg.wire_time(frame.len()) + cfg.frame_gap;
+                line_free_at = line_free_at.max(now) + cfg.wire_time(frame.len()) + cfg.frame_gap;
             }
 
             // Telemetry watchdog.
@@ -432,7 +440,7 @@ async fn run(
                 wake = wake.min(t);
             }
             if session.handshaken && !outbox.is_empty() {
-                wake = wake.min(next_write);
+                wake = wake.min(line_free_at.checked_sub(cfg.max_ahead).unwrap_or(now));
             }
             if session.handshaken {
                 wake = wake.min(next_ping);
