@@ -32,6 +32,8 @@ pub enum AppError {
     Emulator(#[from] crate::firmware::pty::PtyError),
     #[error(transparent)]
     Endpoint(#[from] EndpointError),
+    #[error("ground-station profiles: {0}")]
+    Profiles(#[from] crate::vehicle::input::ProfileError),
     #[error("cannot create the data directory {path}: {source}")]
     DataDir {
         path: std::path::PathBuf,
@@ -94,11 +96,17 @@ pub async fn run(
     }
 
     let (link, mut events) = link::spawn(settings.link.clone());
+    // Profiles are checked before anything moves: a bad file is a clear error at start.
+    let profiles = match &settings.profiles_dir {
+        Some(dir) => crate::vehicle::input::Profiles::load_dir(dir)?,
+        None => crate::vehicle::input::Profiles::builtin(),
+    };
     let mut vehicle = Vehicle::new(
         settings.mavlink.identity,
         store,
         settings.mavlink.endpoints.len(),
-    );
+    )
+    .with_profiles(profiles);
     let t0 = Instant::now();
     let clock = move || Now {
         mono: t0.elapsed(),

@@ -59,6 +59,10 @@ pub struct RunArgs {
     /// How the vehicle presents itself: ardupilot (ArduSub-compatible) or generic.
     #[arg(long, value_name = "ardupilot|generic")]
     pub identity: Option<Identity>,
+    /// Ground-station profiles directory (*.toml) replacing the built-in ones;
+    /// checked at start.
+    #[arg(long, value_name = "DIR")]
+    pub profiles: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -118,6 +122,8 @@ pub struct FileConfig {
     pub board: BoardFileConfig,
     pub emulator: EmulatorOptions,
     pub mavlink: MavlinkFileConfig,
+    /// Ground-station profiles directory replacing the built-in profiles.
+    pub profiles_dir: Option<PathBuf>,
 }
 
 /// `[mavlink]` section.
@@ -187,6 +193,8 @@ pub struct Settings {
     pub link: LinkConfig,
     pub data_dir: PathBuf,
     pub mavlink: MavlinkSettings,
+    /// `None`: the profiles built into the binary.
+    pub profiles_dir: Option<PathBuf>,
 }
 
 impl FileConfig {
@@ -312,6 +320,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         link,
         data_dir,
         mavlink,
+        profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
     })
 }
 

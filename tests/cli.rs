@@ -126,3 +126,22 @@ fn sim_runs_and_logs_telemetry() {
     let log = std::fs::read_to_string(dir.path().join("neptunus.log")).unwrap();
     assert!(log.contains("board link up"));
 }
+
+#[test]
+fn bad_profiles_dir_stops_the_vehicle_at_start_with_the_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let profiles = dir.path().join("profiles");
+    std::fs::create_dir(&profiles).unwrap();
+    std::fs::write(profiles.join("mine.toml"), "name = \"mine\"\nsysids = [250]\nz_convention = \"sideways\"\n").unwrap();
+    let out = Command::new(BIN)
+        .args(["--sim", "--mavlink", "udpin:127.0.0.1:0", "--profiles"])
+        .arg(&profiles)
+        .arg("--data-dir")
+        .arg(dir.path())
+        .env("RUST_LOG", "error")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("mine.toml") && err.contains(":3:"), "{err}");
+}
