@@ -132,7 +132,11 @@ fn bad_profiles_dir_stops_the_vehicle_at_start_with_the_place() {
     let dir = tempfile::tempdir().unwrap();
     let profiles = dir.path().join("profiles");
     std::fs::create_dir(&profiles).unwrap();
-    std::fs::write(profiles.join("mine.toml"), "name = \"mine\"\nsysids = [250]\nz_convention = \"sideways\"\n").unwrap();
+    std::fs::write(
+        profiles.join("mine.toml"),
+        "name = \"mine\"\nsysids = [250]\nz_convention = \"sideways\"\n",
+    )
+    .unwrap();
     let out = Command::new(BIN)
         .args(["--sim", "--mavlink", "udpin:127.0.0.1:0", "--profiles"])
         .arg(&profiles)
