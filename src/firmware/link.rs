@@ -315,16 +315,18 @@ async fn run(
                 let _ = stats_tx.send(stats.clone());
                 let retry_at = Instant::now() + backoff;
                 backoff = (backoff * 2).min(cfg.backoff_max);
-                loop {
-                    tokio::select! {
-                        req = rx.recv() => match req {
-                            None => break 'outer,
-                            Some(Request::Command(c)) => outbox.push(c, &mut stats),
-                            Some(Request::Healthy) => last_healthy = Some(Instant::now()),
-                        },
-                        _ = tokio::time::sleep_until(retry_at) => continue 'outer,
-                    }
+                if !wait_retry(
+                    &mut rx,
+                    &mut outbox,
+                    &mut stats,
+                    &mut last_healthy,
+                    retry_at,
+                )
+                .await
+                {
+                    break 'outer;
                 }
+                continue 'outer;
             }
         };
         stats.opens += 1;
@@ -509,16 +511,39 @@ async fn run(
         // Wait before reopening: a vanished USB device takes a moment to return.
         let retry_at = Instant::now() + backoff;
         backoff = (backoff * 2).min(cfg.backoff_max);
-        loop {
-            tokio::select! {
-                req = rx.recv() => match req {
-                    None => break 'outer,
-                    Some(Request::Command(c)) => outbox.push(c, &mut stats),
-                    Some(Request::Healthy) => last_healthy = Some(Instant::now()),
-                },
-                _ = tokio::time::sleep_until(retry_at) => break,
-            }
+        if !wait_retry(
+            &mut rx,
+            &mut outbox,
+            &mut stats,
+            &mut last_healthy,
+            retry_at,
+        )
+        .await
+        {
+            break 'outer;
         }
     }
     let _ = stats_tx.send(stats);
+}
+
+/// Waits until `retry_at` while still taking requests, so that the newest
+/// thrust command is what goes out once the board is back. `false` when every
+/// [`LinkHandle`] is gone.
+async fn wait_retry(
+    rx: &mut mpsc::UnboundedReceiver<Request>,
+    outbox: &mut Outbox,
+    stats: &mut LinkStats,
+    last_healthy: &mut Option<Instant>,
+    retry_at: Instant,
+) -> bool {
+    loop {
+        tokio::select! {
+            req = rx.recv() => match req {
+                None => return false,
+                Some(Request::Command(c)) => outbox.push(c, stats),
+                Some(Request::Healthy) => *last_healthy = Some(Instant::now()),
+            },
+            _ = tokio::time::sleep_until(retry_at) => return true,
+        }
+    }
 }
