@@ -71,10 +71,15 @@ impl Config {
                 Err(_) => Ok(default),
             }
         }
+        // `cargo bench` passes --bench; `cargo test --all-targets` runs this
+        // binary without it: then a short smoke run shows the bench still
+        // works without taking minutes of the test suite.
+        let full = std::env::args().any(|a| a == "--bench");
+        let (count, soak) = if full { (10_000, 60) } else { (300, 3) };
         Ok(Self {
-            count: var("LATENCY_COUNT", 10_000)? as usize,
+            count: var("LATENCY_COUNT", count)? as usize,
             period: Duration::from_micros(var("LATENCY_PERIOD_US", 5_000)?.max(100)),
-            soak: Duration::from_secs(var("LATENCY_SOAK_S", 60)?.max(1)),
+            soak: Duration::from_secs(var("LATENCY_SOAK_S", soak)?.max(1)),
         })
     }
 }
