@@ -457,3 +457,15 @@ mod properties {
         }
     }
 }
+
+#[test]
+fn motor_test_with_absurd_timeouts_is_capped_not_a_panic() {
+    let mut r = Rig::new();
+    r.arm();
+    for timeout_s in [1e30f32, f32::INFINITY, f32::NAN, -5.0, f32::MAX] {
+        r.cmd(MavCmd::MAV_CMD_DO_MOTOR_TEST, [3.0, 0.0, 75.0, timeout_s, 0.0, 0.0, 0.0]);
+        assert_eq!(r.v.motors_us(), [1500, 1700, 1500], "motor 3 is the vertical thruster (p4 {timeout_s})");
+        r.run(Duration::from_millis(600));
+        assert_eq!(r.v.motors_us(), [1500; 3], "stopped 0.5 s later whatever p4 said ({timeout_s})");
+    }
+}

@@ -232,8 +232,9 @@ impl Vehicle {
             1 if value.is_finite() => value,
             _ => return MavResult::MAV_RESULT_DENIED,
         };
-        let hold = if p[3].is_finite() && p[3] > 0.0 {
-            Duration::from_secs_f32(p[3]).min(MOTOR_TEST_HOLD)
+        // Compare before converting: a huge p4 would overflow a Duration.
+        let hold = if p[3] > 0.0 && p[3] < MOTOR_TEST_HOLD.as_secs_f32() {
+            Duration::from_secs_f32(p[3])
         } else {
             MOTOR_TEST_HOLD
         };
