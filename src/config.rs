@@ -303,9 +303,9 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
             .collect::<Result<_, _>>()?
     };
     let peer_timeout_s = file.mavlink.peer_timeout_s.unwrap_or(10.0);
-    if !(peer_timeout_s.is_finite() && peer_timeout_s > 0.0) {
+    if !(peer_timeout_s > 0.0 && peer_timeout_s <= 86_400.0) {
         return Err(ConfigError::Invalid(format!(
-            "mavlink.peer_timeout_s = {peer_timeout_s} — use a positive number of seconds"
+            "mavlink.peer_timeout_s = {peer_timeout_s} — use a number of seconds in 0..86400"
         )));
     }
     let mavlink = MavlinkSettings {
@@ -313,7 +313,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         identity: args.identity.or(file.mavlink.identity).unwrap_or_default(),
         sysid: file.mavlink.sysid,
         peer_timeout: std::time::Duration::from_secs_f64(peer_timeout_s),
-        tlog_max_bytes: file.mavlink.tlog_max_mb.unwrap_or(64).max(1) * 1024 * 1024,
+        tlog_max_bytes: file.mavlink.tlog_max_mb.unwrap_or(64).clamp(1, 1 << 20) * 1024 * 1024,
     };
     Ok(Settings {
         board,

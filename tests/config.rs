@@ -85,6 +85,7 @@ fn bad_values_are_refused_with_the_key() {
         ("[mavlink]\nendpoints = [\"udpon:1.2.3.4:5\"]\n", "udpon"),
         ("[mavlink]\nsysid = 300\n", "sysid"),
         ("[mavlink]\nbogus = 1\n", "bogus"),
+        ("[mavlink]\npeer_timeout_s = 1e300\n", "peer_timeout_s"),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("n.toml");

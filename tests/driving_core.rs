@@ -463,9 +463,69 @@ fn motor_test_with_absurd_timeouts_is_capped_not_a_panic() {
     let mut r = Rig::new();
     r.arm();
     for timeout_s in [1e30f32, f32::INFINITY, f32::NAN, -5.0, f32::MAX] {
-        r.cmd(MavCmd::MAV_CMD_DO_MOTOR_TEST, [3.0, 0.0, 75.0, timeout_s, 0.0, 0.0, 0.0]);
-        assert_eq!(r.v.motors_us(), [1500, 1700, 1500], "motor 3 is the vertical thruster (p4 {timeout_s})");
+        r.cmd(
+            MavCmd::MAV_CMD_DO_MOTOR_TEST,
+            [3.0, 0.0, 75.0, timeout_s, 0.0, 0.0, 0.0],
+        );
+        assert_eq!(
+            r.v.motors_us(),
+            [1500, 1700, 1500],
+            "motor 3 is the vertical thruster (p4 {timeout_s})"
+        );
         r.run(Duration::from_millis(600));
-        assert_eq!(r.v.motors_us(), [1500; 3], "stopped 0.5 s later whatever p4 said ({timeout_s})");
+        assert_eq!(
+            r.v.motors_us(),
+            [1500; 3],
+            "stopped 0.5 s later whatever p4 said ({timeout_s})"
+        );
     }
+}
+
+#[test]
+fn a_station_not_allowed_can_neither_arm_nor_motor_test_but_can_disarm() {
+    let mut r = Rig::new();
+    let as_stranger = |r: &mut Rig, command: MavCmd, p: [f32; 7]| {
+        r.input(Input::Mavlink {
+            from: STRANGER,
+            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                param1: p[0],
+                param2: p[1],
+                param3: p[2],
+                command,
+                target_system: 1,
+                target_component: 1,
+                ..Default::default()
+            }),
+        })
+    };
+    let ack = |out: &[Output]| {
+        out.iter()
+            .find_map(|o| match o {
+                Output::Send {
+                    msg: MavMessage::COMMAND_ACK(a),
+                    ..
+                } => Some(a.result),
+                _ => None,
+            })
+            .unwrap()
+    };
+    let out = as_stranger(
+        &mut r,
+        MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(ack(&out), MavResult::MAV_RESULT_NOT_IN_CONTROL);
+    assert!(!r.v.armed());
+    r.arm();
+    let out = as_stranger(
+        &mut r,
+        MavCmd::MAV_CMD_DO_MOTOR_TEST,
+        [1.0, 1.0, 1700.0, 0.0, 0.0, 0.0, 0.0],
+    );
+    assert_eq!(ack(&out), MavResult::MAV_RESULT_NOT_IN_CONTROL);
+    assert!(gos(&out).is_empty());
+    assert_eq!(r.v.motors_us(), [1500; 3]);
+    let out = as_stranger(&mut r, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
+    assert_eq!(ack(&out), MavResult::MAV_RESULT_ACCEPTED);
+    assert!(!r.v.armed());
 }

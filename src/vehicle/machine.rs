@@ -1140,7 +1140,10 @@ impl Vehicle {
                 let arm = given(p[0]).unwrap_or(0.0) >= 0.5;
                 let force = given(p[1])
                     .is_some_and(|v| (v - 2989.0).abs() < 0.5 || (v - 21196.0).abs() < 0.5);
-                let result = if arm {
+                // Disarming is always allowed: stopping is never the wrong answer.
+                let result = if arm && !self.may_drive(from.sysid) {
+                    self.refuse_command(from, "arm", out)
+                } else if arm {
                     self.arm(force, now, out)
                 } else {
                     self.disarm("commanded", out)
@@ -1222,7 +1225,11 @@ impl Vehicle {
                 });
             }
             C::MAV_CMD_DO_MOTOR_TEST => {
-                let result = self.motor_test(p, now, out);
+                let result = if self.may_drive(from.sysid) {
+                    self.motor_test(p, now, out)
+                } else {
+                    self.refuse_command(from, "motor test", out)
+                };
                 out.push(ack(result));
             }
             C::MAV_CMD_DO_SET_SERVO => {

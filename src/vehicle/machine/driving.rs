@@ -79,6 +79,24 @@ impl Vehicle {
         }
     }
 
+    /// A command that could move a thruster, from a station not allowed to drive.
+    pub(super) fn refuse_command(
+        &mut self,
+        from: Sender,
+        what: &str,
+        out: &mut Vec<Output>,
+    ) -> MavResult {
+        self.statustext(
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &format!(
+                "Refused {what} from sysid {}: not an allowed GCS",
+                from.sysid
+            ),
+            out,
+        );
+        MavResult::MAV_RESULT_NOT_IN_CONTROL
+    }
+
     pub(super) fn on_manual_control(
         &mut self,
         from: Sender,
