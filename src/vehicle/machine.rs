@@ -240,7 +240,7 @@ pub struct Vehicle {
     booted: Duration,
     started: bool,
     pilot: driving::Pilot,
-    profiles: Profiles,
+    profiles: std::sync::Arc<Profiles>,
     sim_truth: Stamped<SimTruth>,
     tilt_accum: f64,
     last_tick: Option<Duration>,
@@ -293,7 +293,7 @@ impl Vehicle {
             started: false,
             pilot: driving::Pilot::default(),
             sim_truth: Stamped::default(),
-            profiles: Profiles::builtin(),
+            profiles: std::sync::Arc::new(Profiles::builtin()),
             tilt_accum: 0.0,
             last_tick: None,
         }
@@ -301,7 +301,7 @@ impl Vehicle {
 
     /// Ground-station conventions (default: the profiles built into the binary).
     pub fn with_profiles(mut self, profiles: Profiles) -> Self {
-        self.profiles = profiles;
+        self.profiles = std::sync::Arc::new(profiles);
         self
     }
 
@@ -350,7 +350,7 @@ impl Vehicle {
         }
         match input {
             Input::Tick => self.tick(now, out),
-            Input::Link { state, reason } => self.on_link(state, reason, now, out),
+            Input::Link { state, reason } => self.on_link(state, reason, out),
             Input::Board(ev) => self.on_board(ev, now),
             Input::UnknownCommand {
                 from,
@@ -425,13 +425,7 @@ impl Vehicle {
 
     // ---- board ----
 
-    fn on_link(
-        &mut self,
-        state: LinkState,
-        reason: Option<String>,
-        now: Now,
-        out: &mut Vec<Output>,
-    ) {
+    fn on_link(&mut self, state: LinkState, reason: Option<String>, out: &mut Vec<Output>) {
         let was = self.link;
         self.link = state;
         self.link_reason = reason.clone();
@@ -462,7 +456,6 @@ impl Vehicle {
                     out,
                 );
             }
-            let _ = now;
         }
     }
 
@@ -620,12 +613,7 @@ impl Vehicle {
                 self.param("BATT_LOW_VOLT", 10.5)
             ));
         }
-        let disarm_mapped = (0..32).any(|i| {
-            [format!("BTN{i}_FUNCTION"), format!("BTN{i}_SFUNCTION")]
-                .iter()
-                .any(|n| matches!(self.params.get(n).map(|v| v as i64), Some(2 | 4)))
-        });
-        if !disarm_mapped {
+        if !self.params.some_button_disarms() {
             return Some("no joystick button is mapped to disarm (BTNn_FUNCTION 2 or 4)".into());
         }
         None
@@ -844,13 +832,11 @@ impl Vehicle {
         let mut caps = C::MAV_PROTOCOL_CAPABILITY_MAVLINK2
             | C::MAV_PROTOCOL_CAPABILITY_COMMAND_INT
             | C::MAV_PROTOCOL_CAPABILITY_MISSION_INT;
+        // Values travel as their numeric value (C cast) under both
+        // identities; the generic one also sends every type as REAL32.
         #[allow(deprecated)]
         let param_float = C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT;
-        caps |= param_float;
-        caps |= match self.identity {
-            Identity::Ardupilot => C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
-            Identity::Generic => C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST,
-        };
+        caps |= param_float | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST;
         let mut custom = [0u8; 8];
         let v = env!("CARGO_PKG_VERSION").as_bytes();
         let tag = b"nept";

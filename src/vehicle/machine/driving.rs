@@ -13,7 +13,7 @@ use crate::firmware::codec::Command;
 use crate::firmware::link::LinkState;
 use crate::vehicle::input::{self, RcAxis, Sticks};
 use crate::vehicle::mixer::{self, Demand, MixerConfig, NEUTRAL_US};
-use crate::vehicle::params::BTN_FUNCTION_LASER_TOGGLE;
+use crate::vehicle::params::{BTN_DEFAULTS, BTN_FUNCTION_LASER_TOGGLE};
 
 /// A thruster command that has not changed is re-sent this often, so a board
 /// that lost it (dead-man trip, reset) gets it back.
@@ -111,8 +111,10 @@ impl Vehicle {
             self.refuse_input(from, "MANUAL_CONTROL", now, out);
             return;
         }
-        let profile = self.profiles.for_sysid(from.sysid).clone();
-        let s: Sticks = input::sticks_from_manual_control(m.x, m.y, m.z, m.r, &profile);
+        // A cheap handle: no profile is copied per message on the 25 Hz path.
+        let profiles = std::sync::Arc::clone(&self.profiles);
+        let profile = profiles.for_sysid(from.sysid);
+        let s: Sticks = input::sticks_from_manual_control(m.x, m.y, m.z, m.r, profile);
         let d = &mut self.pilot.sticks;
         if let Some(v) = s.forward {
             d.surge = v;
@@ -125,7 +127,7 @@ impl Vehicle {
         }
         self.pilot.last_input = Some(now.mono);
         let buttons = u32::from(m.buttons) | (u32::from(m.buttons2) << 16);
-        self.on_buttons(from, buttons, &profile, now, out);
+        self.on_buttons(from, buttons, profile, now, out);
         self.update_thrusters(now, out);
     }
 
@@ -143,7 +145,9 @@ impl Vehicle {
             self.refuse_input(from, "RC override", now, out);
             return;
         }
-        let profile = self.profiles.for_sysid(from.sysid).clone();
+        // A cheap handle: no profile is copied per message on the 25 Hz path.
+        let profiles = std::sync::Arc::clone(&self.profiles);
+        let profile = profiles.for_sysid(from.sysid);
         let ch = [
             r.chan1_raw,
             r.chan2_raw,
@@ -164,7 +168,7 @@ impl Vehicle {
             r.chan17_raw,
             r.chan18_raw,
         ];
-        let u = input::rc_override(&ch, &profile);
+        let u = input::rc_override(&ch, profile);
         let apply = |slot: &mut f64, a: Option<RcAxis>| match a {
             Some(RcAxis::Set(v)) => *slot = v,
             Some(RcAxis::Release) => *slot = 0.0,
@@ -382,7 +386,9 @@ impl Vehicle {
     /// otherwise the sender's profile default.
     fn button_function(&self, i: usize, shifted: bool, profile: &input::Profile) -> u8 {
         let param = self.params.btn_function(i, shifted);
-        let ardusub = input::Profile::ardusub_default().button_function(i, shifted);
+        let ardusub = BTN_DEFAULTS
+            .get(i)
+            .map_or(0, |&(regular, shift)| if shifted { shift } else { regular });
         if param != ardusub {
             param
         } else {
