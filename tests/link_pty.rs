@@ -200,12 +200,15 @@ async fn stalled_board_is_reported_down_then_up_again() {
     let _h = keep_healthy(&link);
     wait_state(&mut events, LinkState::Up).await;
     board.control().set_stalled(true);
-    let stalled = Instant::now();
-    let down = wait_state(&mut events, LinkState::Down).await;
-    assert!(
-        down - stalled < Duration::from_secs(2),
-        "stale after {:?}",
-        down - stalled
+    // The device stays open: only the silence can say the board is gone (the
+    // delay is the configured stale_after, not something to time here).
+    wait_state(&mut events, LinkState::Down).await;
+    let reason = link.stats().down_reason.unwrap_or_default();
+    assert!(reason.contains("no telemetry"), "{reason}");
+    assert_eq!(
+        link.stats().opens,
+        1,
+        "a stalled board is not a vanished device"
     );
     board.control().set_stalled(false);
     wait_state(&mut events, LinkState::Up).await;
