@@ -153,7 +153,7 @@ pub async fn run(
             msg = inbound.recv() => match msg {
                 None => break,
                 Some(Inbound { endpoint, peer, frame }) => {
-                    let from = Sender { endpoint, peer, sysid: frame.sysid, compid: frame.compid };
+                    let from = Sender::new(endpoint, peer, frame.sysid, frame.compid);
                     let input = match (frame.unknown_command, &frame.msg) {
                         (Some(command), MavMessage::COMMAND_LONG(c)) => Input::UnknownCommand {
                             from,
@@ -271,6 +271,10 @@ impl Io {
                     });
                 }
                 Output::Board(cmd) => self.link.send(cmd),
+                Output::Log(ev) => {
+                    tracing::info!(event = ev.kind, sysid = ?ev.sysid, "{}", ev.detail)
+                }
+                Output::SetSigningKey { .. } => {}
                 Output::SaveParams => {
                     if let Err(e) = self.params.save(vehicle.params()) {
                         tracing::error!("parameters not saved: {e}");

@@ -14,6 +14,7 @@
 pub mod app;
 pub mod config;
 pub mod dialect;
+pub mod eventlog;
 pub mod firmware;
 pub mod mavlink;
 pub mod sim;

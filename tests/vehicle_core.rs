@@ -10,12 +10,7 @@ use neptunus::firmware::link::LinkState;
 use neptunus::vehicle::machine::{Identity, Input, Now, Output, Sender, To, Vehicle};
 use neptunus::vehicle::params::ParamStore;
 
-const QGC: Sender = Sender {
-    endpoint: 0,
-    peer: 7,
-    sysid: 255,
-    compid: 190,
-};
+const QGC: Sender = Sender::new(0, 7, 255, 190);
 
 struct Rig {
     v: Vehicle,

@@ -18,12 +18,15 @@ use std::time::Duration;
 
 use mavlink_core::types::CharArray;
 
+mod authority;
 mod driving;
+mod failsafe;
 
 use super::input::Profiles;
 use super::params::ParamStore;
 use super::telemetry::{self, Schedule};
 use crate::dialect::neptunus::*;
+pub use crate::eventlog::LogEvent;
 use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
 use crate::firmware::link::LinkState;
 
@@ -53,9 +56,25 @@ pub struct Sender {
     pub peer: u64,
     pub sysid: u8,
     pub compid: u8,
+    /// The frame carried a valid MAVLink 2 signature with our key.
+    pub signed: bool,
+    /// It came over an endpoint marked trusted (SETUP_SIGNING is accepted there).
+    pub trusted: bool,
 }
 
 impl Sender {
+    /// An unsigned sender on an untrusted endpoint.
+    pub const fn new(endpoint: usize, peer: u64, sysid: u8, compid: u8) -> Self {
+        Self {
+            endpoint,
+            peer,
+            sysid,
+            compid,
+            signed: false,
+            trusted: false,
+        }
+    }
+
     fn reply(&self) -> To {
         To::Peer(self.endpoint, self.peer)
     }
@@ -86,6 +105,12 @@ pub enum Input {
     Tick,
     /// Ground truth from the simulator (only when running on it).
     SimTruth(SimTruth),
+    /// Something happened to a browser HMI session (the HMI sends these; the
+    /// core acts on them like on any ground station's).
+    Hmi {
+        sysid: u8,
+        event: HmiEvent,
+    },
     /// A COMMAND_LONG/COMMAND_INT whose number our dialect does not define.
     UnknownCommand {
         from: Sender,
@@ -93,6 +118,17 @@ pub enum Input {
         target_system: u8,
         target_component: u8,
     },
+}
+
+/// Events of a browser HMI session that matter for safety.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HmiEvent {
+    /// The window lost focus (the operator is looking elsewhere).
+    FocusLost,
+    /// The operator switched input device (keyboard, touch, gamepad).
+    InputModeChanged,
+    /// The session's WebSocket closed.
+    Disconnected,
 }
 
 /// The simulated vehicle's true state, in plain units.
@@ -121,8 +157,18 @@ pub enum Output {
     Board(Command),
     /// Parameters changed: persist them.
     SaveParams,
-    /// The core is alive: the link may feed the board's dead-man switch.
+    /// The board's dead-man switch may be fed now: the core is alive and
+    /// the owner showed life recently (or the vehicle is disarmed, or a
+    /// failsafe action needs thrust).
     Healthy,
+    /// A line for the event log.
+    Log(LogEvent),
+    /// A trusted SETUP_SIGNING: persist this key (all zero = signing off)
+    /// and never let our signing timestamp fall below `initial_timestamp`.
+    SetSigningKey {
+        key: [u8; 32],
+        initial_timestamp: u64,
+    },
     /// COMMAND_ACK for a command number the dialect cannot represent.
     AckUnknown {
         to: To,
@@ -244,6 +290,15 @@ pub struct Vehicle {
     sim_truth: Stamped<SimTruth>,
     tilt_accum: f64,
     last_tick: Option<Duration>,
+    auth: authority::Authority,
+    /// The last station that owned the vehicle (for failsafe texts).
+    last_owner: Option<u8>,
+    failsafes: failsafe::Failsafes,
+    /// Low and critical battery thresholds.
+    battery: [failsafe::BatteryWatch; 2],
+    signing_active: bool,
+    armed_at: Option<Duration>,
+    link_seen_up: bool,
 }
 
 fn chars<const N: usize>(s: &str) -> CharArray<N> {
@@ -296,6 +351,13 @@ impl Vehicle {
             profiles: std::sync::Arc::new(Profiles::builtin()),
             tilt_accum: 0.0,
             last_tick: None,
+            auth: authority::Authority::default(),
+            last_owner: None,
+            failsafes: failsafe::Failsafes::default(),
+            battery: Default::default(),
+            signing_active: false,
+            armed_at: None,
+            link_seen_up: false,
         }
     }
 
@@ -305,9 +367,17 @@ impl Vehicle {
         self
     }
 
-    /// Pilot input refused because it came from a station not allowed to drive.
+    /// Pilot input refused because it came from a station not in control.
     pub fn refused_inputs(&self) -> u64 {
-        self.pilot.refused
+        self.auth.input_refusals.count
+    }
+
+    /// Signing is on (a key is set): control traffic must be signed.
+    pub fn set_signing_active(&mut self, active: bool) {
+        self.signing_active = active;
+    }
+    pub fn signing_active(&self) -> bool {
+        self.signing_active
     }
 
     pub fn params(&self) -> &ParamStore {
@@ -350,7 +420,8 @@ impl Vehicle {
         }
         match input {
             Input::Tick => self.tick(now, out),
-            Input::Link { state, reason } => self.on_link(state, reason, out),
+            Input::Link { state, reason } => self.on_link(state, reason, now, out),
+            Input::Hmi { sysid, event } => self.on_hmi(sysid, event, now, out),
             Input::Board(ev) => self.on_board(ev, now),
             Input::UnknownCommand {
                 from,
@@ -425,11 +496,19 @@ impl Vehicle {
 
     // ---- board ----
 
-    fn on_link(&mut self, state: LinkState, reason: Option<String>, out: &mut Vec<Output>) {
+    fn on_link(
+        &mut self,
+        state: LinkState,
+        reason: Option<String>,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
         let was = self.link;
         self.link = state;
         self.link_reason = reason.clone();
         if state == LinkState::Up && was != LinkState::Up {
+            self.link_seen_up = true;
+            self.log("link_up", None, "board link up".into(), out);
             // Whatever the board had, it gets what we decide now.
             self.send_neutral(out);
             let (l, t) = (self.lights, self.tilt_us);
@@ -446,15 +525,52 @@ impl Vehicle {
                 &format!("Board link down: {why}"),
                 out,
             );
-            if self.armed {
-                self.armed = false;
-                self.pilot.hold = None;
-                self.stop_pilot();
-                self.statustext(
-                    MavSeverity::MAV_SEVERITY_CRITICAL,
-                    "Disarmed: board link lost",
+            self.log("link_down", None, why, out);
+        }
+        // The board-link failsafe disarms at once, not at the next tick.
+        self.failsafe_tick(now, out);
+    }
+
+    /// Thrusters to neutral and pilot state cleared (the thesis' safety-mode
+    /// stop). With `pickup`, the owner's sticks are ignored until centred.
+    fn safety_stop(&mut self, pickup: bool, out: &mut Vec<Output>) {
+        self.stop_pilot();
+        self.pilot.hold = None;
+        // After a transfer the next button mask is a baseline: buttons the new
+        // owner holds were not pressed now. Otherwise buttons start released.
+        self.pilot.buttons_stale = pickup;
+        if pickup {
+            self.auth.pickup = true;
+        } else {
+            self.pilot.buttons = 0;
+        }
+        self.send_neutral(out);
+    }
+
+    fn on_hmi(&mut self, sysid: u8, event: HmiEvent, now: Now, out: &mut Vec<Output>) {
+        let owner = self.owner() == Some(sysid);
+        match event {
+            HmiEvent::FocusLost | HmiEvent::InputModeChanged => {
+                if owner {
+                    self.safety_stop(true, out);
+                }
+                let kind = if event == HmiEvent::FocusLost {
+                    "hmi_focus_lost"
+                } else {
+                    "hmi_input_mode"
+                };
+                self.log(kind, Some(sysid), format!("owner: {owner}"), out);
+            }
+            HmiEvent::Disconnected => {
+                self.log(
+                    "hmi_disconnected",
+                    Some(sysid),
+                    format!("owner: {owner}"),
                     out,
                 );
+                if owner {
+                    self.drop_owner("control_released", "HMI session closed", now, out);
+                }
             }
         }
     }
@@ -495,6 +611,12 @@ impl Vehicle {
                     // A `motors:` line on its own: keep the last full status.
                     return;
                 }
+                if let Some(v) = s.vout_v {
+                    let low = f64::from(self.params.batt_low_volt());
+                    let crt = f64::from(self.params.batt_crt_volt());
+                    self.battery[0].sample(v, low, now.mono);
+                    self.battery[1].sample(v, crt, now.mono);
+                }
                 if let Some(i) = s.btti_a.or(s.iout_a) {
                     if let Some((pt, pi)) = self.last_current {
                         let h = now.mono.saturating_sub(pt).as_secs_f64() / 3600.0;
@@ -517,12 +639,23 @@ impl Vehicle {
     // ---- time ----
 
     fn tick(&mut self, now: Now, out: &mut Vec<Output>) {
-        out.push(Output::Healthy);
         let dt = self
             .last_tick
             .map_or(Duration::ZERO, |t| now.mono.saturating_sub(t));
         self.last_tick = Some(now.mono);
         self.drive_tick(now, dt, out);
+        // Failsafes act before the owner is dropped for silence, so a pending
+        // request is granted only after the GCS failsafe has acted.
+        self.failsafe_tick(now, out);
+        self.authority_tick(now, out);
+        // The board's dead-man is fed by the owner's life, not by ours alone:
+        // a dead owner link reaches the board even if this loop runs on.
+        if !self.armed
+            || self.owner_alive(now, authority::LIFE_FEEDS_DEADMAN)
+            || self.failsafe_needs_thrust()
+        {
+            out.push(Output::Healthy);
+        }
         let mut due = Vec::new();
         for ep in 0..self.schedules.len() {
             due.clear();
@@ -570,7 +703,13 @@ impl Vehicle {
             health |= depth;
         }
         if self.link == LinkState::Up {
-            health |= motors | rc;
+            health |= motors;
+        }
+        if self.link == LinkState::Up
+            && !self.failsafes.active[failsafe::GCS]
+            && !self.failsafes.active[failsafe::PILOT]
+        {
+            health |= rc;
         }
         if self.battery_ok(now) {
             health |= battery;
@@ -637,7 +776,7 @@ impl Vehicle {
         if self.armed {
             base |= F::MAV_MODE_FLAG_SAFETY_ARMED;
         }
-        let system_status = if self.link != LinkState::Up {
+        let system_status = if self.link != LinkState::Up || self.failsafe_active() {
             MavState::MAV_STATE_CRITICAL
         } else if self.armed {
             MavState::MAV_STATE_ACTIVE
@@ -804,6 +943,7 @@ impl Vehicle {
                 .collect()
             }
             148 => vec![self.autopilot_version()],
+            512 => vec![self.control_status()],
             44101
                 if self
                     .sim_truth
@@ -836,7 +976,9 @@ impl Vehicle {
         // identities; the generic one also sends every type as REAL32.
         #[allow(deprecated)]
         let param_float = C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT;
-        caps |= param_float | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST;
+        caps |= param_float
+            | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+            | C::MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL;
         let mut custom = [0u8; 8];
         let v = env!("CARGO_PKG_VERSION").as_bytes();
         let tag = b"nept";
@@ -904,11 +1046,30 @@ impl Vehicle {
             MavMessage::MANUAL_CONTROL(m) => self.on_manual_control(from, &m, now, out),
             MavMessage::RC_CHANNELS_OVERRIDE(r) => self.on_rc_override(from, &r, now, out),
             MavMessage::NEPTUNUS_THRUSTERS(t) => self.on_thrusters_message(from, &t, now, out),
+            MavMessage::HEARTBEAT(h) if h.mavtype == MavType::MAV_TYPE_GCS => {
+                // Only a ground station's own heartbeats keep it in control.
+                self.note_life(from, now);
+            }
+            MavMessage::COMMAND_ACK(a) => {
+                if a.target_system == self.sysid()
+                    && (a.target_component == 0 || a.target_component == COMPONENT_ID)
+                {
+                    self.on_gcs_ack(from, &a, out);
+                }
+            }
+            MavMessage::SETUP_SIGNING(k) => {
+                if self.for_us(k.target_system, k.target_component) {
+                    self.setup_signing(from, &k, out);
+                }
+            }
             MavMessage::SET_MODE(m) => {
                 if m.target_system != self.sysid() && m.target_system != 0 {
                     return;
                 }
-                let result = self.set_mode(m.custom_mode, out);
+                let result = match self.check_control(from, authority::Control::Command, now, out) {
+                    Ok(()) => self.set_mode(m.custom_mode, Some(from.sysid), out),
+                    Err(why) => self.refuse_command(from, "mode change", why, now, out),
+                };
                 out.push(Output::Send {
                     to: from.reply(),
                     msg: ack_set_mode(result, from),
@@ -953,16 +1114,21 @@ impl Vehicle {
                     );
                     return;
                 };
-                match self.params.set(&name, f64::from(p.param_value)) {
-                    Ok(_) => {
-                        self.on_param_changed(&name);
-                        out.push(Output::SaveParams);
+                match self.check_control(from, authority::Control::Command, now, out) {
+                    Err(why) => {
+                        self.refuse_command(from, &format!("PARAM_SET {name}"), why, now, out);
                     }
-                    Err(e) => self.statustext(
-                        MavSeverity::MAV_SEVERITY_WARNING,
-                        &format!("Param refused: {e}"),
-                        out,
-                    ),
+                    Ok(()) => match self.params.set(&name, f64::from(p.param_value)) {
+                        Ok(_) => {
+                            self.on_param_changed(&name);
+                            out.push(Output::SaveParams);
+                        }
+                        Err(e) => self.statustext(
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            &format!("Param refused: {e}"),
+                            out,
+                        ),
+                    },
                 }
                 // Echo the value now in force (the old one if refused) to everyone.
                 if let Some(msg) = self.param_value(index) {
@@ -1082,7 +1248,7 @@ impl Vehicle {
         }
     }
 
-    fn set_mode(&mut self, mode: u32, out: &mut Vec<Output>) -> MavResult {
+    fn set_mode(&mut self, mode: u32, by: Option<u8>, out: &mut Vec<Output>) -> MavResult {
         match MODES.iter().find(|m| m.0 == mode) {
             None => {
                 self.statustext(
@@ -1102,11 +1268,13 @@ impl Vehicle {
             }
             Some((m, name, None)) => {
                 if self.mode != *m {
+                    let old = mode_name(self.mode);
                     self.mode = *m;
                     // A mode change is a safety-mode stop.
                     self.stop_pilot();
                     self.send_neutral(out);
                     self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {name}"), out);
+                    self.log("mode", by, format!("{old} -> {name}"), out);
                 }
                 MavResult::MAV_RESULT_ACCEPTED
             }
@@ -1116,6 +1284,7 @@ impl Vehicle {
     fn command(&mut self, from: Sender, cmd: MavCmd, p: [f32; 7], now: Now, out: &mut Vec<Output>) {
         use MavCmd as C;
         use MavResult as R;
+        use authority::Control;
         let reply = from.reply();
         let ack = |result: MavResult| Output::Send {
             to: reply,
@@ -1126,19 +1295,30 @@ impl Vehicle {
                 let arm = given(p[0]).unwrap_or(0.0) >= 0.5;
                 let force = given(p[1])
                     .is_some_and(|v| (v - 2989.0).abs() < 0.5 || (v - 21196.0).abs() < 0.5);
-                // Disarming is always allowed: stopping is never the wrong answer.
-                let result = if arm && !self.may_drive(from.sysid) {
-                    self.refuse_command(from, "arm", out)
-                } else if arm {
-                    self.arm(force, now, out)
+                // Disarming is open to every station (stopping is never the
+                // wrong answer), but with signing on only to signed ones.
+                let result = if arm {
+                    match self.check_control(from, Control::Arm, now, out) {
+                        Ok(()) => self.arm(force, Some(from.sysid), now, out),
+                        Err(why) => self.refuse_command(from, "arm", why, now, out),
+                    }
+                } else if self.signing_active && !from.signed {
+                    self.refuse_command(from, "disarm", authority::Refusal::Unsigned, now, out)
                 } else {
-                    self.disarm("commanded", out)
+                    self.disarm("commanded", Some(from.sysid), out)
                 };
+                out.push(ack(result));
+            }
+            C::MAV_CMD_REQUEST_OPERATOR_CONTROL => {
+                let result = self.operator_control(from, p, now, out);
                 out.push(ack(result));
             }
             C::MAV_CMD_DO_SET_MODE => {
                 let mode = given(p[1]).map_or(u32::MAX, |m| m.max(0.0) as u32);
-                let result = self.set_mode(mode, out);
+                let result = match self.check_control(from, Control::Command, now, out) {
+                    Ok(()) => self.set_mode(mode, Some(from.sysid), out),
+                    Err(why) => self.refuse_command(from, "mode change", why, now, out),
+                };
                 out.push(ack(result));
             }
             C::MAV_CMD_SET_MESSAGE_INTERVAL => {
@@ -1211,11 +1391,19 @@ impl Vehicle {
                 });
             }
             C::MAV_CMD_DO_MOTOR_TEST => {
-                let result = if self.may_drive(from.sysid) {
-                    self.motor_test(p, now, out)
-                } else {
-                    self.refuse_command(from, "motor test", out)
+                let result = match self.check_control(from, Control::Drive, now, out) {
+                    Ok(()) => self.motor_test(p, now, out),
+                    Err(why) => self.refuse_command(from, "motor test", why, now, out),
                 };
+                out.push(ack(result));
+            }
+            C::MAV_CMD_DO_SET_SERVO
+            | C::MAV_CMD_DO_MOUNT_CONTROL
+            | C::MAV_CMD_ILLUMINATOR_ON_OFF
+            | C::MAV_CMD_DO_ILLUMINATOR_CONFIGURE
+                if let Err(why) = self.check_control(from, Control::Command, now, out) =>
+            {
+                let result = self.refuse_command(from, "command", why, now, out);
                 out.push(ack(result));
             }
             C::MAV_CMD_DO_SET_SERVO => {
@@ -1260,7 +1448,7 @@ impl Vehicle {
         }
     }
 
-    fn arm(&mut self, force: bool, now: Now, out: &mut Vec<Output>) -> MavResult {
+    fn arm(&mut self, force: bool, by: Option<u8>, now: Now, out: &mut Vec<Output>) -> MavResult {
         if self.armed {
             return MavResult::MAV_RESULT_ACCEPTED;
         }
@@ -1284,12 +1472,24 @@ impl Vehicle {
             return MavResult::MAV_RESULT_FAILED;
         }
         self.armed = true;
+        self.armed_at = Some(now.mono);
         self.send_neutral(out);
         self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Armed", out);
+        self.log(
+            "armed",
+            by,
+            if force {
+                "forced"
+            } else {
+                "pre-arm checks passed"
+            }
+            .into(),
+            out,
+        );
         MavResult::MAV_RESULT_ACCEPTED
     }
 
-    fn disarm(&mut self, why: &str, out: &mut Vec<Output>) -> MavResult {
+    fn disarm(&mut self, why: &str, by: Option<u8>, out: &mut Vec<Output>) -> MavResult {
         self.pilot.hold = None;
         self.stop_pilot();
         if self.armed {
@@ -1299,6 +1499,7 @@ impl Vehicle {
                 &format!("Disarmed ({why})"),
                 out,
             );
+            self.log("disarmed", by, why.to_owned(), out);
         }
         self.send_neutral(out);
         MavResult::MAV_RESULT_ACCEPTED
@@ -1447,4 +1648,42 @@ fn ftp_reply(req: &[u8; 251], from: Sender) -> MavMessage {
         target_component: from.compid,
         payload,
     })
+}
+
+impl Vehicle {
+    /// SETUP_SIGNING: only over a trusted endpoint, and once signing is on
+    /// only signed with the current key. The key itself is never logged.
+    fn setup_signing(&mut self, from: Sender, k: &SETUP_SIGNING_DATA, out: &mut Vec<Output>) {
+        let refusal = if !from.trusted {
+            Some(format!("endpoint {} is not trusted", from.endpoint))
+        } else if self.signing_active && !from.signed {
+            Some("unsigned, and a key is already set".to_owned())
+        } else {
+            None
+        };
+        if let Some(why) = refusal {
+            let text = format!("SETUP_SIGNING from sysid {} ignored: {why}", from.sysid);
+            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            self.log("signing_refused", Some(from.sysid), text, out);
+            return;
+        }
+        let off = k.secret_key.iter().all(|b| *b == 0);
+        self.signing_active = !off;
+        out.push(Output::SetSigningKey {
+            key: k.secret_key,
+            initial_timestamp: k.initial_timestamp,
+        });
+        let (kind, text) = if off {
+            ("signing_key_cleared", "Signing off: key cleared")
+        } else {
+            ("signing_key_set", "Signing on: key set")
+        };
+        self.statustext(MavSeverity::MAV_SEVERITY_INFO, text, out);
+        self.log(
+            kind,
+            Some(from.sysid),
+            format!("over endpoint {}", from.endpoint),
+            out,
+        );
+    }
 }

@@ -3,10 +3,13 @@
 //!
 //! Every path that can move a thruster ends in [`Vehicle::update_thrusters`],
 //! which is the single place that decides the three pulse widths: neutral
-//! unless armed, the board link up, and the input fresh and allowed.
+//! unless armed, the board link up, and the input fresh. Input reaches the
+//! pilot state only from the station in control ([`Vehicle::check_control`])
+//! and, after a transfer, only once it has been neutral (pick-up).
 
 use std::time::Duration;
 
+use super::authority::Control;
 use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
@@ -20,8 +23,6 @@ use crate::vehicle::params::{BTN_DEFAULTS, BTN_FUNCTION_LASER_TOGGLE};
 const RESEND: Duration = Duration::from_secs(1);
 /// Motor test stops this long after its last command (ArduSub: ≥ 2 Hz).
 const MOTOR_TEST_HOLD: Duration = Duration::from_millis(500);
-/// Refused pilot input is reported at most this often.
-const REFUSAL_REPORT: Duration = Duration::from_secs(5);
 
 /// One motor under MAV_CMD_DO_MOTOR_TEST.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,60 +44,17 @@ pub(super) struct Pilot {
     pub thrusters: [f64; 3],
     pub last_input: Option<Duration>,
     pub buttons: u32,
+    /// `buttons` belongs to a previous owner: the next mask is a baseline, not edges.
+    pub buttons_stale: bool,
+    pub last_motor_test: Option<Duration>,
     pub shift: bool,
     pub motor_test: Option<MotorTest>,
     /// Camera tilt rate from an RC override, −1..1.
     pub tilt_rate: f64,
-    pub refused: u64,
-    pub refusal_reported: Option<Duration>,
     pub last_go: Option<Duration>,
 }
 
 impl Vehicle {
-    /// Whether `sysid` may drive: SYSID_MYGCS or one of NEPT_GCS_ALLOWn.
-    /// (Control authority between several allowed stations is the next step.)
-    pub(super) fn may_drive(&self, sysid: u8) -> bool {
-        self.params.gcs_allowed(sysid)
-    }
-
-    fn refuse_input(&mut self, from: Sender, what: &str, now: Now, out: &mut Vec<Output>) {
-        self.pilot.refused += 1;
-        let due = self
-            .pilot
-            .refusal_reported
-            .is_none_or(|t| now.mono.saturating_sub(t) >= REFUSAL_REPORT);
-        if due {
-            self.pilot.refusal_reported = Some(now.mono);
-            let n = self.pilot.refused;
-            self.statustext(
-                MavSeverity::MAV_SEVERITY_WARNING,
-                &format!(
-                    "Ignoring {what} from sysid {}: not an allowed GCS ({n} refused)",
-                    from.sysid
-                ),
-                out,
-            );
-        }
-    }
-
-    /// A command that could move a thruster, from a station not allowed to drive.
-    pub(super) fn refuse_command(
-        &mut self,
-        from: Sender,
-        what: &str,
-        out: &mut Vec<Output>,
-    ) -> MavResult {
-        self.statustext(
-            MavSeverity::MAV_SEVERITY_WARNING,
-            &format!(
-                "Refused {what} from sysid {}: not an allowed GCS",
-                from.sysid
-            ),
-            out,
-        );
-        MavResult::MAV_RESULT_NOT_IN_CONTROL
-    }
-
     pub(super) fn on_manual_control(
         &mut self,
         from: Sender,
@@ -107,15 +65,16 @@ impl Vehicle {
         if m.target != self.sysid() {
             return;
         }
-        if !self.may_drive(from.sysid) {
-            self.refuse_input(from, "MANUAL_CONTROL", now, out);
+        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
+            self.refuse_input(from, "MANUAL_CONTROL", why, now, out);
             return;
         }
+        self.note_life(from, now);
         // A cheap handle: no profile is copied per message on the 25 Hz path.
         let profiles = std::sync::Arc::clone(&self.profiles);
         let profile = profiles.for_sysid(from.sysid);
         let s: Sticks = input::sticks_from_manual_control(m.x, m.y, m.z, m.r, profile);
-        let d = &mut self.pilot.sticks;
+        let mut d = self.pilot.sticks;
         if let Some(v) = s.forward {
             d.surge = v;
         }
@@ -126,6 +85,9 @@ impl Vehicle {
             d.yaw = v;
         }
         self.pilot.last_input = Some(now.mono);
+        if self.picked_up(is_neutral(&d), now, out) {
+            self.pilot.sticks = d;
+        }
         let buttons = u32::from(m.buttons) | (u32::from(m.buttons2) << 16);
         self.on_buttons(from, buttons, profile, now, out);
         self.update_thrusters(now, out);
@@ -141,10 +103,11 @@ impl Vehicle {
         if r.target_system != self.sysid() {
             return;
         }
-        if !self.may_drive(from.sysid) {
-            self.refuse_input(from, "RC override", now, out);
+        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
+            self.refuse_input(from, "RC override", why, now, out);
             return;
         }
+        self.note_life(from, now);
         // A cheap handle: no profile is copied per message on the 25 Hz path.
         let profiles = std::sync::Arc::clone(&self.profiles);
         let profile = profiles.for_sysid(from.sysid);
@@ -174,9 +137,13 @@ impl Vehicle {
             Some(RcAxis::Release) => *slot = 0.0,
             None => {}
         };
-        apply(&mut self.pilot.sticks.surge, u.forward);
-        apply(&mut self.pilot.sticks.heave, u.heave_down);
-        apply(&mut self.pilot.sticks.yaw, u.yaw);
+        let mut d = self.pilot.sticks;
+        apply(&mut d.surge, u.forward);
+        apply(&mut d.heave, u.heave_down);
+        apply(&mut d.yaw, u.yaw);
+        if self.picked_up(is_neutral(&d), now, out) {
+            self.pilot.sticks = d;
+        }
         apply(&mut self.pilot.tilt_rate, u.tilt_rate);
         if let Some(RcAxis::Set(level)) = u.lights {
             let max = f64::from(self.params.lights_max());
@@ -201,21 +168,21 @@ impl Vehicle {
         {
             return;
         }
-        if !self.may_drive(from.sysid) {
-            self.refuse_input(from, "NEPTUNUS_THRUSTERS", now, out);
+        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
+            self.refuse_input(from, "NEPTUNUS_THRUSTERS", why, now, out);
             return;
         }
-        for (slot, v) in self
-            .pilot
-            .thrusters
-            .iter_mut()
-            .zip([t.port, t.vertical, t.starboard])
-        {
+        self.note_life(from, now);
+        let mut thrusters = self.pilot.thrusters;
+        for (slot, v) in thrusters.iter_mut().zip([t.port, t.vertical, t.starboard]) {
             if !v.is_nan() {
                 *slot = f64::from(v).clamp(-1.0, 1.0);
             }
         }
         self.pilot.last_input = Some(now.mono);
+        if self.picked_up(thrusters.iter().all(|v| v.abs() < 1e-9), now, out) {
+            self.pilot.thrusters = thrusters;
+        }
         self.update_thrusters(now, out);
     }
 
@@ -261,6 +228,7 @@ impl Vehicle {
             MOTOR_TEST_HOLD
         };
         let pwm_us = pwm.round().clamp(f64::from(lo), f64::from(hi)) as u16;
+        self.pilot.last_motor_test = Some(now.mono);
         self.pilot.motor_test = Some(MotorTest {
             slot,
             pwm_us,
@@ -366,6 +334,11 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
+        if std::mem::take(&mut self.pilot.buttons_stale) {
+            // The first mask after a transfer: buttons held now were not pressed now.
+            self.pilot.buttons = now_mask;
+            return;
+        }
         let (pressed, released) = input::edges(self.pilot.buttons, now_mask);
         self.pilot.buttons = now_mask;
         for i in 0..32usize {
@@ -403,16 +376,16 @@ impl Vehicle {
             1 => self.pilot.shift = true,
             2 => {
                 if self.armed {
-                    self.disarm("button", out);
+                    self.disarm("button", Some(from.sysid), out);
                 } else {
-                    self.arm(false, now, out);
+                    self.arm(false, Some(from.sysid), now, out);
                 }
             }
             3 => {
-                self.arm(false, now, out);
+                self.arm(false, Some(from.sysid), now, out);
             }
             4 => {
-                self.disarm("button", out);
+                self.disarm("button", Some(from.sysid), out);
             }
             5..=13 => {
                 let mode = match function {
@@ -426,7 +399,7 @@ impl Vehicle {
                     12 => 1,
                     _ => 21,
                 };
-                self.set_mode(mode, out);
+                self.set_mode(mode, Some(from.sysid), out);
             }
             21 => self.set_tilt_us(1500.0, out),
             22 | 23 => {
@@ -485,4 +458,9 @@ impl Vehicle {
             }
         }
     }
+}
+
+/// Every axis centred (after the profile's deadband).
+fn is_neutral(d: &Demand) -> bool {
+    d.surge.abs() < 1e-9 && d.heave.abs() < 1e-9 && d.yaw.abs() < 1e-9
 }

@@ -1,0 +1,587 @@
+//! Control authority: which ground station may change the vehicle's state,
+//! how it gets that role (claim, MAV_CMD_REQUEST_OPERATOR_CONTROL, primary
+//! takeover), how it loses it, the pick-up rule and CONTROL_STATUS.
+//!
+//! One owner at most, identified by MAVLink system id. Every path that
+//! changes the vehicle's state asks [`Vehicle::check_control`] first; every
+//! change of owner goes through [`Vehicle::grant`] or
+//! [`Vehicle::drop_owner`], which stop the thrusters.
+
+use std::time::Duration;
+
+use super::{Now, Output, Sender, To, Vehicle, given};
+use crate::dialect::neptunus::*;
+use crate::eventlog::LogEvent;
+use crate::vehicle::params::ControlClaim;
+
+/// How long a control request waits for the owner when p3 does not say.
+const DEFAULT_REQUEST_TIMEOUT_S: f32 = 10.0;
+/// The board's dead-man is fed only while the owner showed life this recently
+/// (heartbeats come at 1 Hz; half a period of slack).
+pub(super) const LIFE_FEEDS_DEADMAN: Duration = Duration::from_millis(1500);
+/// Refusals of commands are reported at most this often.
+const COMMAND_REFUSAL_REPORT: Duration = Duration::from_secs(1);
+/// Refused stick input and pending pick-up are reported at most this often.
+const INPUT_REPORT: Duration = Duration::from_secs(5);
+
+/// A ground station, and the way back to it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Station {
+    pub sysid: u8,
+    pub compid: u8,
+    pub reply: To,
+}
+
+impl Station {
+    pub fn of(s: Sender) -> Self {
+        Self {
+            sysid: s.sysid,
+            compid: s.compid,
+            reply: s.reply(),
+        }
+    }
+}
+
+/// A request for control waiting for the owner's answer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Pending {
+    pub from: Station,
+    pub deadline: Duration,
+}
+
+/// Counts events and says whether one is due for a report.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct RateLimit {
+    last: Option<Duration>,
+    pub count: u64,
+}
+
+impl RateLimit {
+    /// Counts one event; true when it should be reported now.
+    pub fn hit(&mut self, now: Duration, every: Duration) -> bool {
+        self.count += 1;
+        let due = self.last.is_none_or(|t| now.saturating_sub(t) >= every);
+        if due {
+            self.last = Some(now);
+        }
+        due
+    }
+}
+
+/// Who controls the vehicle.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(super) struct Authority {
+    pub owner: Option<Station>,
+    /// The owner lets requests through without asking (GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED).
+    pub takeover_allowed: bool,
+    pub pending: Option<Pending>,
+    /// The owner's stick input is ignored until it has been neutral once.
+    pub pickup: bool,
+    /// The owner's last sign of life: its own HEARTBEAT or stick input.
+    pub last_life: Option<Duration>,
+    pub command_refusals: RateLimit,
+    pub input_refusals: RateLimit,
+    pub pickup_notes: RateLimit,
+}
+
+/// What kind of state-changing traffic is being checked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Control {
+    /// Stick input, per-thruster commands, motor test: may claim an unowned vehicle.
+    Drive,
+    /// Arming: may claim an unowned vehicle.
+    Arm,
+    /// Other state changes (mode, lights, tilt, parameters): allowed stations
+    /// may make them while nobody owns the vehicle, without claiming it.
+    Command,
+}
+
+/// Why control traffic was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Refusal {
+    /// Signing is on and the frame was not (validly) signed.
+    Unsigned,
+    /// Not SYSID_MYGCS nor one of NEPT_GCS_ALLOWn.
+    NotAllowed,
+    /// Another station owns the vehicle.
+    NotOwner(u8),
+    /// Nobody owns the vehicle and NEPT_CTRL_CLAIM asks for an explicit request.
+    NeedsRequest,
+}
+
+impl Refusal {
+    pub fn reason(self) -> String {
+        match self {
+            Self::Unsigned => "unsigned, and signing is on".into(),
+            Self::NotAllowed => "not an allowed GCS (SYSID_MYGCS, NEPT_GCS_ALLOWn)".into(),
+            Self::NotOwner(o) => format!("GCS {o} is in control"),
+            Self::NeedsRequest => {
+                "nobody is in control: request control first (NEPT_CTRL_CLAIM 1)".into()
+            }
+        }
+    }
+
+    pub fn result(self) -> MavResult {
+        match self {
+            Self::Unsigned => MavResult::MAV_RESULT_DENIED,
+            _ => MavResult::MAV_RESULT_NOT_IN_CONTROL,
+        }
+    }
+}
+
+/// How a station became the owner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Grant {
+    /// First allowed station to drive or arm an unowned vehicle.
+    Claim,
+    /// MAV_CMD_REQUEST_OPERATOR_CONTROL granted at once.
+    Request,
+    /// The owner released or allowed takeover while a request was pending.
+    Handover,
+    /// The primary station took control without asking.
+    PrimaryTakeover,
+}
+
+impl Vehicle {
+    /// The current owner's system id.
+    pub fn owner(&self) -> Option<u8> {
+        self.auth.owner.map(|o| o.sysid)
+    }
+
+    /// Whether the owner's stick input is still waiting for neutral.
+    pub fn pickup_pending(&self) -> bool {
+        self.auth.pickup
+    }
+
+    pub(super) fn log(
+        &self,
+        kind: &'static str,
+        sysid: Option<u8>,
+        detail: String,
+        out: &mut Vec<Output>,
+    ) {
+        out.push(Output::Log(LogEvent::new(kind, sysid, detail)));
+    }
+
+    /// May `from` change the vehicle's state in this way? Claims an unowned
+    /// vehicle for the first allowed station that drives or arms (NEPT_CTRL_CLAIM 0).
+    pub(super) fn check_control(
+        &mut self,
+        from: Sender,
+        kind: Control,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> Result<(), Refusal> {
+        if self.signing_active && !from.signed {
+            return Err(Refusal::Unsigned);
+        }
+        if !self.params.gcs_allowed(from.sysid) {
+            return Err(Refusal::NotAllowed);
+        }
+        match self.auth.owner {
+            Some(o) if o.sysid == from.sysid => {
+                // The owner may have moved (a new UDP port): answer where it is now.
+                if let Some(owner) = self.auth.owner.as_mut() {
+                    owner.reply = from.reply();
+                    owner.compid = from.compid;
+                }
+                Ok(())
+            }
+            Some(o) => Err(Refusal::NotOwner(o.sysid)),
+            None => match kind {
+                Control::Command => Ok(()),
+                Control::Drive | Control::Arm => match self.params.ctrl_claim() {
+                    ControlClaim::FirstToDrive => {
+                        self.grant(Station::of(from), Grant::Claim, now, out);
+                        Ok(())
+                    }
+                    ControlClaim::ExplicitOnly => Err(Refusal::NeedsRequest),
+                },
+            },
+        }
+    }
+
+    /// A refused command: the ACK result, and a rate-limited report.
+    pub(super) fn refuse_command(
+        &mut self,
+        from: Sender,
+        what: &str,
+        why: Refusal,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> MavResult {
+        if self
+            .auth
+            .command_refusals
+            .hit(now.mono, COMMAND_REFUSAL_REPORT)
+        {
+            let text = format!("Refused {what} from sysid {}: {}", from.sysid, why.reason());
+            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            self.log("command_rejected", Some(from.sysid), text, out);
+        }
+        why.result()
+    }
+
+    /// Refused stick input: counted, reported at most every 5 s.
+    pub(super) fn refuse_input(
+        &mut self,
+        from: Sender,
+        what: &str,
+        why: Refusal,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        if self.auth.input_refusals.hit(now.mono, INPUT_REPORT) {
+            let n = self.auth.input_refusals.count;
+            let text = format!(
+                "Ignoring {what} from sysid {}: {} ({n} refused)",
+                from.sysid,
+                why.reason()
+            );
+            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            self.log("input_rejected", Some(from.sysid), text, out);
+        }
+    }
+
+    /// The owner showed life (its own HEARTBEAT or stick input).
+    pub(super) fn note_life(&mut self, from: Sender, now: Now) {
+        if self.owner() == Some(from.sysid) && !(self.signing_active && !from.signed) {
+            self.auth.last_life = Some(now.mono);
+        }
+    }
+
+    /// Whether the owner showed life within `window`.
+    pub(super) fn owner_alive(&self, now: Now, window: Duration) -> bool {
+        self.auth.owner.is_some()
+            && self
+                .auth
+                .last_life
+                .is_some_and(|t| now.mono.saturating_sub(t) <= window)
+    }
+
+    /// Pick-up: true when the owner's input may drive. `neutral` says whether
+    /// this input has every axis centred.
+    pub(super) fn picked_up(&mut self, neutral: bool, now: Now, out: &mut Vec<Output>) -> bool {
+        if !self.auth.pickup {
+            return true;
+        }
+        if neutral {
+            self.auth.pickup = false;
+            if let Some(o) = self.owner() {
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_INFO,
+                    &format!("GCS {o}: sticks centred, driving"),
+                    out,
+                );
+            }
+            return true;
+        }
+        if self.auth.pickup_notes.hit(now.mono, INPUT_REPORT) {
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                "Centre the sticks to take control",
+                out,
+            );
+        }
+        false
+    }
+
+    /// Makes `to` the owner. From another owner this is a transfer: thrusters
+    /// to neutral, input hold cleared, pick-up required. Claiming an armed
+    /// vehicle also needs pick-up; claiming a disarmed one does not.
+    pub(super) fn grant(&mut self, to: Station, how: Grant, now: Now, out: &mut Vec<Output>) {
+        let previous = self.auth.owner.map(|o| o.sysid);
+        if previous == Some(to.sysid) {
+            return;
+        }
+        // A handover passes control from one station to another even when the
+        // old owner let go first.
+        let transfer =
+            previous.is_some() || matches!(how, Grant::Handover | Grant::PrimaryTakeover);
+        self.safety_stop(transfer || self.armed, out);
+        self.auth.owner = Some(to);
+        self.last_owner = Some(to.sysid);
+        self.auth.takeover_allowed = false;
+        self.auth.last_life = Some(now.mono);
+        if self.auth.pending.is_some_and(|p| p.from.sysid == to.sysid) {
+            self.auth.pending = None;
+        }
+        let was = previous.map_or_else(|| "nobody".to_owned(), |p| format!("GCS {p}"));
+        let (kind, how_text) = match how {
+            Grant::Claim => ("control_claimed", "first to drive or arm"),
+            Grant::Request => ("control_granted", "on request"),
+            Grant::Handover => ("control_granted", "handed over"),
+            Grant::PrimaryTakeover => ("control_takeover", "primary takeover"),
+        };
+        self.statustext(
+            MavSeverity::MAV_SEVERITY_INFO,
+            &format!("GCS {} in control (was {was})", to.sysid),
+            out,
+        );
+        let detail = format!(
+            "{} -> {} ({how_text}{})",
+            previous.map_or_else(|| "none".to_owned(), |p| p.to_string()),
+            to.sysid,
+            if self.auth.pickup {
+                ", pick-up required"
+            } else {
+                ""
+            }
+        );
+        self.log(kind, Some(to.sysid), detail, out);
+        self.send_control_status(out);
+    }
+
+    /// Nobody owns the vehicle any more; a pending request gets control.
+    pub(super) fn drop_owner(
+        &mut self,
+        kind: &'static str,
+        why: &str,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
+        let Some(old) = self.auth.owner.take() else {
+            return;
+        };
+        self.auth.takeover_allowed = false;
+        self.auth.pickup = false;
+        self.safety_stop(false, out);
+        self.statustext(
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &format!("GCS {} no longer in control: {why}", old.sysid),
+            out,
+        );
+        self.log(kind, Some(old.sysid), why.to_owned(), out);
+        if let Some(p) = self.auth.pending.take() {
+            self.grant(p.from, Grant::Handover, now, out);
+        } else {
+            self.send_control_status(out);
+        }
+    }
+
+    /// MAV_CMD_REQUEST_OPERATOR_CONTROL (32100): p1 0 release / 1 request,
+    /// p2 allow takeover, p3 request timeout s (3..60), p4 requesting sysid.
+    pub(super) fn operator_control(
+        &mut self,
+        from: Sender,
+        p: [f32; 7],
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> MavResult {
+        if self.signing_active && !from.signed {
+            return self.refuse_command(from, "control request", Refusal::Unsigned, now, out);
+        }
+        if let Some(id) = given(p[3])
+            && id != 0.0
+            && (id.round() - f32::from(from.sysid)).abs() > 0.5
+        {
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &format!(
+                    "Control request from sysid {} names sysid {id}: a station requests for itself",
+                    from.sysid
+                ),
+                out,
+            );
+            return MavResult::MAV_RESULT_DENIED;
+        }
+        let takeover = given(p[1]).is_some_and(|v| v >= 0.5);
+        let timeout_s = given(p[2])
+            .filter(|t| t.is_finite() && *t > 0.0)
+            .map_or(DEFAULT_REQUEST_TIMEOUT_S, |t| t.clamp(3.0, 60.0));
+        let me = Station::of(from);
+        match given(p[0]).map(|a| a.round() as i64) {
+            Some(0) => {
+                if self.owner() == Some(from.sysid) {
+                    self.drop_owner("control_released", "released", now, out);
+                } else if self
+                    .auth
+                    .pending
+                    .is_some_and(|p| p.from.sysid == from.sysid)
+                {
+                    self.auth.pending = None;
+                    self.log(
+                        "control_refused",
+                        Some(from.sysid),
+                        "request withdrawn by the requester".into(),
+                        out,
+                    );
+                }
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            Some(1) => {
+                if !self.params.gcs_allowed(from.sysid) {
+                    let text = format!(
+                        "Control request from sysid {} refused: {}",
+                        from.sysid,
+                        Refusal::NotAllowed.reason()
+                    );
+                    self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+                    self.log("control_refused", Some(from.sysid), text, out);
+                    return MavResult::MAV_RESULT_DENIED;
+                }
+                self.log(
+                    "control_requested",
+                    Some(from.sysid),
+                    format!("takeover allowed {takeover}, timeout {timeout_s} s"),
+                    out,
+                );
+                match self.auth.owner {
+                    None => {
+                        self.grant(me, Grant::Request, now, out);
+                        self.set_takeover_allowed(takeover, out);
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Some(o) if o.sysid == from.sysid => {
+                        self.set_takeover_allowed(takeover, out);
+                        // Re-requesting with takeover allowed is the owner's yes.
+                        if takeover && let Some(p) = self.auth.pending.take() {
+                            self.grant(p.from, Grant::Handover, now, out);
+                        }
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Some(_) if self.auth.takeover_allowed => {
+                        self.grant(me, Grant::Request, now, out);
+                        self.set_takeover_allowed(takeover, out);
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Some(o) if from.sysid == self.params.sysid_mygcs() => {
+                        // DNV practice: the main station takes control without
+                        // acknowledgement, after a warning.
+                        self.statustext(
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            &format!(
+                                "Control taken over by primary GCS {} from GCS {}",
+                                from.sysid, o.sysid
+                            ),
+                            out,
+                        );
+                        self.grant(me, Grant::PrimaryTakeover, now, out);
+                        self.set_takeover_allowed(takeover, out);
+                        MavResult::MAV_RESULT_ACCEPTED
+                    }
+                    Some(o) => {
+                        self.auth.pending = Some(Pending {
+                            from: me,
+                            deadline: now.mono + Duration::from_secs_f32(timeout_s),
+                        });
+                        out.push(Output::Send {
+                            to: o.reply,
+                            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                                param1: 1.0,
+                                param2: 0.0,
+                                param3: timeout_s,
+                                param4: f32::from(from.sysid),
+                                param5: 0.0,
+                                param6: 0.0,
+                                param7: 0.0,
+                                command: MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL,
+                                target_system: o.sysid,
+                                target_component: o.compid,
+                                confirmation: 0,
+                            }),
+                        });
+                        self.statustext(
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            &format!(
+                                "GCS {} requests control from GCS {} (answer within {timeout_s:.0} s)",
+                                from.sysid, o.sysid
+                            ),
+                            out,
+                        );
+                        self.log(
+                            "control_forwarded",
+                            Some(from.sysid),
+                            format!("asked GCS {}", o.sysid),
+                            out,
+                        );
+                        MavResult::MAV_RESULT_FAILED
+                    }
+                }
+            }
+            _ => MavResult::MAV_RESULT_DENIED,
+        }
+    }
+
+    fn set_takeover_allowed(&mut self, allowed: bool, out: &mut Vec<Output>) {
+        if self.auth.takeover_allowed != allowed {
+            self.auth.takeover_allowed = allowed;
+            self.send_control_status(out);
+        }
+    }
+
+    /// A COMMAND_ACK from a ground station: the owner's answer to a forwarded request.
+    pub(super) fn on_gcs_ack(
+        &mut self,
+        from: Sender,
+        ack: &COMMAND_ACK_DATA,
+        out: &mut Vec<Output>,
+    ) {
+        if ack.command != MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL
+            || self.owner() != Some(from.sysid)
+            || (self.signing_active && !from.signed)
+        {
+            return;
+        }
+        let Some(p) = self.auth.pending else {
+            return;
+        };
+        use MavResult as R;
+        match ack.result {
+            R::MAV_RESULT_DENIED | R::MAV_RESULT_FAILED | R::MAV_RESULT_TEMPORARILY_REJECTED => {
+                self.auth.pending = None;
+                let text = format!(
+                    "Control request from GCS {} refused by GCS {}",
+                    p.from.sysid, from.sysid
+                );
+                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+                self.log("control_refused", Some(p.from.sysid), text, out);
+            }
+            _ => {}
+        }
+    }
+
+    /// Request timeouts and the owner's disappearance.
+    pub(super) fn authority_tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        if let Some(p) = self.auth.pending
+            && now.mono >= p.deadline
+        {
+            self.auth.pending = None;
+            let keeper = self
+                .owner()
+                .map_or_else(|| "nobody".into(), |o| format!("GCS {o}"));
+            let text = format!(
+                "Control request from GCS {} timed out: {keeper} keeps control",
+                p.from.sysid
+            );
+            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            self.log("control_refused", Some(p.from.sysid), text, out);
+        }
+        if self.auth.owner.is_some() && !self.owner_alive(now, self.gcs_timeout()) {
+            self.drop_owner("control_lost", "no heartbeat for FS_GCS_TIMEOUT", now, out);
+        }
+    }
+
+    pub(super) fn gcs_timeout(&self) -> Duration {
+        Duration::from_secs_f32(self.params.fs_gcs_timeout_s().clamp(0.1, 600.0))
+    }
+
+    pub(super) fn control_status(&self) -> MavMessage {
+        let mut flags = GcsControlStatusFlags::GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER;
+        if self.auth.takeover_allowed {
+            flags |= GcsControlStatusFlags::GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED;
+        }
+        MavMessage::CONTROL_STATUS(CONTROL_STATUS_DATA {
+            flags,
+            gcs_main: self.owner().unwrap_or(0),
+            gcs_secondary: [0; 10],
+        })
+    }
+
+    pub(super) fn send_control_status(&self, out: &mut Vec<Output>) {
+        out.push(Output::Send {
+            to: To::All,
+            msg: self.control_status(),
+        });
+    }
+}

@@ -1,0 +1,238 @@
+//! Failsafes, table-driven: each row says when it is raised, when it clears,
+//! which parameter picks its action and how it reads to the operator.
+//!
+//! Raising acts once (warn, disarm, or an autopilot mode that needs thrust);
+//! any active failsafe shows as MAV_STATE_CRITICAL and in SYS_STATUS health,
+//! and each raise and clear is a STATUSTEXT and an event-log line.
+
+use std::time::Duration;
+
+use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, MODES, Now, Output, Vehicle};
+use crate::dialect::neptunus::MavSeverity;
+use crate::firmware::link::LinkState;
+use crate::vehicle::params::{FailsafeAction, ParamStore};
+
+/// A battery voltage must stay beyond its threshold this long to raise or
+/// clear a battery failsafe (ArduPilot's BATT_LOW_TIMER default).
+pub(super) const BATTERY_DEBOUNCE: Duration = Duration::from_secs(10);
+const MODE_ALT_HOLD: u32 = 2;
+const MODE_SURFACE: u32 = 9;
+
+/// One failsafe.
+pub(super) struct Rule {
+    /// Short name for logs.
+    pub name: &'static str,
+    raise: fn(&Vehicle, Now) -> bool,
+    clear: fn(&Vehicle, Now) -> bool,
+    action: fn(&ParamStore) -> FailsafeAction,
+    /// What the operator reads ("GCS 255 heartbeat lost").
+    text: fn(&Vehicle) -> String,
+}
+
+/// Index of each rule in [`RULES`].
+pub(super) const GCS: usize = 0;
+pub(super) const PILOT: usize = 1;
+
+pub(super) const RULES: [Rule; 5] = [
+    Rule {
+        name: "gcs",
+        // Armed, and neither the owner nor anyone else showed life for FS_GCS_TIMEOUT.
+        raise: |v, now| {
+            v.armed
+                && v.auth
+                    .last_life
+                    .is_none_or(|t| now.mono.saturating_sub(t) > v.gcs_timeout())
+        },
+        clear: |v, now| v.owner_alive(now, v.gcs_timeout()),
+        action: ParamStore::fs_gcs_enable,
+        text: |v| match v.last_owner {
+            Some(o) => format!("GCS {o} heartbeat lost"),
+            None => "no GCS in control".into(),
+        },
+    },
+    Rule {
+        name: "pilot_input",
+        raise: |v, now| v.armed && v.pilot_input_stale(now),
+        clear: |v, now| !v.pilot_input_stale(now),
+        action: ParamStore::fs_pilot_input,
+        text: |_| "lost manual control".into(),
+    },
+    Rule {
+        name: "board_link",
+        raise: |v, _| v.link_seen_up && v.link != LinkState::Up,
+        clear: |v, _| v.link == LinkState::Up,
+        action: |_| FailsafeAction::Disarm,
+        text: |v| {
+            format!(
+                "board link lost ({})",
+                v.link_reason.as_deref().unwrap_or("no telemetry")
+            )
+        },
+    },
+    Rule {
+        name: "battery_low",
+        raise: |v, now| v.battery[0].held_below(now),
+        clear: |v, now| v.battery[0].held_above(now),
+        action: ParamStore::batt_fs_low_act,
+        text: |v| format!("battery low {:.1} V", v.status.value.vout_v.unwrap_or(0.0)),
+    },
+    Rule {
+        name: "battery_critical",
+        raise: |v, now| v.battery[1].held_below(now),
+        clear: |v, now| v.battery[1].held_above(now),
+        action: ParamStore::batt_fs_crt_act,
+        text: |v| {
+            format!(
+                "battery critical {:.1} V",
+                v.status.value.vout_v.unwrap_or(0.0)
+            )
+        },
+    },
+];
+
+/// Which failsafes are active, and the mode one of them put the vehicle in.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(super) struct Failsafes {
+    pub active: [bool; RULES.len()],
+    pub mode: Option<u32>,
+}
+
+/// How long a battery voltage has been below / above one threshold.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct BatteryWatch {
+    below_since: Option<Duration>,
+    above_since: Option<Duration>,
+}
+
+impl BatteryWatch {
+    /// A new voltage sample against `threshold_v` (0 = off).
+    pub fn sample(&mut self, volts: f64, threshold_v: f64, now: Duration) {
+        if threshold_v <= 0.0 {
+            *self = Self::default();
+        } else if volts < threshold_v {
+            self.above_since = None;
+            self.below_since.get_or_insert(now);
+        } else {
+            self.below_since = None;
+            self.above_since.get_or_insert(now);
+        }
+    }
+    fn held_below(&self, now: Now) -> bool {
+        self.below_since
+            .is_some_and(|t| now.mono.saturating_sub(t) >= BATTERY_DEBOUNCE)
+    }
+    fn held_above(&self, now: Now) -> bool {
+        self.above_since
+            .is_some_and(|t| now.mono.saturating_sub(t) >= BATTERY_DEBOUNCE)
+            || (self.below_since.is_none() && self.above_since.is_none())
+    }
+}
+
+impl Vehicle {
+    /// Whether any failsafe is active.
+    pub fn failsafe_active(&self) -> bool {
+        self.failsafes.active.iter().any(|a| *a)
+    }
+
+    /// Names of the active failsafes.
+    pub fn active_failsafes(&self) -> Vec<&'static str> {
+        RULES
+            .iter()
+            .zip(self.failsafes.active)
+            .filter(|(_, a)| *a)
+            .map(|(r, _)| r.name)
+            .collect()
+    }
+
+    /// No stick input from the owner (nor a motor test) for FS_PILOT_TIMEOUT
+    /// since the input, the test or arming, in a mode the pilot drives.
+    fn pilot_input_stale(&self, now: Now) -> bool {
+        let pilot_mode = matches!(self.mode, MODE_MANUAL | MODE_MANUAL_THRUSTERS);
+        let timeout = Duration::from_secs_f32(self.params.fs_pilot_timeout_s().clamp(0.1, 3.0));
+        let last = [
+            self.pilot.last_input,
+            self.armed_at,
+            self.pilot.last_motor_test,
+        ]
+        .into_iter()
+        .flatten()
+        .max();
+        pilot_mode
+            && self.pilot.motor_test.is_none()
+            && last.is_none_or(|t| now.mono.saturating_sub(t) > timeout)
+    }
+
+    /// A failsafe action is holding the vehicle in an autopilot mode: the
+    /// board's dead-man must be fed on Neptunus' own authority.
+    pub(super) fn failsafe_needs_thrust(&self) -> bool {
+        self.armed && self.failsafe_active() && self.failsafes.mode == Some(self.mode)
+    }
+
+    /// Raises and clears failsafes; runs every tick and after link changes.
+    pub(super) fn failsafe_tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        for (i, rule) in RULES.iter().enumerate() {
+            let action = (rule.action)(&self.params);
+            let active = self.failsafes.active[i];
+            if !active && action != FailsafeAction::Off && (rule.raise)(self, now) {
+                self.failsafes.active[i] = true;
+                let text = (rule.text)(self);
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_CRITICAL,
+                    &format!("Failsafe: {text}"),
+                    out,
+                );
+                self.log(
+                    "failsafe_raised",
+                    self.last_owner,
+                    format!("{}: {text} (action {action:?})", rule.name),
+                    out,
+                );
+                self.failsafe_act(rule.name, action, out);
+            } else if active && (action == FailsafeAction::Off || (rule.clear)(self, now)) {
+                self.failsafes.active[i] = false;
+                let text = (rule.text)(self);
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_INFO,
+                    &format!("Failsafe cleared: {text}"),
+                    out,
+                );
+                self.log(
+                    "failsafe_cleared",
+                    self.owner(),
+                    format!("{}: {text}", rule.name),
+                    out,
+                );
+                if !self.failsafe_active() {
+                    self.failsafes.mode = None;
+                }
+            }
+        }
+    }
+
+    fn failsafe_act(&mut self, name: &str, action: FailsafeAction, out: &mut Vec<Output>) {
+        let mode = match action {
+            FailsafeAction::Off | FailsafeAction::Warn => return,
+            FailsafeAction::Disarm => {
+                self.disarm(&format!("failsafe: {name}"), None, out);
+                return;
+            }
+            FailsafeAction::DepthHold => MODE_ALT_HOLD,
+            FailsafeAction::Surface => MODE_SURFACE,
+        };
+        let available = MODES.iter().any(|m| m.0 == mode && m.2.is_none());
+        if available && self.armed && self.link == LinkState::Up {
+            self.set_mode(mode, None, out);
+            self.failsafes.mode = Some(mode);
+        } else {
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!(
+                    "Failsafe {name}: {} is not available on this vehicle, disarming instead",
+                    super::mode_name(mode)
+                ),
+                out,
+            );
+            self.disarm(&format!("failsafe: {name}"), None, out);
+        }
+    }
+}
