@@ -1473,6 +1473,9 @@ impl Vehicle {
         }
         self.armed = true;
         self.armed_at = Some(now.mono);
+        // Arming starts from neutral: sticks sent while disarmed do not move
+        // the vehicle the instant it arms.
+        self.stop_pilot();
         self.send_neutral(out);
         self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Armed", out);
         self.log(
