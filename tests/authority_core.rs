@@ -1269,7 +1269,7 @@ mod properties {
             let mut m = Model::default();
             for a in acts {
                 let armed_before = r.v.armed();
-                let (out, motion) = match a {
+                let (out, motion) = match a.clone() {
                     Act::Stick(i, x) => {
                         let out = r.stick(STATIONS[i], x);
                         (out, Some((STATIONS[i].sysid, x == 0, false)))
@@ -1323,6 +1323,13 @@ mod properties {
                 if let Some((sysid, neutral, is_test)) = motion
                     && m.owner == Some(sysid)
                 {
+                    // Sticks drive in MANUAL, the per-thruster message in
+                    // MANUAL_THRUSTERS; each is ignored in the other mode.
+                    let thrusters_msg = matches!(a, Act::Thrusters(..));
+                    let counts = is_test || thrusters_msg == (r.v.mode() == 100);
+                    if !counts {
+                        // Not this mode's input: no effect on the model.
+                    } else
                     if is_test {
                         m.motion_from = Some(sysid);
                     } else if neutral {

@@ -84,9 +84,12 @@ impl Vehicle {
         if let Some(v) = s.yaw {
             d.yaw = v;
         }
-        self.pilot.last_input = Some(now.mono);
-        if self.picked_up(is_neutral(&d), now, out) {
-            self.pilot.sticks = d;
+        // In MANUAL_THRUSTERS the sticks do not drive (buttons still work).
+        if self.mode != MODE_MANUAL_THRUSTERS {
+            self.pilot.last_input = Some(now.mono);
+            if self.picked_up(is_neutral(&d), now, out) {
+                self.pilot.sticks = d;
+            }
         }
         let buttons = u32::from(m.buttons) | (u32::from(m.buttons2) << 16);
         self.on_buttons(from, buttons, profile, now, out);
@@ -141,7 +144,8 @@ impl Vehicle {
         apply(&mut d.surge, u.forward);
         apply(&mut d.heave, u.heave_down);
         apply(&mut d.yaw, u.yaw);
-        if self.picked_up(is_neutral(&d), now, out) {
+        let sticks_drive = self.mode != MODE_MANUAL_THRUSTERS;
+        if sticks_drive && self.picked_up(is_neutral(&d), now, out) {
             self.pilot.sticks = d;
         }
         apply(&mut self.pilot.tilt_rate, u.tilt_rate);
@@ -152,7 +156,9 @@ impl Vehicle {
                 self.set_lights(level, out);
             }
         }
-        self.pilot.last_input = Some(now.mono);
+        if sticks_drive {
+            self.pilot.last_input = Some(now.mono);
+        }
         self.update_thrusters(now, out);
     }
 
@@ -173,6 +179,10 @@ impl Vehicle {
             return;
         }
         self.note_life(from, now);
+        if self.mode != MODE_MANUAL_THRUSTERS {
+            // Not this mode's input: it neither drives nor keeps other input fresh.
+            return;
+        }
         let mut thrusters = self.pilot.thrusters;
         for (slot, v) in thrusters.iter_mut().zip([t.port, t.vertical, t.starboard]) {
             if !v.is_nan() {
