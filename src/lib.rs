@@ -8,12 +8,14 @@
 //!   and the telemetry log.
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
+//! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`vehicle`]: the vehicle core (parameters so far).
 
 pub mod app;
 pub mod config;
 pub mod dialect;
+pub mod eventlog;
 pub mod firmware;
 pub mod mavlink;
 pub mod sim;
