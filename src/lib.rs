@@ -8,6 +8,7 @@
 //!   and the telemetry log.
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
+//! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`vehicle`]: the vehicle core (parameters so far).
 
