@@ -12,13 +12,17 @@ use tokio::time::Instant;
 
 use crate::config::{BoardSource, Settings};
 use crate::dialect::neptunus::MavMessage;
+use crate::eventlog::{EventLog, EventLogConfig, EventLogError, LogEvent};
 use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
 use crate::firmware::emulator::PtyBoard;
 use crate::firmware::link::{self, LinkError, LinkEvent};
 use crate::mavlink::endpoint::{
     EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle,
 };
-use crate::mavlink::frame::{encode_command_ack_raw, encode_v2};
+use crate::mavlink::frame::{Frame, encode_command_ack_raw, encode_v2};
+use crate::mavlink::signing::{
+    Signer, SigningError, SigningKey, SigningStore, Verdict, Verifier, timestamp_from_unix_us,
+};
 use crate::mavlink::tlog::TlogConfig;
 use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, SimTruth, To, Vehicle};
 use crate::vehicle::params::ParamFile;
@@ -34,6 +38,10 @@ pub enum AppError {
     Endpoint(#[from] EndpointError),
     #[error("ground-station profiles: {0}")]
     Profiles(#[from] crate::vehicle::input::ProfileError),
+    #[error("event log: {0}")]
+    EventLog(#[from] EventLogError),
+    #[error("message signing: {0}")]
+    Signing(#[from] SigningError),
     #[error("cannot create the data directory {path}: {source}")]
     DataDir {
         path: std::path::PathBuf,
@@ -90,7 +98,14 @@ pub async fn run(
             max_bytes: settings.mavlink.tlog_max_bytes,
         }),
     };
-    let router = Router::start(settings.mavlink.endpoints.clone(), router_cfg, in_tx).await?;
+    let specs = settings
+        .mavlink
+        .endpoints
+        .iter()
+        .map(|u| u.spec.clone())
+        .collect();
+    let trusted: Vec<bool> = settings.mavlink.endpoints.iter().map(|u| u.trusted).collect();
+    let router = Router::start(specs, router_cfg, in_tx).await?;
     for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
         tracing::info!(endpoint = %spec, local = ?router.local_addr(i), "MAVLink endpoint");
     }
@@ -107,6 +122,12 @@ pub async fn run(
         settings.mavlink.endpoints.len(),
     )
     .with_profiles(profiles);
+    let events = EventLog::start(EventLogConfig::new(settings.data_dir.join("events")))?;
+    let signing = LinkSigning::load(SigningStore::new(&settings.data_dir))?;
+    vehicle.set_signing_active(signing.active());
+    if signing.active() {
+        tracing::info!("message signing on: unsigned ground stations may watch but not control");
+    }
     let t0 = Instant::now();
     let clock = move || Now {
         mono: t0.elapsed(),
@@ -120,6 +141,8 @@ pub async fn run(
         params: param_file,
         seq: 0,
         last_healthy: None,
+        events: events.clone(),
+        signing,
     };
     let mut shutdown = std::pin::pin!(shutdown);
     let mut outputs = Vec::with_capacity(64);
@@ -153,7 +176,14 @@ pub async fn run(
             msg = inbound.recv() => match msg {
                 None => break,
                 Some(Inbound { endpoint, peer, frame }) => {
-                    let from = Sender::new(endpoint, peer, frame.sysid, frame.compid);
+                    let Some(signed) = io.signing.check(&frame, now, &events) else {
+                        continue;
+                    };
+                    let from = Sender {
+                        signed,
+                        trusted: trusted.get(endpoint).copied().unwrap_or(false),
+                        ..Sender::new(endpoint, peer, frame.sysid, frame.compid)
+                    };
                     let input = match (frame.unknown_command, &frame.msg) {
                         (Some(command), MavMessage::COMMAND_LONG(c)) => Input::UnknownCommand {
                             from,
@@ -213,6 +243,8 @@ pub async fn run(
     tokio::time::sleep(Duration::from_millis(50)).await;
     drop(link);
     router.shutdown().await;
+    io.signing.persist();
+    let _ = tokio::task::spawn_blocking(move || events.shutdown()).await;
     if let Some(board) = board {
         board.shutdown().await;
     }
@@ -234,6 +266,8 @@ struct Io {
     params: ParamFile,
     seq: u8,
     last_healthy: Option<Duration>,
+    events: EventLog,
+    signing: LinkSigning,
 }
 
 impl Io {
@@ -241,8 +275,9 @@ impl Io {
         for out in outputs.drain(..) {
             match out {
                 Output::Send { to, msg } => {
-                    let bytes = encode_v2(vehicle.sysid(), COMPONENT_ID, self.seq, &msg);
+                    let mut bytes = encode_v2(vehicle.sysid(), COMPONENT_ID, self.seq, &msg);
                     self.seq = self.seq.wrapping_add(1);
+                    self.signing.sign(&mut bytes, now);
                     self.router.send(Outbound {
                         route: route(to),
                         bytes: bytes.into(),
@@ -255,7 +290,7 @@ impl Io {
                     target_system,
                     target_component,
                 } => {
-                    let bytes = encode_command_ack_raw(
+                    let mut bytes = encode_command_ack_raw(
                         vehicle.sysid(),
                         COMPONENT_ID,
                         self.seq,
@@ -265,6 +300,7 @@ impl Io {
                         target_component,
                     );
                     self.seq = self.seq.wrapping_add(1);
+                    self.signing.sign(&mut bytes, now);
                     self.router.send(Outbound {
                         route: route(to),
                         bytes: bytes.into(),
@@ -272,9 +308,17 @@ impl Io {
                 }
                 Output::Board(cmd) => self.link.send(cmd),
                 Output::Log(ev) => {
-                    tracing::info!(event = ev.kind, sysid = ?ev.sysid, "{}", ev.detail)
+                    tracing::info!(event = ev.kind, sysid = ?ev.sysid, "{}", ev.detail);
+                    self.events.record(now.unix_us, now.mono, &ev);
                 }
-                Output::SetSigningKey { .. } => {}
+                Output::SetSigningKey {
+                    key,
+                    initial_timestamp,
+                } => {
+                    if let Err(e) = self.signing.set_key(key, initial_timestamp) {
+                        tracing::error!("signing key not saved: {e}");
+                    }
+                }
                 Output::SaveParams => {
                     if let Err(e) = self.params.save(vehicle.params()) {
                         tracing::error!("parameters not saved: {e}");
@@ -319,4 +363,118 @@ pub async fn emulate_board(
     shutdown.await;
     board.shutdown().await;
     Ok(())
+}
+
+/// Signature checks on what comes in, signatures on what goes out, and the
+/// key and timestamp files behind them. The vehicle core decides policy from
+/// the per-frame result; this only verifies, signs and persists.
+struct LinkSigning {
+    store: SigningStore,
+    keyed: Option<(Verifier, Signer)>,
+    /// Floor for a new key's timestamps: ours never go backwards.
+    last_timestamp: u64,
+    rejected: u64,
+    last_report: Option<Duration>,
+}
+
+/// Rejected signatures are logged at most this often.
+const SIGNATURE_REPORT: Duration = Duration::from_secs(5);
+
+impl LinkSigning {
+    fn load(store: SigningStore) -> Result<Self, AppError> {
+        let key = store.load_key()?;
+        let reservation = store.load_reservation();
+        let mut s = Self {
+            store,
+            keyed: None,
+            last_timestamp: reservation.unwrap_or(0),
+            rejected: 0,
+            last_report: None,
+        };
+        if let Some(key) = key {
+            s.keyed = Some(s.pair(key));
+        }
+        Ok(s)
+    }
+
+    fn pair(&self, key: SigningKey) -> (Verifier, Signer) {
+        let reservation = self.store.load_reservation().max(Some(self.last_timestamp));
+        (Verifier::new(key.clone()), Signer::new(key, 0, reservation))
+    }
+
+    fn active(&self) -> bool {
+        self.keyed.is_some()
+    }
+
+    /// Some(signed) for a frame to hand to the vehicle, None for one to drop.
+    fn check(&mut self, frame: &Frame, now: Now, events: &EventLog) -> Option<bool> {
+        let Some((verifier, _)) = self.keyed.as_mut() else {
+            return Some(false);
+        };
+        let why = match verifier.check(&frame.raw, timestamp_from_unix_us(now.unix_us)) {
+            Verdict::Valid { .. } => return Some(true),
+            Verdict::Unsigned => return Some(false),
+            Verdict::BadSignature => "bad signature",
+            Verdict::Replayed => "replayed (timestamp not newer than the last of its stream)",
+            Verdict::TooOld => "stale timestamp (more than 1 min old)",
+            Verdict::Malformed => "malformed signature",
+        };
+        self.rejected += 1;
+        if self
+            .last_report
+            .is_none_or(|t| now.mono.saturating_sub(t) >= SIGNATURE_REPORT)
+        {
+            self.last_report = Some(now.mono);
+            let detail = format!(
+                "msg {} from {}/{}: {why} ({} rejected)",
+                frame.msg_id, frame.sysid, frame.compid, self.rejected
+            );
+            tracing::warn!("signature rejected: {detail}");
+            events.record(
+                now.unix_us,
+                now.mono,
+                &LogEvent::new("signature_rejected", Some(frame.sysid), detail),
+            );
+        }
+        None
+    }
+
+    fn sign(&mut self, bytes: &mut Vec<u8>, now: Now) {
+        let Some((_, signer)) = self.keyed.as_mut() else {
+            return;
+        };
+        if let Some(reservation) = signer.sign(bytes, timestamp_from_unix_us(now.unix_us))
+            && let Err(e) = self.store.save_reservation(reservation)
+        {
+            tracing::error!("signing timestamp not saved: {e}");
+        }
+        self.last_timestamp = signer.last_timestamp();
+    }
+
+    fn set_key(&mut self, key: [u8; 32], initial_timestamp: u64) -> Result<(), SigningError> {
+        match SigningKey::from_bytes(key) {
+            None => {
+                self.store.save_key(None)?;
+                self.keyed = None;
+            }
+            Some(key) => {
+                self.store.save_key(Some(&key))?;
+                let (verifier, mut signer) = self.pair(key);
+                signer.raise_floor(initial_timestamp);
+                self.keyed = Some((verifier, signer));
+            }
+        }
+        Ok(())
+    }
+
+    /// At shutdown: the timestamp in use, so the next start begins above it.
+    fn persist(&self) {
+        if let Some((_, signer)) = &self.keyed
+            && let Err(e) = self
+                .store
+                .save_reservation(signer.last_timestamp().saturating_add(1))
+        {
+            tracing::error!("signing timestamp not saved: {e}");
+        }
+    }
 }

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 use crate::firmware::codec::Framing;
 use crate::firmware::emulator::{EmulatorOptions, FaultOptions};
 use crate::firmware::link::LinkConfig;
-use crate::mavlink::endpoint::{DEFAULT_ENDPOINTS, EndpointSpec};
+use crate::mavlink::endpoint::{DEFAULT_ENDPOINTS, EndpointUrl};
 use crate::vehicle::machine::Identity;
 
 /// The BeagleBone UART wired to the OpenROV board.
@@ -52,10 +52,11 @@ pub struct RunArgs {
     #[arg(long, value_name = "DIR", global = true)]
     pub data_dir: Option<PathBuf>,
     /// MAVLink endpoint, repeatable: udpin:HOST:PORT, udpout:HOST:PORT,
-    /// tcpin:HOST:PORT, tcpout:HOST:PORT, serial:PATH:BAUD
+    /// tcpin:HOST:PORT, tcpout:HOST:PORT, serial:PATH:BAUD; add ?trusted
+    /// to accept SETUP_SIGNING (the signing key) over it
     /// [default: udpout:127.0.0.1:14550 and tcpin:0.0.0.0:5760].
     #[arg(long = "mavlink", value_name = "URL")]
-    pub mavlink: Vec<EndpointSpec>,
+    pub mavlink: Vec<EndpointUrl>,
     /// How the vehicle presents itself: ardupilot (ArduSub-compatible) or generic.
     #[arg(long, value_name = "ardupilot|generic")]
     pub identity: Option<Identity>,
@@ -74,6 +75,24 @@ pub enum CliCommand {
         #[command(subcommand)]
         command: ProfilesCommand,
     },
+    /// The MAVLink 2 signing key in the data directory.
+    Signing {
+        #[command(subcommand)]
+        command: SigningCommand,
+    },
+}
+
+/// `neptunus signing …` (the vehicle must not be running: it reads the key at start).
+#[derive(Debug, Subcommand)]
+pub enum SigningCommand {
+    /// Set the key to SHA-256 of a passphrase, as QGroundControl and MAVProxy
+    /// derive it. Without PASSPHRASE, one line is read from standard input
+    /// (keeps it out of the shell history and the process list).
+    SetPassphrase { passphrase: Option<String> },
+    /// Remove the key: signing off.
+    Clear,
+    /// Say whether a key is set (never prints it).
+    Status,
 }
 
 /// `neptunus profiles …`
@@ -144,7 +163,7 @@ pub struct MavlinkFileConfig {
 /// MAVLink settings, resolved.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MavlinkSettings {
-    pub endpoints: Vec<EndpointSpec>,
+    pub endpoints: Vec<EndpointUrl>,
     pub identity: Identity,
     pub sysid: Option<u8>,
     pub peer_timeout: std::time::Duration,
@@ -289,7 +308,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
     } else if let Some(urls) = &file.mavlink.endpoints {
         urls.iter()
             .map(|u| {
-                u.parse::<EndpointSpec>()
+                u.parse::<EndpointUrl>()
                     .map_err(|e| ConfigError::Invalid(format!("mavlink.endpoints: {e}")))
             })
             .collect::<Result<_, _>>()?
@@ -297,7 +316,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         DEFAULT_ENDPOINTS
             .iter()
             .map(|u| {
-                u.parse::<EndpointSpec>()
+                u.parse::<EndpointUrl>()
                     .map_err(|e| ConfigError::Invalid(e.to_string()))
             })
             .collect::<Result<_, _>>()?

@@ -4,7 +4,7 @@ use std::io::Write as _;
 
 use anyhow::Context as _;
 use clap::Parser as _;
-use neptunus::config::{self, Cli, CliCommand, ProfilesCommand};
+use neptunus::config::{self, Cli, CliCommand, ProfilesCommand, SigningCommand};
 use neptunus::vehicle::input::{Profile, Profiles, ZConvention};
 
 fn main() -> std::process::ExitCode {
@@ -35,6 +35,10 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
         Some(CliCommand::Profiles {
             command: ProfilesCommand::Check { dir },
         }) => profiles_check(dir.as_deref())?,
+        Some(CliCommand::Signing { command }) => {
+            let data_dir = config::resolve(&cli.run)?.data_dir;
+            signing(&command, &data_dir)?;
+        }
         Some(CliCommand::EmulateBoard(args)) => {
             init_logging(None)?;
             let opts = config::resolve_emulator(&args, cli.run.config.as_deref())?;
@@ -61,6 +65,44 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
             tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
             runtime()?.block_on(neptunus::app::run(settings, shutdown_signal()))?;
         }
+    }
+    Ok(())
+}
+
+/// `neptunus signing set-passphrase|clear|status`.
+fn signing(command: &SigningCommand, data_dir: &std::path::Path) -> anyhow::Result<()> {
+    use neptunus::mavlink::signing::{SigningKey, SigningStore};
+    let store = SigningStore::new(data_dir);
+    let path = data_dir.join(SigningStore::KEY_FILE);
+    let mut out = std::io::stdout();
+    match command {
+        SigningCommand::SetPassphrase { passphrase } => {
+            let passphrase = match passphrase {
+                Some(p) => p.clone(),
+                None => {
+                    let mut line = String::new();
+                    std::io::stdin()
+                        .read_line(&mut line)
+                        .context("cannot read the passphrase from standard input")?;
+                    line.trim_end_matches(['\r', '\n']).to_owned()
+                }
+            };
+            if passphrase.is_empty() {
+                anyhow::bail!("the passphrase is empty: give one, or use `neptunus signing clear`");
+            }
+            std::fs::create_dir_all(data_dir)
+                .with_context(|| format!("cannot create data directory {}", data_dir.display()))?;
+            store.save_key(Some(&SigningKey::from_passphrase(&passphrase)))?;
+            writeln!(out, "signing key set in {} (mode 0600); restart neptunus", path.display())?;
+        }
+        SigningCommand::Clear => {
+            store.save_key(None)?;
+            writeln!(out, "signing key removed: signing off at the next start")?;
+        }
+        SigningCommand::Status => match store.load_key()? {
+            Some(_) => writeln!(out, "signing on: key in {}", path.display())?,
+            None => writeln!(out, "signing off: no key in {}", path.display())?,
+        },
     }
     Ok(())
 }

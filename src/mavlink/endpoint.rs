@@ -158,6 +158,49 @@ impl fmt::Display for EndpointSpec {
     }
 }
 
+/// An endpoint as the user writes it: a URL, optionally ending in
+/// `?trusted` (SETUP_SIGNING, which sets the signing key, is accepted only
+/// on trusted endpoints — a cable or a VPN, never an open radio link).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct EndpointUrl {
+    pub spec: EndpointSpec,
+    pub trusted: bool,
+}
+
+const TRUSTED_SUFFIX: &str = "?trusted";
+
+impl FromStr for EndpointUrl {
+    type Err = EndpointError;
+
+    fn from_str(url: &str) -> Result<Self, Self::Err> {
+        let url = url.trim();
+        let (base, trusted) = match url.strip_suffix(TRUSTED_SUFFIX) {
+            Some(base) => (base, true),
+            None => (url, false),
+        };
+        if let Some((_, option)) = base.split_once('?') {
+            return Err(EndpointError::Spec {
+                url: url.to_owned(),
+                reason: format!("unknown option {option:?} (the only option is ?trusted)"),
+            });
+        }
+        Ok(Self {
+            spec: base.parse()?,
+            trusted,
+        })
+    }
+}
+
+impl fmt::Display for EndpointUrl {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.spec)?;
+        if self.trusted {
+            f.write_str(TRUSTED_SUFFIX)?;
+        }
+        Ok(())
+    }
+}
+
 /// Index of an endpoint in the list given to [`Router::start`].
 pub type EndpointId = usize;
 /// One remote (UDP address, TCP connection, serial port session); never

@@ -264,7 +264,7 @@ const HEAD: &[ParamDef] = &[
     def("SYSID_THISMAV", Int16, 1.0, 1.0, 255.0, "", Neptunus,
         "MAVLink system id of the vehicle. Takes effect at the next start."),
     def("SYSID_MYGCS", Int16, 255.0, 1.0, 255.0, "", Neptunus,
-        "System id of the main ground station (QGroundControl and MAVProxy use 255). MANUAL_CONTROL is accepted from it and from the NEPT_GCS_ALLOWn ids; its heartbeats feed the GCS failsafe."),
+        "System id of the primary ground station (QGroundControl and MAVProxy use 255). It may control the vehicle like the NEPT_GCS_ALLOWn ids, and may take control from another station without asking (the owner gets a warning first)."),
     def("NEPT_CTRL_CLAIM", Int8, 0.0, 0.0, 1.0, "", Neptunus,
         "How an allowed ground station gets control of a vehicle nobody controls: 0 = the first one that drives (MANUAL_CONTROL) or arms (ArduSub-like), 1 = only by an explicit MAV_CMD_REQUEST_OPERATOR_CONTROL."),
     def("NEPT_GCS_ALLOW1", Int16, 245.0, 0.0, 255.0, "", Neptunus,
@@ -311,9 +311,9 @@ const HEAD: &[ParamDef] = &[
 #[rustfmt::skip]
 const SAFETY: &[ParamDef] = &[
     def("FS_GCS_ENABLE", Int8, 2.0, 0.0, 4.0, "", Neptunus,
-        "Action when the controlling ground station's heartbeats stop for FS_GCS_TIMEOUT while armed: 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface."),
+        "Action when the station in control shows no life (heartbeat or stick input) for FS_GCS_TIMEOUT while armed: 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface (3 and 4 disarm instead while those modes are not available)."),
     def("FS_GCS_TIMEOUT", Real32, 5.0, 2.0, 120.0, "s", Neptunus,
-        "Time without a heartbeat from the controlling ground station before the GCS failsafe acts."),
+        "Time without a heartbeat or stick input from the station in control before it loses control and, if armed, the GCS failsafe acts."),
     def("FS_PILOT_INPUT", Int8, 2.0, 0.0, 2.0, "", Neptunus,
         "Action when pilot input (MANUAL_CONTROL or RC override) stops for FS_PILOT_TIMEOUT while armed: 0 off, 1 warn, 2 disarm. The sticks go neutral first in every case."),
     def("FS_PILOT_TIMEOUT", Real32, 3.0, 0.1, 3.0, "s", Neptunus,
