@@ -122,7 +122,7 @@ pub async fn run(
         settings.mavlink.endpoints.len(),
     )
     .with_profiles(profiles);
-    let events = EventLog::start(EventLogConfig::new(settings.data_dir.join("events")))?;
+    let event_log = EventLog::start(EventLogConfig::new(settings.data_dir.join("events")))?;
     let signing = LinkSigning::load(SigningStore::new(&settings.data_dir))?;
     vehicle.set_signing_active(signing.active());
     if signing.active() {
@@ -141,7 +141,7 @@ pub async fn run(
         params: param_file,
         seq: 0,
         last_healthy: None,
-        events: events.clone(),
+        events: event_log.clone(),
         signing,
     };
     let mut shutdown = std::pin::pin!(shutdown);
@@ -176,7 +176,7 @@ pub async fn run(
             msg = inbound.recv() => match msg {
                 None => break,
                 Some(Inbound { endpoint, peer, frame }) => {
-                    let Some(signed) = io.signing.check(&frame, now, &events) else {
+                    let Some(signed) = io.signing.check(&frame, now, &event_log) else {
                         continue;
                     };
                     let from = Sender {
@@ -244,7 +244,7 @@ pub async fn run(
     drop(link);
     router.shutdown().await;
     io.signing.persist();
-    let _ = tokio::task::spawn_blocking(move || events.shutdown()).await;
+    let _ = tokio::task::spawn_blocking(move || event_log.shutdown()).await;
     if let Some(board) = board {
         board.shutdown().await;
     }

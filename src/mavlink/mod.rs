@@ -5,6 +5,8 @@
 //!   encoding) with per-kind counters for bad input.
 //! - [`endpoint`]: endpoint URLs, sockets and serial ports, peer tables, and
 //!   the router that fans frames in and out.
+//! - [`signing`]: MAVLink 2 signing (sans-IO signer and verifier) and the
+//!   key and timestamp files.
 //! - [`tlog`]: telemetry log files (pymavlink `.tlog` format).
 //!
 //! Nothing here interprets a message or decides anything about the vehicle;
@@ -14,6 +16,7 @@
 
 pub mod endpoint;
 pub mod frame;
+pub mod signing;
 pub mod tlog;
 
 pub use endpoint::{
