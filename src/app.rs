@@ -104,7 +104,12 @@ pub async fn run(
         .iter()
         .map(|u| u.spec.clone())
         .collect();
-    let trusted: Vec<bool> = settings.mavlink.endpoints.iter().map(|u| u.trusted).collect();
+    let trusted: Vec<bool> = settings
+        .mavlink
+        .endpoints
+        .iter()
+        .map(|u| u.trusted)
+        .collect();
     let router = Router::start(specs, router_cfg, in_tx).await?;
     for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
         tracing::info!(endpoint = %spec, local = ?router.local_addr(i), "MAVLink endpoint");

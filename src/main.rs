@@ -93,7 +93,11 @@ fn signing(command: &SigningCommand, data_dir: &std::path::Path) -> anyhow::Resu
             std::fs::create_dir_all(data_dir)
                 .with_context(|| format!("cannot create data directory {}", data_dir.display()))?;
             store.save_key(Some(&SigningKey::from_passphrase(&passphrase)))?;
-            writeln!(out, "signing key set in {} (mode 0600); restart neptunus", path.display())?;
+            writeln!(
+                out,
+                "signing key set in {} (mode 0600); restart neptunus",
+                path.display()
+            )?;
         }
         SigningCommand::Clear => {
             store.save_key(None)?;

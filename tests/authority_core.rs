@@ -1329,8 +1329,7 @@ mod properties {
                     let counts = is_test || thrusters_msg == (r.v.mode() == 100);
                     if !counts {
                         // Not this mode's input: no effect on the model.
-                    } else
-                    if is_test {
+                    } else if is_test {
                         m.motion_from = Some(sysid);
                     } else if neutral {
                         m.picked_up = true;

@@ -1050,17 +1050,14 @@ impl Vehicle {
                 // Only a ground station's own heartbeats keep it in control.
                 self.note_life(from, now);
             }
-            MavMessage::COMMAND_ACK(a) => {
+            MavMessage::COMMAND_ACK(a)
                 if a.target_system == self.sysid()
-                    && (a.target_component == 0 || a.target_component == COMPONENT_ID)
-                {
-                    self.on_gcs_ack(from, &a, out);
-                }
+                    && (a.target_component == 0 || a.target_component == COMPONENT_ID) =>
+            {
+                self.on_gcs_ack(from, &a, out);
             }
-            MavMessage::SETUP_SIGNING(k) => {
-                if self.for_us(k.target_system, k.target_component) {
-                    self.setup_signing(from, &k, out);
-                }
+            MavMessage::SETUP_SIGNING(k) if self.for_us(k.target_system, k.target_component) => {
+                self.setup_signing(from, &k, out);
             }
             MavMessage::SET_MODE(m) => {
                 if m.target_system != self.sysid() && m.target_system != 0 {

@@ -245,7 +245,7 @@ impl Vehicle {
 
     /// The owner showed life (its own HEARTBEAT or stick input).
     pub(super) fn note_life(&mut self, from: Sender, now: Now) {
-        if self.owner() == Some(from.sysid) && !(self.signing_active && !from.signed) {
+        if (from.signed || !self.signing_active) && self.owner() == Some(from.sysid) {
             self.auth.last_life = Some(now.mono);
         }
     }
