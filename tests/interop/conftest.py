@@ -22,7 +22,7 @@ os.environ.setdefault("MAVLINK20", "1")  # speak MAVLink 2 from the first frame
 
 from pymavlink import mavutil  # noqa: E402
 
-from mavhelpers import Deadline, free_tcp_port, free_udp_port, from_vehicle, recv  # noqa: E402
+from mavhelpers import Deadline, Stations, free_tcp_port, free_udp_port, from_vehicle, generate_dialect, recv  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(os.environ.get("NEPTUNUS_BIN", REPO / "target" / "debug" / "neptunus"))
@@ -193,3 +193,20 @@ def pymav(make_vehicle):
         yield v, conn
     finally:
         conn.close()
+
+
+@pytest.fixture(scope="session")
+def vehicle_dialect(tmp_path_factory):
+    """pymavlink bindings generated from the vehicle's own dialect (our XML
+    over the mavlink crate's upstream XML): CONTROL_STATUS, REQUEST_OPERATOR_CONTROL,
+    NEPTUNUS_SIM_STATE decode."""
+    return generate_dialect(tmp_path_factory.mktemp("vehicle-dialect"))
+
+
+@pytest.fixture
+def stations(vehicle_dialect):
+    """Factory of ground stations and observers (`stations.gcs(port, sysid)`,
+    `stations.observer()`), all closed at teardown."""
+    s = Stations(vehicle_dialect)
+    yield s
+    s.close()
