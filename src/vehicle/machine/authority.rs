@@ -192,7 +192,7 @@ impl Vehicle {
                 Control::Command => Ok(()),
                 Control::Drive | Control::Arm => match self.params.ctrl_claim() {
                     ControlClaim::FirstToDrive => {
-                        self.grant(Station::of(from), Grant::Claim, now, out);
+                        self.grant(Station::of(from), Grant::Claim, false, now, out);
                         Ok(())
                     }
                     ControlClaim::ExplicitOnly => Err(Refusal::NeedsRequest),
@@ -289,7 +289,15 @@ impl Vehicle {
     /// Makes `to` the owner. From another owner this is a transfer: thrusters
     /// to neutral, input hold cleared, pick-up required. Claiming an armed
     /// vehicle also needs pick-up; claiming a disarmed one does not.
-    pub(super) fn grant(&mut self, to: Station, how: Grant, now: Now, out: &mut Vec<Output>) {
+    /// `takeover_allowed` is the new owner's own choice (p2 of its request).
+    pub(super) fn grant(
+        &mut self,
+        to: Station,
+        how: Grant,
+        takeover_allowed: bool,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
         let previous = self.auth.owner.map(|o| o.sysid);
         if previous == Some(to.sysid) {
             return;
@@ -301,7 +309,7 @@ impl Vehicle {
         self.safety_stop(transfer || self.armed, out);
         self.auth.owner = Some(to);
         self.last_owner = Some(to.sysid);
-        self.auth.takeover_allowed = false;
+        self.auth.takeover_allowed = takeover_allowed;
         self.auth.last_life = Some(now.mono);
         if self.auth.pending.is_some_and(|p| p.from.sysid == to.sysid) {
             self.auth.pending = None;
@@ -353,7 +361,7 @@ impl Vehicle {
         );
         self.log(kind, Some(old.sysid), why.to_owned(), out);
         if let Some(p) = self.auth.pending.take() {
-            self.grant(p.from, Grant::Handover, now, out);
+            self.grant(p.from, Grant::Handover, false, now, out);
         } else {
             self.send_control_status(out);
         }
@@ -428,21 +436,19 @@ impl Vehicle {
                 );
                 match self.auth.owner {
                     None => {
-                        self.grant(me, Grant::Request, now, out);
-                        self.set_takeover_allowed(takeover, out);
+                        self.grant(me, Grant::Request, takeover, now, out);
                         MavResult::MAV_RESULT_ACCEPTED
                     }
                     Some(o) if o.sysid == from.sysid => {
                         self.set_takeover_allowed(takeover, out);
                         // Re-requesting with takeover allowed is the owner's yes.
                         if takeover && let Some(p) = self.auth.pending.take() {
-                            self.grant(p.from, Grant::Handover, now, out);
+                            self.grant(p.from, Grant::Handover, false, now, out);
                         }
                         MavResult::MAV_RESULT_ACCEPTED
                     }
                     Some(_) if self.auth.takeover_allowed => {
-                        self.grant(me, Grant::Request, now, out);
-                        self.set_takeover_allowed(takeover, out);
+                        self.grant(me, Grant::Request, takeover, now, out);
                         MavResult::MAV_RESULT_ACCEPTED
                     }
                     Some(o) if from.sysid == self.params.sysid_mygcs() => {
@@ -456,8 +462,7 @@ impl Vehicle {
                             ),
                             out,
                         );
-                        self.grant(me, Grant::PrimaryTakeover, now, out);
-                        self.set_takeover_allowed(takeover, out);
+                        self.grant(me, Grant::PrimaryTakeover, takeover, now, out);
                         MavResult::MAV_RESULT_ACCEPTED
                     }
                     Some(o) => {
