@@ -29,12 +29,15 @@
     reason = "a bench binary's output is its figures"
 )]
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::{Read as _, Write as _};
 use std::net::UdpSocket;
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc as std_mpsc;
@@ -42,10 +45,10 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use neptunus::dialect::neptunus::*;
+use common::{Gcs, Vehicle, free_udp_port, gcs_heartbeat, manual_control, pct_ms};
 use neptunus::firmware::codec::{self, Framing};
-use neptunus::firmware::emulator::{BoardRecord, EmulatorOptions, PtyBoard};
-use neptunus::mavlink::frame::{FrameStats, decode_datagram, encode_v2};
+use neptunus::firmware::emulator::{BoardRecord, PtyBoard};
+use neptunus::mavlink::frame::encode_v2;
 
 const TARGET_ADDED_P99_MS: f64 = 0.2;
 const TARGET_CPU_PCT: f64 = 2.0;
@@ -86,7 +89,7 @@ impl Config {
 
 fn main() -> anyhow::Result<()> {
     let cfg = Config::from_env()?;
-    let bin = neptunus_bin()?;
+    let bin = common::neptunus_bin()?;
     println!("neptunus binary: {}", bin.display());
     println!(
         "{} datagrams per path, one every {:.1} ms; soak {} s",
@@ -96,10 +99,7 @@ fn main() -> anyhow::Result<()> {
     );
     // The emulators run here; one worker keeps the bench off the second core
     // as much as it can (the machine may have only two).
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(1)
-        .enable_all()
-        .build()?;
+    let rt = common::board_runtime()?;
 
     println!("\n[1/3] floor: UDP → forwarder thread → pty …");
     let floor = floor_run(&rt, &cfg)?;
@@ -115,255 +115,9 @@ fn main() -> anyhow::Result<()> {
 }
 
 // ---------------------------------------------------------------------------
-// The binary under test
+// The ground station side (the binary, the process and the station itself
+// are in tests/common, shared with the other end-to-end tests and benches)
 // ---------------------------------------------------------------------------
-
-fn neptunus_bin() -> anyhow::Result<PathBuf> {
-    if let Ok(p) = std::env::var("NEPTUNUS_BIN") {
-        let p = PathBuf::from(p);
-        if !p.is_file() {
-            bail!(
-                "NEPTUNUS_BIN={} is not a file — point it at a built neptunus binary",
-                p.display()
-            );
-        }
-        return Ok(p);
-    }
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let target = std::env::var_os("CARGO_TARGET_DIR")
-        .map(PathBuf::from)
-        .map(|t| if t.is_relative() { root.join(t) } else { t })
-        .unwrap_or_else(|| root.join("target"));
-    let release = target.join("release/neptunus");
-    let debug = target.join("debug/neptunus");
-    let bin = if release.is_file() {
-        release
-    } else if debug.is_file() {
-        println!(
-            "WARNING: {} not found, measuring the debug build — run `cargo build --release` first for meaningful figures",
-            release.display()
-        );
-        debug
-    } else {
-        bail!(
-            "no neptunus binary at {} — run `cargo build --release` before `cargo bench --bench latency`, or set NEPTUNUS_BIN",
-            release.display()
-        );
-    };
-    // A binary older than the sources measures something else.
-    if let (Ok(built), Some(newest)) = (
-        std::fs::metadata(&bin).and_then(|m| m.modified()),
-        newest_mtime(&root.join("src")),
-    ) && newest > built
-    {
-        println!(
-            "WARNING: {} is older than the sources — rebuild with `cargo build --release`",
-            bin.display()
-        );
-    }
-    Ok(bin)
-}
-
-fn newest_mtime(dir: &Path) -> Option<std::time::SystemTime> {
-    let mut newest = None;
-    for entry in std::fs::read_dir(dir).ok()?.flatten() {
-        let path = entry.path();
-        let t = if path.is_dir() {
-            newest_mtime(&path)
-        } else {
-            entry.metadata().and_then(|m| m.modified()).ok()
-        };
-        newest = newest.max(t);
-    }
-    newest
-}
-
-/// The child process, killed with SIGTERM (then SIGKILL) on drop.
-struct Vehicle {
-    child: Child,
-    stderr_path: PathBuf,
-}
-
-impl Vehicle {
-    fn spawn(bin: &Path, args: &[&str], dir: &Path) -> anyhow::Result<Self> {
-        let stderr_path = dir.join("neptunus.stderr");
-        let stderr = File::create(&stderr_path)?;
-        let child = Command::new(bin)
-            .args(args)
-            .arg("--data-dir")
-            .arg(dir.join("data"))
-            .env("RUST_LOG", "warn")
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(stderr)
-            .spawn()
-            .with_context(|| format!("cannot start {}", bin.display()))?;
-        Ok(Self { child, stderr_path })
-    }
-
-    fn pid(&self) -> u32 {
-        self.child.id()
-    }
-
-    /// Its stderr, for error messages.
-    fn stderr_tail(&self) -> String {
-        let text = std::fs::read_to_string(&self.stderr_path).unwrap_or_default();
-        let lines: Vec<&str> = text.lines().collect();
-        lines[lines.len().saturating_sub(10)..].join("\n")
-    }
-}
-
-impl Drop for Vehicle {
-    fn drop(&mut self) {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-        let end = Instant::now() + Duration::from_secs(2);
-        while Instant::now() < end {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// A loopback port nobody uses right now, for `udpin:` (the vehicle binds it).
-fn free_udp_port() -> anyhow::Result<u16> {
-    Ok(UdpSocket::bind("127.0.0.1:0")?.local_addr()?.port())
-}
-
-// ---------------------------------------------------------------------------
-// The ground station side
-// ---------------------------------------------------------------------------
-
-fn manual_control(x: i16) -> MavMessage {
-    MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
-        x,
-        y: 0,
-        z: 500,
-        r: 0,
-        target: 1,
-        ..Default::default()
-    })
-}
-
-fn gcs_heartbeat() -> MavMessage {
-    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        mavtype: MavType::MAV_TYPE_GCS,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-        ..Default::default()
-    })
-}
-
-/// A bare UDP ground station (sysid 255) talking to a `udpin:` vehicle.
-struct Gcs {
-    sock: UdpSocket,
-    seq: u8,
-}
-
-impl Gcs {
-    fn connect(port: u16) -> anyhow::Result<Self> {
-        let sock = UdpSocket::bind("127.0.0.1:0")?;
-        sock.connect(("127.0.0.1", port))?;
-        sock.set_read_timeout(Some(Duration::from_millis(100)))?;
-        Ok(Self { sock, seq: 0 })
-    }
-
-    fn send(&mut self, msg: &MavMessage) -> anyhow::Result<()> {
-        let bytes = encode_v2(255, 190, self.seq, msg);
-        self.seq = self.seq.wrapping_add(1);
-        // Before the vehicle has bound its port, loopback answers with
-        // ECONNREFUSED on a connected socket; that is not an error here.
-        match self.sock.send(&bytes) {
-            Ok(_) => Ok(()),
-            Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => Ok(()),
-            Err(e) => Err(e.into()),
-        }
-    }
-
-    fn recv(&self) -> Vec<MavMessage> {
-        let mut buf = [0u8; 4096];
-        let mut out = Vec::new();
-        if let Ok(n) = self.sock.recv(&mut buf) {
-            let mut stats = FrameStats::default();
-            decode_datagram(&buf[..n], &mut stats, &mut out);
-        }
-        out.into_iter()
-            .filter(|f| f.sysid == 1)
-            .map(|f| f.msg)
-            .collect()
-    }
-
-    /// Heartbeats until the vehicle reports itself ready to arm, then arms it.
-    fn arm(&mut self, vehicle: &mut Vehicle) -> anyhow::Result<()> {
-        let end = Instant::now() + Duration::from_secs(30);
-        let mut next_hb = Instant::now();
-        let mut ready = false;
-        while !ready {
-            if let Ok(Some(status)) = vehicle.child.try_wait() {
-                bail!(
-                    "neptunus exited ({status}) before it was ready:\n{}",
-                    vehicle.stderr_tail()
-                );
-            }
-            if Instant::now() > end {
-                bail!(
-                    "neptunus did not report PREARM_CHECK healthy within 30 s:\n{}",
-                    vehicle.stderr_tail()
-                );
-            }
-            if Instant::now() >= next_hb {
-                next_hb += Duration::from_secs(1);
-                self.send(&gcs_heartbeat())?;
-            }
-            ready = self.recv().iter().any(|m| {
-                matches!(m, MavMessage::SYS_STATUS(s) if s.onboard_control_sensors_health.contains(MavSysStatusSensor::MAV_SYS_STATUS_PREARM_CHECK))
-            });
-        }
-        let arm = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: 1.0,
-            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            target_system: 1,
-            target_component: 1,
-            ..Default::default()
-        });
-        self.send(&arm)?;
-        let end = Instant::now() + Duration::from_secs(5);
-        while Instant::now() < end {
-            for m in self.recv() {
-                if let MavMessage::COMMAND_ACK(a) = m
-                    && a.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM
-                {
-                    if a.result == MavResult::MAV_RESULT_ACCEPTED {
-                        return Ok(());
-                    }
-                    bail!("arming refused: {:?}", a.result);
-                }
-            }
-        }
-        bail!("no COMMAND_ACK for arming within 5 s")
-    }
-
-    /// Reads (and drops) telemetry on a clone of the socket until `stop`,
-    /// so the vehicle's datagrams never pile up; returns how many arrived.
-    fn drain(&self, stop: Arc<AtomicBool>) -> anyhow::Result<thread::JoinHandle<u64>> {
-        let sock = self.sock.try_clone()?;
-        Ok(thread::spawn(move || {
-            let mut buf = [0u8; 4096];
-            let mut n = 0;
-            while !stop.load(Ordering::Relaxed) {
-                if sock.recv(&mut buf).is_ok() {
-                    n += 1;
-                }
-            }
-            n
-        }))
-    }
-}
 
 /// One datagram sent: when, and the MAVLink sequence number it carried.
 #[derive(Clone, Copy)]
@@ -433,27 +187,10 @@ fn watch_go_frames(
     rt: &tokio::runtime::Runtime,
     board: &PtyBoard,
 ) -> std_mpsc::Receiver<(Instant, String)> {
-    let mut records = board.control().timed_records();
-    let (tx, rx) = std_mpsc::channel();
-    rt.spawn(async move {
-        loop {
-            match records.recv().await {
-                Ok(r) => {
-                    if let BoardRecord::Frame(f) = &r.record
-                        && let Some(text) = go_text(f)
-                        && tx.send((r.at, text)).is_err()
-                    {
-                        break;
-                    }
-                }
-                Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => {
-                    tracing::warn!("latency bench lagged {n} board records");
-                }
-                Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
-            }
-        }
-    });
-    rx
+    common::forward_records(rt, board, |r| match r {
+        BoardRecord::Frame(f) => go_text(f),
+        BoardRecord::Executed(_) => None,
+    })
 }
 
 /// Latencies of one path.
@@ -556,15 +293,6 @@ impl Outcome {
     }
 }
 
-/// Nearest-rank percentile of sorted durations, in ms.
-fn pct_ms(sorted: &[Duration], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[rank - 1].as_secs_f64() * 1e3
-}
-
 /// How long the link keeps the serial line after writing a `go()` frame
 /// (its wire time at 115200 baud plus the frame gap): a datagram arriving
 /// sooner after the previous one waits for the line.
@@ -590,10 +318,7 @@ fn collect_frames(rx: &std_mpsc::Receiver<(Instant, String)>) -> Vec<(Instant, S
 fn floor_run(rt: &tokio::runtime::Runtime, cfg: &Config) -> anyhow::Result<Outcome> {
     let dir = tempfile::tempdir()?;
     let link = dir.path().join("floor-board");
-    let board = {
-        let _rt = rt.enter();
-        PtyBoard::spawn(EmulatorOptions::default(), Some(link.clone()))?
-    };
+    let board = common::spawn_board(rt, Some(link.clone()))?;
     let frames_rx = watch_go_frames(rt, &board);
 
     // The forwarder: one datagram in, one go() frame out, nothing else. The
@@ -670,10 +395,7 @@ fn neptunus_run(
 ) -> anyhow::Result<(Outcome, Option<f64>)> {
     let dir = tempfile::tempdir()?;
     let link = dir.path().join("board");
-    let board = {
-        let _rt = rt.enter();
-        PtyBoard::spawn(EmulatorOptions::default(), Some(link.clone()))?
-    };
+    let board = common::spawn_board(rt, Some(link.clone()))?;
     let frames_rx = watch_go_frames(rt, &board);
     let port = free_udp_port()?;
     let link_arg = link.to_string_lossy().into_owned();
@@ -682,6 +404,7 @@ fn neptunus_run(
         bin,
         &["--serial", &link_arg, "--mavlink", &endpoint],
         dir.path(),
+        "",
     )?;
     let mut gcs = Gcs::connect(port)?;
     gcs.arm(&mut vehicle)?;
@@ -753,7 +476,7 @@ fn soak_run(bin: &Path, cfg: &Config) -> anyhow::Result<Soak> {
     let dir = tempfile::tempdir()?;
     let port = free_udp_port()?;
     let endpoint = format!("udpin:127.0.0.1:{port}");
-    let mut vehicle = Vehicle::spawn(bin, &["--sim", "--mavlink", &endpoint], dir.path())?;
+    let mut vehicle = Vehicle::spawn(bin, &["--sim", "--mavlink", &endpoint], dir.path(), "")?;
     let mut gcs = Gcs::connect(port)?;
     gcs.arm(&mut vehicle)?;
     let stop = Arc::new(AtomicBool::new(false));
