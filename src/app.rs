@@ -162,25 +162,27 @@ pub async fn run(
     let mut nav = NavSample::default();
     let mut status = StatusSample::default();
     loop {
-        let now = clock();
+        // Time is read when an input is handled, not when the wait began: a
+        // tick or a datagram must not carry a time up to a tick period old.
         tokio::select! {
             () = &mut shutdown => break,
-            _ = tick.tick() => vehicle.handle(Input::Tick, now, &mut outputs),
+            _ = tick.tick() => vehicle.handle(Input::Tick, clock(), &mut outputs),
             ev = events.recv() => match ev {
                 None => break,
-                Some(LinkEvent::State { state, reason }) => vehicle.handle(Input::Link { state, reason }, now, &mut outputs),
+                Some(LinkEvent::State { state, reason }) => vehicle.handle(Input::Link { state, reason }, clock(), &mut outputs),
                 Some(LinkEvent::Telemetry(ev)) => {
                     match &ev {
                         Event::Nav(n) => nav = merge_nav(nav, *n),
                         Event::Status(s) if s.vout_v.is_some() => status = s.clone(),
                         _ => {}
                     }
-                    vehicle.handle(Input::Board(ev), now, &mut outputs);
+                    vehicle.handle(Input::Board(ev), clock(), &mut outputs);
                 }
             },
             msg = inbound.recv() => match msg {
                 None => break,
                 Some(Inbound { endpoint, peer, frame }) => {
+                    let now = clock();
                     let Some(signed) = io.signing.check(&frame, now, &event_log) else {
                         continue;
                     };
@@ -221,7 +223,7 @@ pub async fn run(
                         heave_mps: s.heave_mps,
                         yaw_rate_rps: s.yaw_rate_dps.to_radians(),
                     };
-                    vehicle.handle(Input::SimTruth(t), now, &mut outputs);
+                    vehicle.handle(Input::SimTruth(t), clock(), &mut outputs);
                 }
             }
             _ = report.tick() => {
@@ -240,7 +242,7 @@ pub async fn run(
                 );
             }
         }
-        io.apply(&mut outputs, &vehicle, now);
+        io.apply(&mut outputs, &vehicle, clock());
     }
     tracing::info!("shutting down: thrusters to neutral");
     link.send(NEUTRAL);

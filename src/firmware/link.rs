@@ -57,7 +57,7 @@ impl LinkConfig {
             baud: 115_200,
             framing: Framing::Crc8,
             ping_period: Duration::from_secs(1),
-            healthy_window: Duration::from_millis(1500),
+            healthy_window: Duration::from_millis(500),
             stale_after: Duration::from_millis(1500),
             boot_wait: Duration::from_millis(1500),
             backoff_min: Duration::from_millis(200),
@@ -284,11 +284,13 @@ async fn run(
                 }
                 LinkState::Up => tracing::info!(device = %cfg.device.display(), "board link up"),
             }
+            // Figures first: anyone looking at them after the event sees the
+            // new state (the other order let a test read the old reason).
+            let _ = stats_tx.send(stats.clone());
             if events.try_send(LinkEvent::State { state, reason }).is_err() {
                 stats.events_dropped += 1;
+                let _ = stats_tx.send(stats.clone());
             }
-            // Anyone looking at the figures after the event sees the new state.
-            let _ = stats_tx.send(stats.clone());
         }
     };
     report(
