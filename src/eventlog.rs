@@ -422,9 +422,9 @@ pub fn rfc3339_utc(unix_us: u64) -> String {
 
 /// Proleptic Gregorian (year, month, day) of a day count since 1970-01-01:
 /// Howard Hinnant's era-based `civil_from_days`, unsigned since the log
-/// never sees times before 1970. Same algorithm as the telemetry log's file
-/// names use; no date crate is in the offline cache.
-fn civil_from_days(days: u64) -> (u64, u64, u64) {
+/// never sees times before 1970. The telemetry log's file names use it too;
+/// no date crate is in the offline cache.
+pub(crate) fn civil_from_days(days: u64) -> (u64, u64, u64) {
     let z = days + 719_468;
     let era = z / 146_097;
     let doe = z - era * 146_097;

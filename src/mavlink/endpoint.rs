@@ -1197,30 +1197,14 @@ fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
 /// the ROV (which may have no time zone set) and on the laptop.
 fn session_name(now: SystemTime) -> String {
     let secs = now.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let days = i64::try_from(secs / 86_400).unwrap_or(0);
     let rem = secs % 86_400;
-    let (y, m, d) = civil_from_days(days);
+    let (y, m, d) = crate::eventlog::civil_from_days(secs / 86_400);
     format!(
         "neptunus-{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
         rem / 3600,
         (rem / 60) % 60,
         rem % 60
     )
-}
-
-/// Proleptic Gregorian date of a day count since 1970-01-01 (the standard
-/// era-based conversion; avoids a date crate for one file name).
-fn civil_from_days(days: i64) -> (i64, u32, u32) {
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    (y, m as u32, d as u32)
 }
 
 #[cfg(test)]
