@@ -222,6 +222,7 @@ pub async fn run(
                         sway_mps: s.sway_mps,
                         heave_mps: s.heave_mps,
                         yaw_rate_rps: s.yaw_rate_dps.to_radians(),
+                        ..SimTruth::default()
                     };
                     vehicle.handle(Input::SimTruth(t), clock(), &mut outputs);
                 }

@@ -142,6 +142,9 @@ pub struct SimTruth {
     pub sway_mps: f64,
     pub heave_mps: f64,
     pub yaw_rate_rps: f64,
+    /// Roll and pitch (0 in the 4-DOF model).
+    pub roll_rad: f64,
+    pub pitch_rad: f64,
 }
 
 /// What the core asks the I/O around it to do.
@@ -961,6 +964,8 @@ impl Vehicle {
                     v: t.sway_mps as f32,
                     w: t.heave_mps as f32,
                     r: t.yaw_rate_rps as f32,
+                    phi: t.roll_rad as f32,
+                    theta: t.pitch_rad as f32,
                 })]
             }
             _ => Vec::new(),
