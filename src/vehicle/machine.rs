@@ -60,6 +60,10 @@ pub struct Sender {
     pub signed: bool,
     /// It came over an endpoint marked trusted (SETUP_SIGNING is accepted there).
     pub trusted: bool,
+    /// A browser HMI session whose operator is a pilot (gave the pilot
+    /// password, or none is configured): allowed to request and take control
+    /// whatever its system id, like a station in the NEPT_GCS_ALLOWn list.
+    pub pilot: bool,
 }
 
 impl Sender {
@@ -72,6 +76,7 @@ impl Sender {
             compid,
             signed: false,
             trusted: false,
+            pilot: false,
         }
     }
 

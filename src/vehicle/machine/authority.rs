@@ -163,6 +163,12 @@ impl Vehicle {
         out.push(Output::Log(LogEvent::new(kind, sysid, detail)));
     }
 
+    /// May `from` control the vehicle at all: SYSID_MYGCS, a NEPT_GCS_ALLOWn
+    /// station, or an HMI pilot session.
+    fn allowed(&self, from: Sender) -> bool {
+        from.pilot || self.params.gcs_allowed(from.sysid)
+    }
+
     /// May `from` change the vehicle's state in this way? Claims an unowned
     /// vehicle for the first allowed station that drives or arms (NEPT_CTRL_CLAIM 0).
     pub(super) fn check_control(
@@ -175,7 +181,7 @@ impl Vehicle {
         if self.signing_active && !from.signed {
             return Err(Refusal::Unsigned);
         }
-        if !self.params.gcs_allowed(from.sysid) {
+        if !self.allowed(from) {
             return Err(Refusal::NotAllowed);
         }
         match self.auth.owner {
@@ -418,7 +424,7 @@ impl Vehicle {
                 MavResult::MAV_RESULT_ACCEPTED
             }
             Some(1) => {
-                if !self.params.gcs_allowed(from.sysid) {
+                if !self.allowed(from) {
                     let text = format!(
                         "Control request from sysid {} refused: {}",
                         from.sysid,
