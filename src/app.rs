@@ -14,8 +14,10 @@ use crate::config::{BoardSource, Settings};
 use crate::dialect::neptunus::MavMessage;
 use crate::eventlog::{EventLog, EventLogConfig, EventLogError, LogEvent};
 use crate::firmware::codec::{Command, Event, NavSample, StatusSample};
+use crate::firmware::emulator::EmulatorOptions;
 use crate::firmware::emulator::PtyBoard;
 use crate::firmware::link::{self, LinkError, LinkEvent};
+use crate::firmware::loopback::LoopbackBoard;
 use crate::mavlink::endpoint::{
     EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle,
 };
@@ -24,7 +26,9 @@ use crate::mavlink::signing::{
     Signer, SigningError, SigningKey, SigningStore, Verdict, Verifier, timestamp_from_unix_us,
 };
 use crate::mavlink::tlog::TlogConfig;
-use crate::vehicle::machine::{COMPONENT_ID, Input, Now, Output, Sender, SimTruth, To, Vehicle};
+use crate::vehicle::machine::{
+    COMPONENT_ID, Input, Now, Output, RunMode, Sender, SimTruth, To, Vehicle,
+};
 use crate::vehicle::params::ParamFile;
 
 /// Errors starting the vehicle.
@@ -148,7 +152,10 @@ pub async fn run(
         last_healthy: None,
         events: event_log.clone(),
         signing,
+        simulator: None,
+        simulator_opts: settings.simulator.clone(),
     };
+    let mut sim_events = Vec::new();
     let mut shutdown = std::pin::pin!(shutdown);
     let mut outputs = Vec::with_capacity(64);
     let mut tick = tokio::time::interval(Duration::from_millis(10));
@@ -166,7 +173,19 @@ pub async fn run(
         // tick or a datagram must not carry a time up to a tick period old.
         tokio::select! {
             () = &mut shutdown => break,
-            _ = tick.tick() => vehicle.handle(Input::Tick, clock(), &mut outputs),
+            _ = tick.tick() => {
+                let now = clock();
+                // The built-in simulator (run mode SIMULATOR) runs on the same tick.
+                if let Some(sim) = io.simulator.as_mut() {
+                    sim.advance(now.mono, &mut sim_events);
+                    let truth = sim_truth(&sim.snapshot().sim);
+                    for ev in sim_events.drain(..) {
+                        vehicle.handle(Input::SimBoard(ev), now, &mut outputs);
+                    }
+                    vehicle.handle(Input::SimTruth(truth), now, &mut outputs);
+                }
+                vehicle.handle(Input::Tick, now, &mut outputs);
+            }
             ev = events.recv() => match ev {
                 None => break,
                 Some(LinkEvent::State { state, reason }) => vehicle.handle(Input::Link { state, reason }, clock(), &mut outputs),
@@ -212,19 +231,11 @@ pub async fn run(
                 if changed.is_err() {
                     truth = None;
                 } else if let Some(rx) = truth.as_mut() {
-                    let s = rx.borrow_and_update().sim;
-                    let t = SimTruth {
-                        north_m: s.north_m,
-                        east_m: s.east_m,
-                        depth_m: s.depth_m,
-                        heading_rad: s.heading_deg.to_radians(),
-                        surge_mps: s.surge_mps,
-                        sway_mps: s.sway_mps,
-                        heave_mps: s.heave_mps,
-                        yaw_rate_rps: s.yaw_rate_dps.to_radians(),
-                        ..SimTruth::default()
-                    };
-                    vehicle.handle(Input::SimTruth(t), clock(), &mut outputs);
+                    let t = sim_truth(&rx.borrow_and_update().sim);
+                    // In SIMULATOR run mode the built-in simulator's truth counts.
+                    if io.simulator.is_none() {
+                        vehicle.handle(Input::SimTruth(t), clock(), &mut outputs);
+                    }
                 }
             }
             _ = report.tick() => {
@@ -259,6 +270,20 @@ pub async fn run(
     Ok(())
 }
 
+fn sim_truth(s: &crate::firmware::emulator::SimSnapshot) -> SimTruth {
+    SimTruth {
+        north_m: s.north_m,
+        east_m: s.east_m,
+        depth_m: s.depth_m,
+        heading_rad: s.heading_deg.to_radians(),
+        surge_mps: s.surge_mps,
+        sway_mps: s.sway_mps,
+        heave_mps: s.heave_mps,
+        yaw_rate_rps: s.yaw_rate_dps.to_radians(),
+        ..SimTruth::default()
+    }
+}
+
 fn route(to: To) -> Route {
     match to {
         To::All => Route::All,
@@ -276,6 +301,9 @@ struct Io {
     last_healthy: Option<Duration>,
     events: EventLog,
     signing: LinkSigning,
+    /// The built-in simulator while the run mode is SIMULATOR.
+    simulator: Option<LoopbackBoard>,
+    simulator_opts: EmulatorOptions,
 }
 
 impl Io {
@@ -315,6 +343,29 @@ impl Io {
                     });
                 }
                 Output::Board(cmd) => self.link.send(cmd),
+                Output::SimBoard(cmd) => {
+                    if let Some(sim) = self.simulator.as_mut() {
+                        sim.send(&cmd, now.mono);
+                    }
+                }
+                Output::RunMode {
+                    mode,
+                    start_depth_m,
+                    start_heading_deg,
+                } => {
+                    self.simulator = match mode {
+                        RunMode::Normal => None,
+                        RunMode::Simulator => {
+                            let mut sim = LoopbackBoard::new(self.simulator_opts.clone(), now.mono);
+                            let mut start = crate::sim::SimState::default();
+                            start.eta[2] = start_depth_m;
+                            start.eta[3] = start_heading_deg.to_radians();
+                            sim.board_mut().set_sim_state(start);
+                            Some(sim)
+                        }
+                    };
+                    tracing::warn!(?mode, "run mode changed");
+                }
                 Output::Log(ev) => {
                     tracing::info!(event = ev.kind, sysid = ?ev.sysid, "{}", ev.detail);
                     self.events.record(now.unix_us, now.mono, &ev);
@@ -340,6 +391,9 @@ impl Io {
                     {
                         self.last_healthy = Some(now.mono);
                         self.link.healthy();
+                        if let Some(sim) = self.simulator.as_mut() {
+                            sim.send(&crate::firmware::codec::Command::Ping(0), now.mono);
+                        }
                     }
                 }
             }

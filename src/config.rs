@@ -80,6 +80,12 @@ pub enum CliCommand {
         #[command(subcommand)]
         command: SigningCommand,
     },
+    /// Run the autopilot step-response scenarios on the simulator (simulated
+    /// time, fixed seeds) and write a CSV and a PNG plot per scenario to DIR.
+    SimReport {
+        /// Output directory (created if missing).
+        dir: PathBuf,
+    },
 }
 
 /// `neptunus signing …` (the vehicle must not be running: it reads the key at start).
@@ -214,6 +220,9 @@ pub struct Settings {
     pub mavlink: MavlinkSettings,
     /// `None`: the profiles built into the binary.
     pub profiles_dir: Option<PathBuf>,
+    /// The built-in simulator of run mode SIMULATOR (the file's `[emulator]`,
+    /// on a real board as in `--sim`).
+    pub simulator: EmulatorOptions,
 }
 
 impl FileConfig {
@@ -340,6 +349,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         data_dir,
         mavlink,
         profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
+        simulator: file.emulator.clone(),
     })
 }
 

@@ -18,5 +18,6 @@ pub mod dialect;
 pub mod eventlog;
 pub mod firmware;
 pub mod mavlink;
+pub mod scenario;
 pub mod sim;
 pub mod vehicle;

@@ -35,6 +35,16 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
         Some(CliCommand::Profiles {
             command: ProfilesCommand::Check { dir },
         }) => profiles_check(dir.as_deref())?,
+        Some(CliCommand::SimReport { dir }) => {
+            let outcomes = neptunus::scenario::report::all();
+            for o in &outcomes {
+                for (name, value, unit) in &o.metrics {
+                    println!("{:<22} {name:<28} {value:>9.3} {unit}", o.name);
+                }
+            }
+            let written = neptunus::scenario::report::write(&dir, &outcomes)?;
+            println!("wrote {} files to {}", written.len(), dir.display());
+        }
         Some(CliCommand::Signing { command }) => {
             let data_dir = config::resolve(&cli.run)?.data_dir;
             signing(&command, &data_dir)?;

@@ -14,4 +14,5 @@
 pub mod codec;
 pub mod emulator;
 pub mod link;
+pub mod loopback;
 pub mod pty;

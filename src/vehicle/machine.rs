@@ -21,6 +21,9 @@ use mavlink_core::types::CharArray;
 mod authority;
 mod driving;
 mod failsafe;
+mod holds;
+
+pub use holds::{MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE, RunMode};
 
 use super::input::Profiles;
 use super::params::ParamStore;
@@ -102,6 +105,8 @@ pub enum Input {
         msg: MavMessage,
     },
     Board(Event),
+    /// Telemetry of the built-in simulator (run mode SIMULATOR).
+    SimBoard(Event),
     Link {
         state: LinkState,
         reason: Option<String>,
@@ -163,6 +168,15 @@ pub enum Output {
         msg: MavMessage,
     },
     Board(Command),
+    /// A command for the built-in simulator's board (run mode SIMULATOR).
+    SimBoard(Command),
+    /// The run mode changed: route thruster commands and telemetry
+    /// accordingly; a new simulator starts at the given depth and heading.
+    RunMode {
+        mode: RunMode,
+        start_depth_m: f64,
+        start_heading_deg: f64,
+    },
     /// Parameters changed: persist them.
     SaveParams,
     /// The board's dead-man switch may be fed now: the core is alive and
@@ -212,13 +226,13 @@ pub enum Identity {
 pub const MODES: &[(u32, &str, Option<&str>)] = &[
     (19, "MANUAL", None),
     (MODE_MANUAL_THRUSTERS, "MANUAL_THRUSTERS", None),
-    (0, "STABILIZE", Some("heading hold is not implemented yet")),
+    (MODE_STABILIZE, "STABILIZE", None),
     (
         1,
         "ACRO",
         Some("rate control is not implemented on this vehicle"),
     ),
-    (2, "ALT_HOLD", Some("depth hold is not implemented yet")),
+    (MODE_ALT_HOLD, "ALT_HOLD", None),
     (
         3,
         "AUTO",
@@ -234,7 +248,7 @@ pub const MODES: &[(u32, &str, Option<&str>)] = &[
         "CIRCLE",
         Some("needs a position estimate, which this vehicle does not have"),
     ),
-    (9, "SURFACE", Some("surfacing is not implemented yet")),
+    (MODE_SURFACE, "SURFACE", None),
     (
         16,
         "POSHOLD",
@@ -248,6 +262,12 @@ pub const MODES: &[(u32, &str, Option<&str>)] = &[
     ),
 ];
 pub const MODE_MANUAL: u32 = 19;
+/// All thrusters neutral.
+pub const NEUTRAL_GO: Command = Command::Go {
+    port_us: 1500,
+    vertical_us: 1500,
+    starboard_us: 1500,
+};
 /// Neptunus' own mode: each thruster driven directly (NEPTUNUS_THRUSTERS).
 pub const MODE_MANUAL_THRUSTERS: u32 = 100;
 
@@ -307,6 +327,7 @@ pub struct Vehicle {
     signing_active: bool,
     armed_at: Option<Duration>,
     link_seen_up: bool,
+    holds: holds::Holds,
 }
 
 fn chars<const N: usize>(s: &str) -> CharArray<N> {
@@ -366,6 +387,7 @@ impl Vehicle {
             signing_active: false,
             armed_at: None,
             link_seen_up: false,
+            holds: holds::Holds::default(),
         }
     }
 
@@ -430,7 +452,19 @@ impl Vehicle {
             Input::Tick => self.tick(now, out),
             Input::Link { state, reason } => self.on_link(state, reason, now, out),
             Input::Hmi { sysid, event } => self.on_hmi(sysid, event, now, out),
-            Input::Board(ev) => self.on_board(ev, now),
+            Input::Board(ev) => {
+                // In SIMULATOR run mode the board's navigation and power
+                // telemetry is not the vehicle's (the simulator's is).
+                let simulated = self.holds.run_mode == RunMode::Simulator;
+                if !(simulated && matches!(ev, Event::Nav(_) | Event::Status(_))) {
+                    self.on_board(ev, now, out);
+                }
+            }
+            Input::SimBoard(ev) => {
+                if self.holds.run_mode == RunMode::Simulator {
+                    self.on_board(ev, now, out);
+                }
+            }
             Input::UnknownCommand {
                 from,
                 command,
@@ -495,11 +529,17 @@ impl Vehicle {
 
     fn send_neutral(&mut self, out: &mut Vec<Output>) {
         self.motors_us = [1500; 3];
-        out.push(Output::Board(Command::Go {
-            port_us: 1500,
-            vertical_us: 1500,
-            starboard_us: 1500,
-        }));
+        self.holds.applied = driving::NO_DEMAND;
+        self.send_go(NEUTRAL_GO, out);
+    }
+
+    /// A thruster command, to the board or, in SIMULATOR run mode, to the
+    /// simulator (the board then stays stopped).
+    fn send_go(&mut self, go: Command, out: &mut Vec<Output>) {
+        match self.holds.run_mode {
+            RunMode::Normal => out.push(Output::Board(go)),
+            RunMode::Simulator => out.push(Output::SimBoard(go)),
+        }
     }
 
     // ---- board ----
@@ -544,6 +584,9 @@ impl Vehicle {
     fn safety_stop(&mut self, pickup: bool, out: &mut Vec<Output>) {
         self.stop_pilot();
         self.pilot.hold = None;
+        // An autopilot mode stops where it is: the held depth and heading are
+        // taken again from the vehicle's state.
+        self.holds_reset();
         // After a transfer the next button mask is a baseline: buttons the new
         // owner holds were not pressed now. Otherwise buttons start released.
         self.pilot.buttons_stale = pickup;
@@ -583,7 +626,7 @@ impl Vehicle {
         }
     }
 
-    fn on_board(&mut self, ev: Event, now: Now) {
+    fn on_board(&mut self, ev: Event, now: Now, out: &mut Vec<Output>) {
         let t = Some(now.mono);
         match ev {
             Event::Nav(NavSample {
@@ -603,9 +646,11 @@ impl Vehicle {
                     }
                     self.prev_heading = Some((now.mono, h));
                     self.heading_deg = Stamped { value: h, at: t };
+                    self.estimator_reading(holds::Reading::Heading(h), now, out);
                 }
                 if let Some(d) = depth_m {
                     self.depth_m = Stamped { value: d, at: t };
+                    self.estimator_reading(holds::Reading::Depth(d), now, out);
                 }
                 if let Some(p) = pitch_deg {
                     self.pitch_deg = Stamped { value: p, at: t };
@@ -784,6 +829,10 @@ impl Vehicle {
         if self.armed {
             base |= F::MAV_MODE_FLAG_SAFETY_ARMED;
         }
+        if self.holds.run_mode == RunMode::Simulator {
+            // Telemetry is simulated: MAVLink's flag for hardware in the loop.
+            base |= F::MAV_MODE_FLAG_HIL_ENABLED;
+        }
         let system_status = if self.link != LinkState::Up || self.failsafe_active() {
             MavState::MAV_STATE_CRITICAL
         } else if self.armed {
@@ -807,8 +856,18 @@ impl Vehicle {
     /// The message(s) for `id` now; empty when there is nothing honest to send.
     pub fn build(&self, id: u32, now: Now) -> Vec<MavMessage> {
         let boot_ms = self.boot_ms(now);
-        let heading = self.heading_deg.value;
-        let depth = self.depth_m.value;
+        // Estimates where the filters have started, raw readings before.
+        let e = self.holds.est.estimate(now.mono);
+        let (heading, yaw_rate_rps) = if self.holds.est.heading_filter().initialised() {
+            (e.heading_deg, e.yaw_rate_dps.to_radians())
+        } else {
+            (self.heading_deg.value, self.yaw_rate_rps)
+        };
+        let (depth, heave_mps) = if self.holds.est.depth_filter().initialised() {
+            (e.depth_m, e.heave_mps)
+        } else {
+            (self.depth_m.value, 0.0)
+        };
         match id {
             0 => vec![self.heartbeat()],
             1 => {
@@ -842,7 +901,7 @@ impl Vehicle {
                     yaw: yaw.to_radians() as f32,
                     rollspeed: 0.0,
                     pitchspeed: 0.0,
-                    yawspeed: self.yaw_rate_rps as f32,
+                    yawspeed: yaw_rate_rps as f32,
                 })]
             }
             33 if self.fresh(&self.depth_m, now) => {
@@ -854,7 +913,7 @@ impl Vehicle {
                     relative_alt: (-depth * 1000.0).round() as i32,
                     vx: 0,
                     vy: 0,
-                    vz: 0,
+                    vz: (heave_mps * 100.0).round().clamp(-32767.0, 32767.0) as i16,
                     hdg: if self.fresh(&self.heading_deg, now) {
                         (heading * 100.0).round().rem_euclid(36000.0) as u16
                     } else {
@@ -886,7 +945,7 @@ impl Vehicle {
                     airspeed: 0.0,
                     groundspeed: 0.0,
                     alt: -depth as f32,
-                    climb: 0.0,
+                    climb: -heave_mps as f32,
                     heading: heading.round().rem_euclid(360.0) as i16,
                     throttle,
                 })]
@@ -973,7 +1032,7 @@ impl Vehicle {
                     theta: t.pitch_rad as f32,
                 })]
             }
-            _ => Vec::new(),
+            _ => self.build_holds(id, now).into_iter().collect(),
         }
     }
 
@@ -1056,6 +1115,10 @@ impl Vehicle {
             MavMessage::MANUAL_CONTROL(m) => self.on_manual_control(from, &m, now, out),
             MavMessage::RC_CHANNELS_OVERRIDE(r) => self.on_rc_override(from, &r, now, out),
             MavMessage::NEPTUNUS_THRUSTERS(t) => self.on_thrusters_message(from, &t, now, out),
+            MavMessage::SET_POSITION_TARGET_GLOBAL_INT(t) => {
+                self.on_position_target(from, &t, now, out)
+            }
+            MavMessage::SET_ATTITUDE_TARGET(t) => self.on_attitude_target(from, &t, now, out),
             MavMessage::HEARTBEAT(h) if h.mavtype == MavType::MAV_TYPE_GCS => {
                 // Only a ground station's own heartbeats keep it in control.
                 self.note_life(from, now);
@@ -1074,7 +1137,7 @@ impl Vehicle {
                     return;
                 }
                 let result = match self.check_control(from, authority::Control::Command, now, out) {
-                    Ok(()) => self.set_mode(m.custom_mode, Some(from.sysid), out),
+                    Ok(()) => self.set_mode(m.custom_mode, Some(from.sysid), now, out),
                     Err(why) => self.refuse_command(from, "mode change", why, now, out),
                 };
                 out.push(Output::Send {
@@ -1255,7 +1318,13 @@ impl Vehicle {
         }
     }
 
-    fn set_mode(&mut self, mode: u32, by: Option<u8>, out: &mut Vec<Output>) -> MavResult {
+    fn set_mode(
+        &mut self,
+        mode: u32,
+        by: Option<u8>,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> MavResult {
         match MODES.iter().find(|m| m.0 == mode) {
             None => {
                 self.statustext(
@@ -1275,10 +1344,19 @@ impl Vehicle {
             }
             Some((m, name, None)) => {
                 if self.mode != *m {
+                    if let Some(why) = self.hold_unavailable(*m, now) {
+                        self.statustext(
+                            MavSeverity::MAV_SEVERITY_WARNING,
+                            &format!("Mode {name} refused: {why}"),
+                            out,
+                        );
+                        return MavResult::MAV_RESULT_FAILED;
+                    }
                     let old = mode_name(self.mode);
                     self.mode = *m;
                     // A mode change is a safety-mode stop.
                     self.stop_pilot();
+                    self.holds_reset();
                     self.send_neutral(out);
                     self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {name}"), out);
                     self.log("mode", by, format!("{old} -> {name}"), out);
@@ -1320,10 +1398,18 @@ impl Vehicle {
                 let result = self.operator_control(from, p, now, out);
                 out.push(ack(result));
             }
+            C::MAV_CMD_NEPTUNUS_SET_RUN_MODE => {
+                let result = self.run_mode_command(from, p, now, out);
+                out.push(ack(result));
+            }
+            C::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET => {
+                let result = self.autopilot_target_command(from, p, now, out);
+                out.push(ack(result));
+            }
             C::MAV_CMD_DO_SET_MODE => {
                 let mode = given(p[1]).map_or(u32::MAX, |m| m.max(0.0) as u32);
                 let result = match self.check_control(from, Control::Command, now, out) {
-                    Ok(()) => self.set_mode(mode, Some(from.sysid), out),
+                    Ok(()) => self.set_mode(mode, Some(from.sysid), now, out),
                     Err(why) => self.refuse_command(from, "mode change", why, now, out),
                 };
                 out.push(ack(result));
@@ -1483,6 +1569,7 @@ impl Vehicle {
         // Arming starts from neutral: sticks sent while disarmed do not move
         // the vehicle the instant it arms.
         self.stop_pilot();
+        self.holds_reset();
         self.send_neutral(out);
         self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Armed", out);
         self.log(

@@ -8,10 +8,14 @@
 //! - [`params`]: the MAVLink parameter set (ArduSub names and types where
 //!   the meaning is the same), its validation and its file storage.
 //! - [`telemetry`]: the per-endpoint telemetry schedule.
+//! - [`estimator`]: depth and heading Kalman filters with wild-point gating.
+//! - [`autopilot`]: depth and heading hold (PID controllers and setpoints).
 //!
 //! Nothing here opens a socket, reads a clock or sleeps; time comes in as an
 //! argument and effects go out as values.
 
+pub mod autopilot;
+pub mod estimator;
 pub mod input;
 pub mod machine;
 pub mod mixer;

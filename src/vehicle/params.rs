@@ -299,6 +299,8 @@ const HEAD: &[ParamDef] = &[
         "Extra gain on the throttle (vertical) axis, on top of the pilot gain."),
     def("JS_LIGHTS_STEPS", Int16, 8.0, 1.0, 10.0, "", Neptunus,
         "Number of brightness steps of the lights buttons from off to full."),
+    def("NEPT_ESC_DEADZONE", Int16, 50.0, 0.0, 200.0, "µs", Neptunus,
+        "The board firmware's ESC deadzone around 1500 µs (OpenROV: 50). The estimator counts a thruster inside it as giving no thrust."),
     def("NEPT_LIGHTS_MAX", Int16, 255.0, 0.0, 255.0, "", Neptunus,
         "Lamp level sent to the OpenROV board (ligt) at full brightness; lower it to cap the lamp's power."),
     def("NEPT_TILT_MIN_US", Int16, 1000.0, 500.0, 2500.0, "µs", Neptunus,
@@ -409,8 +411,8 @@ const TUNING: &[ParamDef] = &[
         "Pitch angle P gain. Neptunus has no pitch control: no effect."),
     def("ATC_ANG_RLL_P", Real32, 4.5, 3.0, 12.0, "", Compat,
         "Roll angle P gain. Neptunus has no roll control: no effect."),
-    def("ATC_ANG_YAW_P", Real32, 4.5, 3.0, 12.0, "", Neptunus,
-        "Heading hold: heading error to yaw rate P gain."),
+    def("ATC_ANG_YAW_P", Real32, 3.0, 1.0, 12.0, "1/s", Neptunus,
+        "Heading hold: heading error (rad) to yaw rate target (rad/s)."),
     def("ATC_RAT_PIT_P", Real32, 0.135, 0.0, 0.5, "", Compat,
         "Pitch rate P gain. No effect."),
     def("ATC_RAT_PIT_I", Real32, 0.09, 0.0, 2.0, "", Compat,
@@ -427,40 +429,56 @@ const TUNING: &[ParamDef] = &[
         "Roll rate I limit. No effect."),
     def("ATC_RAT_RLL_D", Real32, 0.0036, 0.0, 0.05, "", Compat,
         "Roll rate D gain. No effect."),
-    def("ATC_RAT_YAW_P", Real32, 0.18, 0.0, 2.5, "", Neptunus,
-        "Heading hold: yaw rate error to yaw demand P gain."),
-    def("ATC_RAT_YAW_I", Real32, 0.018, 0.0, 1.0, "", Neptunus,
-        "Heading hold: yaw rate I gain."),
-    def("ATC_RAT_YAW_IMAX", Real32, 0.222, 0.0, 1.0, "", Neptunus,
+    def("ATC_RAT_YAW_P", Real32, 0.8, 0.0, 2.5, "", Neptunus,
+        "Heading hold: yaw rate error (rad/s) to yaw demand (-1..1) P gain."),
+    def("ATC_RAT_YAW_I", Real32, 0.5, 0.0, 2.0, "", Neptunus,
+        "Heading hold: yaw rate I gain (trims a steady yaw moment, e.g. unequal thrusters)."),
+    def("ATC_RAT_YAW_IMAX", Real32, 0.3, 0.0, 1.0, "", Neptunus,
         "Heading hold: limit of the yaw rate integrator, as a fraction of full yaw demand."),
-    def("ATC_RAT_YAW_D", Real32, 0.0, 0.0, 0.02, "", Neptunus,
-        "Heading hold: yaw rate D gain."),
+    def("ATC_RAT_YAW_D", Real32, 0.0, 0.0, 0.1, "", Neptunus,
+        "Heading hold: yaw rate D gain, on the measured rate (no kick on a target step)."),
+    def("ATC_RAT_YAW_FF", Real32, 0.45, 0.0, 1.0, "", Neptunus,
+        "Heading hold: yaw rate target (rad/s) to yaw demand feed-forward."),
+    def("ACRO_YAW_P", Real32, 1.0, 0.2, 4.0, "", Neptunus,
+        "Yaw rate at full yaw stick in STABILIZE and ALT_HOLD, in units of 45 deg/s (1.0 = 45 deg/s). Also the largest rate the heading hold commands."),
     def("PSC_POSXY_P", Real32, 1.0, 0.5, 2.0, "", Compat,
         "Horizontal position P gain. Neptunus has no position estimate: no effect."),
-    def("PSC_POSZ_P", Real32, 3.0, 1.0, 3.0, "", Neptunus,
-        "Depth hold: depth error to climb rate P gain."),
+    def("PSC_POSZ_P", Real32, 1.0, 0.2, 3.0, "1/s", Neptunus,
+        "Depth hold: depth error (m) to climb rate target (m/s)."),
     def("PSC_VELXY_P", Real32, 2.0, 0.1, 6.0, "", Compat,
         "Horizontal velocity P gain. No effect."),
     def("PSC_VELXY_I", Real32, 1.0, 0.02, 1.0, "", Compat,
         "Horizontal velocity I gain. No effect."),
     def("PSC_VELXY_IMAX", Real32, 100.0, 0.0, 4500.0, "cm/s²", Compat,
         "Horizontal velocity I limit. No effect."),
-    def("PSC_VELZ_P", Real32, 8.0, 1.0, 8.0, "", Neptunus,
-        "Depth hold: climb rate error to vertical acceleration P gain."),
-    def("PSC_ACCZ_P", Real32, 0.5, 0.2, 1.5, "", Neptunus,
-        "Depth hold: vertical acceleration error to vertical thrust P gain."),
-    def("PSC_ACCZ_I", Real32, 0.1, 0.0, 3.0, "", Neptunus,
-        "Depth hold: vertical acceleration I gain (holds buoyancy trim)."),
-    def("PSC_ACCZ_IMAX", Real32, 100.0, 0.0, 1000.0, "d%", Neptunus,
-        "Depth hold: limit of the vertical acceleration integrator, in tenths of a percent of full vertical thrust."),
-    def("PSC_ACCZ_D", Real32, 0.0, 0.0, 0.4, "", Neptunus,
-        "Depth hold: vertical acceleration D gain."),
-    def("PSC_ACCZ_FLTD", Real32, 0.0, 0.0, 100.0, "Hz", Neptunus,
-        "Depth hold: low-pass cutoff of the D term; 0 = no filter."),
-    def("PSC_ACCZ_FLTE", Real32, 20.0, 0.0, 100.0, "Hz", Neptunus,
-        "Depth hold: low-pass cutoff of the acceleration error; 0 = no filter."),
-    def("PSC_ACCZ_FLTT", Real32, 0.0, 0.0, 100.0, "Hz", Neptunus,
-        "Depth hold: low-pass cutoff of the acceleration target; 0 = no filter."),
+    def("PSC_VELZ_P", Real32, 3.0, 0.0, 10.0, "", Neptunus,
+        "Depth hold: climb rate error (m/s) to vertical demand (-1..1) P gain. (ArduPilot's velocity loop outputs an acceleration for a third loop; the OpenROV board reports no vertical acceleration, so Neptunus' velocity loop drives the thruster.)"),
+    def("PSC_VELZ_I", Real32, 1.5, 0.0, 10.0, "", Neptunus,
+        "Depth hold: climb rate I gain (holds the buoyancy and tether trim)."),
+    def("PSC_VELZ_IMAX", Real32, 0.5, 0.0, 1.0, "", Neptunus,
+        "Depth hold: limit of the climb rate integrator, as a fraction of full vertical demand."),
+    def("PSC_VELZ_D", Real32, 0.0, 0.0, 1.0, "", Neptunus,
+        "Depth hold: climb rate D gain, on the measured rate (no kick on a target step)."),
+    def("PSC_VELZ_FF", Real32, 1.3, 0.0, 3.0, "", Neptunus,
+        "Depth hold: climb rate target (m/s) to vertical demand feed-forward."),
+    def("PILOT_SPEED_UP", Real32, 40.0, 10.0, 500.0, "cm/s", Neptunus,
+        "Ascent speed at full heave stick in ALT_HOLD, the fastest the depth hold climbs to a new target, and SURFACE's ascent speed."),
+    def("PILOT_SPEED_DN", Real32, 40.0, 10.0, 500.0, "cm/s", Neptunus,
+        "Descent speed at full heave stick in ALT_HOLD and the fastest the depth hold descends to a new target."),
+    def("PSC_ACCZ_P", Real32, 0.5, 0.2, 1.5, "", Compat,
+        "Vertical acceleration P gain. The OpenROV board reports no vertical acceleration: no effect (see PSC_VELZ_*)."),
+    def("PSC_ACCZ_I", Real32, 0.1, 0.0, 3.0, "", Compat,
+        "Vertical acceleration I gain. No effect (see PSC_VELZ_I)."),
+    def("PSC_ACCZ_IMAX", Real32, 100.0, 0.0, 1000.0, "d%", Compat,
+        "Vertical acceleration I limit. No effect (see PSC_VELZ_IMAX)."),
+    def("PSC_ACCZ_D", Real32, 0.0, 0.0, 0.4, "", Compat,
+        "Vertical acceleration D gain. No effect."),
+    def("PSC_ACCZ_FLTD", Real32, 0.0, 0.0, 100.0, "Hz", Compat,
+        "Vertical acceleration D filter. No effect."),
+    def("PSC_ACCZ_FLTE", Real32, 20.0, 0.0, 100.0, "Hz", Compat,
+        "Vertical acceleration error filter. No effect."),
+    def("PSC_ACCZ_FLTT", Real32, 0.0, 0.0, 100.0, "Hz", Compat,
+        "Vertical acceleration target filter. No effect."),
     def("WPNAV_ACCEL", Real32, 100.0, 50.0, 500.0, "cm/s²", Compat,
         "Waypoint horizontal acceleration. Neptunus has no waypoint navigation: no effect."),
     def("WPNAV_ACCEL_Z", Real32, 100.0, 50.0, 500.0, "cm/s²", Compat,
@@ -913,6 +931,10 @@ impl ParamStore {
         if self.num(name) < 0.0 { -1 } else { 1 }
     }
 
+    pub fn esc_deadzone_us(&self) -> u16 {
+        self.u16_of("NEPT_ESC_DEADZONE")
+    }
+
     pub fn mot_pwm_min(&self) -> u16 {
         self.u16_of("MOT_PWM_MIN")
     }
@@ -942,6 +964,39 @@ impl ParamStore {
             0 => FailsafeAction::Off,
             1 => FailsafeAction::Warn,
             _ => FailsafeAction::Disarm,
+        }
+    }
+
+    /// Heading-hold gains (ATC_*), in SI units.
+    pub fn heading_gains(&self) -> crate::vehicle::autopilot::HeadingGains {
+        use crate::vehicle::autopilot::{HeadingGains, PidGains};
+        HeadingGains {
+            angle_p: self.num("ATC_ANG_YAW_P"),
+            rate: PidGains {
+                p: self.num("ATC_RAT_YAW_P"),
+                i: self.num("ATC_RAT_YAW_I"),
+                d: self.num("ATC_RAT_YAW_D"),
+                imax: self.num("ATC_RAT_YAW_IMAX"),
+                ff: self.num("ATC_RAT_YAW_FF"),
+            },
+            max_rate_rps: (self.num("ACRO_YAW_P") * 45.0).to_radians(),
+        }
+    }
+
+    /// Depth-hold gains (PSC_*, PILOT_SPEED_*), in SI units.
+    pub fn depth_gains(&self) -> crate::vehicle::autopilot::DepthGains {
+        use crate::vehicle::autopilot::{DepthGains, PidGains};
+        DepthGains {
+            pos_p: self.num("PSC_POSZ_P"),
+            vel: PidGains {
+                p: self.num("PSC_VELZ_P"),
+                i: self.num("PSC_VELZ_I"),
+                d: self.num("PSC_VELZ_D"),
+                imax: self.num("PSC_VELZ_IMAX"),
+                ff: self.num("PSC_VELZ_FF"),
+            },
+            speed_up_mps: self.num("PILOT_SPEED_UP") / 100.0,
+            speed_down_mps: self.num("PILOT_SPEED_DN") / 100.0,
         }
     }
 

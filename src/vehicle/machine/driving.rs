@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use super::authority::Control;
-use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, Now, Output, Sender, Vehicle};
+use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, Now, Output, Sender, Vehicle, holds};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
 use crate::firmware::link::LinkState;
@@ -21,6 +21,12 @@ use crate::vehicle::params::{BTN_DEFAULTS, BTN_FUNCTION_LASER_TOGGLE};
 /// A thruster command that has not changed is re-sent this often, so a board
 /// that lost it (dead-man trip, reset) gets it back.
 const RESEND: Duration = Duration::from_secs(1);
+/// No thrust demanded.
+pub(super) const NO_DEMAND: Demand = Demand {
+    surge: 0.0,
+    heave: 0.0,
+    yaw: 0.0,
+};
 /// Motor test stops this long after its last command (ArduSub: ≥ 2 Hz).
 const MOTOR_TEST_HOLD: Duration = Duration::from_millis(500);
 
@@ -248,6 +254,20 @@ impl Vehicle {
         MavResult::MAV_RESULT_ACCEPTED
     }
 
+    /// The pilot's sticks with input hold applied; centred when the input is stale.
+    pub(super) fn pilot_sticks(&self, now: Now) -> Demand {
+        if !self.input_fresh(now) {
+            return NO_DEMAND;
+        }
+        let mut d = self.pilot.sticks;
+        if let Some(h) = self.pilot.hold {
+            d.surge = (d.surge + h.surge).clamp(-1.0, 1.0);
+            d.heave = (d.heave + h.heave).clamp(-1.0, 1.0);
+            d.yaw = (d.yaw + h.yaw).clamp(-1.0, 1.0);
+        }
+        d
+    }
+
     fn input_fresh(&self, now: Now) -> bool {
         let timeout = Duration::from_secs_f32(self.params.fs_pilot_timeout_s().clamp(0.1, 3.0));
         self.pilot
@@ -255,7 +275,7 @@ impl Vehicle {
             .is_some_and(|t| now.mono.saturating_sub(t) <= timeout)
     }
 
-    fn mixer(&self) -> MixerConfig {
+    pub(super) fn mixer(&self) -> MixerConfig {
         MixerConfig::from_params(&self.params, self.gain)
     }
 
@@ -272,6 +292,23 @@ impl Vehicle {
             let mut us = [NEUTRAL_US; 3];
             us[t.slot] = t.pwm_us;
             us
+        } else if holds::holds_depth(self.mode) || holds::holds_heading(self.mode) {
+            // The autopilots act only while a live owner (or a failsafe
+            // action) is behind them: the same rule that feeds the dead-man.
+            if self.owner_alive(now, super::authority::LIFE_FEEDS_DEADMAN)
+                || self.failsafe_needs_thrust()
+            {
+                let d = self.hold_demand(self.pilot_sticks(now));
+                mixer::mix(
+                    &d,
+                    &MixerConfig {
+                        gain: 1.0,
+                        ..self.mixer()
+                    },
+                )
+            } else {
+                [NEUTRAL_US; 3]
+            }
         } else if !self.input_fresh(now) {
             // Pilot input lost: neutral first (the failsafe action comes on top).
             [NEUTRAL_US; 3]
@@ -301,14 +338,19 @@ impl Vehicle {
                 .pilot
                 .last_go
                 .is_none_or(|t| now.mono.saturating_sub(t) >= RESEND);
+        // What the thrusters really push, for the estimator's model.
+        self.holds.applied = self.effective_demand(target);
         if target != self.motors_us || resend {
             self.motors_us = target;
             self.pilot.last_go = Some(now.mono);
-            out.push(Output::Board(Command::Go {
-                port_us: target[0],
-                vertical_us: target[1],
-                starboard_us: target[2],
-            }));
+            self.send_go(
+                Command::Go {
+                    port_us: target[0],
+                    vertical_us: target[1],
+                    starboard_us: target[2],
+                },
+                out,
+            );
         }
     }
 
@@ -325,6 +367,7 @@ impl Vehicle {
                 self.set_tilt_us(f64::from(self.tilt_us) + delta, out);
             }
         }
+        self.holds_step(now, dt, out);
         self.update_thrusters(now, out);
     }
 
@@ -409,7 +452,7 @@ impl Vehicle {
                     12 => 1,
                     _ => 21,
                 };
-                self.set_mode(mode, Some(from.sysid), out);
+                self.set_mode(mode, Some(from.sysid), now, out);
             }
             21 => self.set_tilt_us(1500.0, out),
             22 | 23 => {

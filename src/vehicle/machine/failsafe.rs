@@ -7,7 +7,9 @@
 
 use std::time::Duration;
 
-use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, MODES, Now, Output, Vehicle};
+use super::{
+    MODE_ALT_HOLD, MODE_MANUAL, MODE_MANUAL_THRUSTERS, MODE_SURFACE, MODES, Now, Output, Vehicle,
+};
 use crate::dialect::neptunus::MavSeverity;
 use crate::firmware::link::LinkState;
 use crate::vehicle::params::{FailsafeAction, ParamStore};
@@ -15,8 +17,6 @@ use crate::vehicle::params::{FailsafeAction, ParamStore};
 /// A battery voltage must stay beyond its threshold this long to raise or
 /// clear a battery failsafe (ArduPilot's BATT_LOW_TIMER default).
 pub(super) const BATTERY_DEBOUNCE: Duration = Duration::from_secs(10);
-const MODE_ALT_HOLD: u32 = 2;
-const MODE_SURFACE: u32 = 9;
 
 /// One failsafe.
 pub(super) struct Rule {
@@ -187,7 +187,7 @@ impl Vehicle {
                     format!("{}: {text} (action {action:?})", rule.name),
                     out,
                 );
-                self.failsafe_act(rule.name, action, out);
+                self.failsafe_act(rule.name, action, now, out);
             } else if active && (action == FailsafeAction::Off || (rule.clear)(self, now)) {
                 self.failsafes.active[i] = false;
                 let text = (rule.text)(self);
@@ -209,7 +209,13 @@ impl Vehicle {
         }
     }
 
-    fn failsafe_act(&mut self, name: &str, action: FailsafeAction, out: &mut Vec<Output>) {
+    fn failsafe_act(
+        &mut self,
+        name: &str,
+        action: FailsafeAction,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
         let mode = match action {
             FailsafeAction::Off | FailsafeAction::Warn => return,
             FailsafeAction::Disarm => {
@@ -221,7 +227,7 @@ impl Vehicle {
         };
         let available = MODES.iter().any(|m| m.0 == mode && m.2.is_none());
         if available && self.armed && self.link == LinkState::Up {
-            self.set_mode(mode, None, out);
+            self.set_mode(mode, None, now, out);
             self.failsafes.mode = Some(mode);
         } else {
             self.statustext(
