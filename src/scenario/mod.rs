@@ -345,3 +345,10 @@ impl Scenario {
         self.now
     }
 }
+
+impl Scenario {
+    /// The vehicle, for assertions on the core after a scenario.
+    pub fn into_vehicle(self) -> Vehicle {
+        self.vehicle
+    }
+}

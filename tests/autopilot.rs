@@ -1,0 +1,412 @@
+//! Issue 6 acceptance: the autopilots and the estimator in closed loop with
+//! the board emulator and simulator, on simulated time (no waiting), with
+//! the simulator's fixed seeds; and the modes, setpoints and run mode seen
+//! from a ground station.
+
+use std::time::Duration;
+
+use neptunus::dialect::neptunus::*;
+use neptunus::firmware::codec::Command;
+use neptunus::scenario::report;
+use neptunus::scenario::{Scenario, Sticks};
+use neptunus::vehicle::machine::{
+    Input, MODE_ALT_HOLD, MODE_MANUAL, MODE_STABILIZE, MODE_SURFACE, Now, Output, RunMode, Sender,
+    Vehicle,
+};
+
+fn secs(s: u64) -> Duration {
+    Duration::from_secs(s)
+}
+
+#[test]
+fn depth_step_settles_fast_without_overshoot() {
+    let o = report::depth_step();
+    let settle = o.metric("settling_time_0.1m");
+    let overshoot = o.metric("overshoot");
+    assert!(settle < 20.0, "settling {settle} s");
+    assert!(overshoot < 10.0, "overshoot {overshoot} %");
+}
+
+#[test]
+fn heading_step_settles_within_3_degrees_in_10_s() {
+    let o = report::heading_step();
+    let settle = o.metric("settling_time_3deg");
+    assert!(settle < 10.0, "settling {settle} s");
+}
+
+#[test]
+fn depth_hold_in_current_with_tether_and_lag_stays_within_15_cm() {
+    let o = report::depth_hold_in_current();
+    let err = o.metric("max_depth_error");
+    assert!(err <= 0.15, "max error {err} m");
+    // The current really pushed the vehicle: it moved.
+    let last = o.samples.last().unwrap();
+    let moved = last.north_m.hypot(last.east_m);
+    assert!(moved > 1.0, "moved only {moved} m in 65 s");
+}
+
+#[test]
+fn wild_points_never_jump_the_estimates() {
+    let o = report::wild_points();
+    let dj = o.metric("max_depth_estimate_jump");
+    let hj = o.metric("max_heading_estimate_jump");
+    assert!(dj <= 0.2, "depth estimate jumped {dj} m");
+    assert!(hj <= 5.0, "heading estimate jumped {hj} deg");
+    // The gate really had wild points to reject.
+    assert!(o.metric("depth_rejected") >= 1.0, "{:?}", o.metrics);
+    assert!(o.metric("heading_rejected") >= 10.0, "{:?}", o.metrics);
+}
+
+#[test]
+fn surface_rises_then_goes_neutral() {
+    let o = report::surface();
+    let t = o.metric("time_to_surface");
+    assert!(t < 20.0, "surfaced after {t} s");
+    let last = o.samples.last().unwrap();
+    assert_eq!(last.vertical_us, 1500, "neutral once surfaced");
+}
+
+/// A vehicle at 1.5 m in ALT_HOLD, armed, for the stick tests.
+fn alt_hold_at(depth_m: f64) -> Scenario {
+    let mut s = Scenario::new(report::options(11));
+    s.place(depth_m, 45.0);
+    s.run(secs(3));
+    assert_eq!(s.arm(), Some(MavResult::MAV_RESULT_ACCEPTED));
+    assert_eq!(
+        s.set_mode(MODE_ALT_HOLD),
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    );
+    s
+}
+
+#[test]
+fn heave_stick_commands_a_climb_rate_and_release_holds_the_depth() {
+    let mut s = alt_hold_at(1.5);
+    s.run(secs(3));
+    // Full down stick (z = 0 in ArduSub's 0..1000 convention) for 3 s.
+    s.set_sticks(Sticks { x: 0, z: 0, r: 0 });
+    s.run(secs(3));
+    let deeper = s.samples().last().unwrap().depth_true_m;
+    assert!(deeper > 2.3, "dove only to {deeper} m");
+    s.set_sticks(Sticks::CENTRED);
+    s.run(secs(5));
+    let held = s.vehicle().targets().0.expect("depth captured on release");
+    s.run(secs(20));
+    let end = s.samples().last().unwrap().depth_true_m;
+    assert!((end - held).abs() < 0.1, "held {held} m, at {end} m");
+}
+
+#[test]
+fn yaw_stick_turns_and_release_holds_the_heading() {
+    let mut s = Scenario::new(report::options(12));
+    s.place(1.0, 10.0);
+    s.run(secs(3));
+    s.arm();
+    assert_eq!(
+        s.set_mode(MODE_STABILIZE),
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    );
+    s.set_sticks(Sticks {
+        x: 0,
+        z: 500,
+        r: 600,
+    });
+    s.run(secs(2));
+    let rate = s.samples().last().unwrap().yaw_rate_true_dps;
+    assert!(rate > 10.0, "turning at {rate} deg/s");
+    s.set_sticks(Sticks::CENTRED);
+    s.run(secs(3));
+    let held = s.vehicle().targets().1.expect("heading captured");
+    s.run(secs(15));
+    let end = s.samples().last().unwrap().heading_true_deg;
+    let err = (end - held + 540.0).rem_euclid(360.0) - 180.0;
+    assert!(err.abs() < 3.0, "held {held}, at {end}");
+}
+
+#[test]
+fn position_target_moves_the_held_depth_only_in_alt_hold() {
+    let mut s = Scenario::new(report::options(13));
+    s.place(1.0, 0.0);
+    s.run(secs(3));
+    s.arm();
+    // MANUAL: ignored, with a warning.
+    s.sent.clear();
+    s.set_depth_target(2.0);
+    assert!(s.sent.iter().any(|m| matches!(m, MavMessage::STATUSTEXT(t)
+        if String::from_utf8_lossy(t.text.as_ref()).contains("ignored in MANUAL"))));
+    assert_eq!(s.vehicle().targets().0, None);
+    s.set_mode(MODE_ALT_HOLD);
+    s.set_depth_target(2.0);
+    s.run(secs(15));
+    assert_eq!(s.vehicle().targets().0, Some(2.0));
+    let end = s.samples().last().unwrap().depth_true_m;
+    assert!((end - 2.0).abs() < 0.1, "at {end} m");
+}
+
+#[test]
+fn position_modes_are_refused_with_the_reason() {
+    let mut s = Scenario::new(report::options(14));
+    s.run(secs(3));
+    for mode in [3u32, 4, 7, 16] {
+        s.sent.clear();
+        assert_eq!(s.set_mode(mode), Some(MavResult::MAV_RESULT_FAILED));
+        assert!(
+            s.sent.iter().any(|m| matches!(m, MavMessage::STATUSTEXT(t)
+            if String::from_utf8_lossy(t.text.as_ref()).contains("position estimate"))),
+            "mode {mode}"
+        );
+    }
+}
+
+// ---- the core alone, for run mode and refusals ----
+
+const GCS: Sender = Sender::new(0, 1, 255, 190);
+const STRANGER: Sender = Sender::new(0, 2, 77, 190);
+
+fn now(ms: u64) -> Now {
+    Now {
+        mono: Duration::from_millis(ms),
+        unix_us: 1_800_000_000_000_000 + ms * 1000,
+    }
+}
+
+fn command(
+    v: &mut Vehicle,
+    from: Sender,
+    cmd: MavCmd,
+    p1: f32,
+    p2: f32,
+    t: u64,
+) -> (Option<MavResult>, Vec<Output>) {
+    let mut out = Vec::new();
+    v.handle(
+        Input::Mavlink {
+            from,
+            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+                target_system: 1,
+                target_component: 1,
+                command: cmd,
+                confirmation: 0,
+                param1: p1,
+                param2: p2,
+                param3: 0.0,
+                param4: 0.0,
+                param5: 0.0,
+                param6: 0.0,
+                param7: 0.0,
+            }),
+        },
+        now(t),
+        &mut out,
+    );
+    let result = out.iter().find_map(|o| match o {
+        Output::Send {
+            msg: MavMessage::COMMAND_ACK(a),
+            ..
+        } if a.command == cmd => Some(a.result),
+        _ => None,
+    });
+    (result, out)
+}
+
+/// A vehicle fed with board telemetry, armed by the GCS, in `mode`.
+fn armed_vehicle(mode: u32) -> Vehicle {
+    let mut s = Scenario::new(report::options(21));
+    s.place(1.0, 0.0);
+    s.run(secs(3));
+    s.arm();
+    s.set_mode(mode);
+    s.set_sticks(Sticks {
+        x: 800,
+        z: 500,
+        r: 0,
+    });
+    s.run(Duration::from_millis(500));
+    assert!(s.vehicle().armed());
+    assert_ne!(
+        s.vehicle().motors_us(),
+        [1500; 3],
+        "driving before the switch"
+    );
+    // The scenario's vehicle, moved out for the core-level assertions.
+    s.into_vehicle()
+}
+
+#[test]
+fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
+    let mut v = armed_vehicle(MODE_MANUAL);
+    let (result, out) = command(
+        &mut v,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+        1.0,
+        f32::NAN,
+        3600,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
+    let neutral = Command::Go {
+        port_us: 1500,
+        vertical_us: 1500,
+        starboard_us: 1500,
+    };
+    // The real board gets stop() and neutral; the simulator starts from neutral.
+    assert!(out.contains(&Output::Board(Command::Stop)), "{out:?}");
+    assert!(out.contains(&Output::Board(neutral.clone())), "{out:?}");
+    assert!(out.contains(&Output::SimBoard(neutral)), "{out:?}");
+    assert!(out.iter().any(|o| matches!(
+        o,
+        Output::RunMode {
+            mode: RunMode::Simulator,
+            ..
+        }
+    )));
+    assert!(out.iter().any(
+        |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
+        if String::from_utf8_lossy(t.text.as_ref()).contains("simulated"))
+    ));
+    assert_eq!(v.motors_us(), [1500; 3]);
+    assert_eq!(v.run_mode(), RunMode::Simulator);
+    // HEARTBEAT says HIL (simulated) from now on.
+    let hb = v.build(0, now(3700));
+    let MavMessage::HEARTBEAT(h) = &hb[0] else {
+        panic!()
+    };
+    assert!(h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED));
+    // Thruster commands now go to the simulator, never to the real board.
+    let mut out = Vec::new();
+    for t in (3700..4500).step_by(10) {
+        v.handle(Input::Tick, now(t), &mut out);
+    }
+    assert!(
+        !out.iter().any(|o| matches!(o, Output::Board(Command::Go { .. }) if *o != Output::Board(Command::Go { port_us: 1500, vertical_us: 1500, starboard_us: 1500 }))),
+        "the real board got thrust in simulator run mode: {out:?}"
+    );
+    // And back: another stop, flag cleared.
+    let (result, out) = command(
+        &mut v,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+        0.0,
+        f32::NAN,
+        4600,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
+    assert!(out.iter().any(|o| matches!(
+        o,
+        Output::RunMode {
+            mode: RunMode::Normal,
+            ..
+        }
+    )));
+    let hb = v.build(0, now(4700));
+    let MavMessage::HEARTBEAT(h) = &hb[0] else {
+        panic!()
+    };
+    assert!(!h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED));
+}
+
+#[test]
+fn only_the_owner_switches_run_mode_or_sets_targets() {
+    let mut v = armed_vehicle(MODE_ALT_HOLD);
+    let (result, _) = command(
+        &mut v,
+        STRANGER,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+        1.0,
+        0.0,
+        3600,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_NOT_IN_CONTROL));
+    assert_eq!(v.run_mode(), RunMode::Normal);
+    let (result, _) = command(
+        &mut v,
+        STRANGER,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET,
+        3.0,
+        f32::NAN,
+        3610,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_NOT_IN_CONTROL));
+    assert_ne!(v.targets().0, Some(3.0));
+    let (result, _) = command(
+        &mut v,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET,
+        3.0,
+        120.0,
+        3620,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
+    assert_eq!(v.targets().0, Some(3.0));
+    assert!((v.targets().1.unwrap() - 120.0).abs() < 1e-6);
+    // Out of range: denied, nothing changes.
+    let (result, _) = command(
+        &mut v,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET,
+        -5.0,
+        f32::NAN,
+        3630,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_DENIED));
+    assert_eq!(v.targets().0, Some(3.0));
+}
+
+#[test]
+fn hold_modes_need_fresh_estimates() {
+    let mut v = Vehicle::new(
+        neptunus::vehicle::machine::Identity::Ardupilot,
+        neptunus::vehicle::params::ParamStore::default(),
+        1,
+    );
+    for mode in [MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE] {
+        let (result, out) = command(
+            &mut v,
+            GCS,
+            MavCmd::MAV_CMD_DO_SET_MODE,
+            1.0,
+            mode as f32,
+            100,
+        );
+        assert_eq!(result, Some(MavResult::MAV_RESULT_FAILED), "mode {mode}");
+        assert!(out.iter().any(
+            |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
+            if String::from_utf8_lossy(t.text.as_ref()).contains("estimate"))
+        ));
+    }
+}
+
+#[test]
+fn estimates_and_setpoints_are_published() {
+    let mut s = alt_hold_at(1.0);
+    s.set_depth_target(1.5);
+    s.run(secs(2));
+    let v = s.vehicle();
+    let t = Now {
+        mono: s.now(),
+        unix_us: 0,
+    };
+    let est = v.build(44102, t);
+    let Some(MavMessage::NEPTUNUS_ESTIMATE(e)) = est.first() else {
+        panic!("no NEPTUNUS_ESTIMATE: {est:?}")
+    };
+    assert!(
+        e.flags
+            .contains(NeptunusEstimateFlags::NEPTUNUS_ESTIMATE_FLAGS_DEPTH_VALID)
+    );
+    assert!((e.depth - 1.0).abs() < 0.5);
+    let ap = v.build(44103, t);
+    let Some(MavMessage::NEPTUNUS_AUTOPILOT(a)) = ap.first() else {
+        panic!("no NEPTUNUS_AUTOPILOT")
+    };
+    assert_eq!(a.depth_target, 1.5);
+    assert!(
+        a.flags
+            .contains(NeptunusAutopilotFlags::NEPTUNUS_AUTOPILOT_FLAGS_DEPTH_HOLD)
+    );
+    let nav = v.build(62, t);
+    assert!(matches!(
+        nav.first(),
+        Some(MavMessage::NAV_CONTROLLER_OUTPUT(_))
+    ));
+}
