@@ -946,7 +946,7 @@ fn battery_low_acts_after_ten_seconds_and_clears_after_ten_above() {
 }
 
 #[test]
-fn depth_hold_action_falls_back_to_disarm_while_the_mode_is_unavailable() {
+fn depth_hold_action_holds_depth_and_keeps_the_dead_man_fed() {
     let mut r = Rig::with(&[("FS_GCS_ENABLE", 3.0), ("FS_PILOT_INPUT", 0.0)]);
     r.arm(A);
     // No heartbeats, but stick input is a sign of life too.
@@ -956,12 +956,32 @@ fn depth_hold_action_falls_back_to_disarm_while_the_mode_is_unavailable() {
     }
     assert!(r.v.armed(), "stick input counts as the owner's life");
     let out = r.run(Duration::from_secs(6));
-    assert!(
-        has_text(&out, "ALT_HOLD is not available"),
-        "{:?}",
-        texts(&out)
+    assert!(has_text(&out, "Failsafe"), "{:?}", texts(&out));
+    assert_eq!(
+        r.v.mode(),
+        2,
+        "the GCS failsafe put the vehicle in ALT_HOLD"
     );
-    assert!(!r.v.armed());
+    assert!(r.v.armed());
+    // The failsafe's own mode needs thrust: the board's dead-man stays fed.
+    let out = r.run(Duration::from_secs(3));
+    assert!(out.iter().any(|o| matches!(o, Output::Healthy)));
+}
+
+#[test]
+fn depth_hold_action_disarms_when_depth_hold_is_impossible() {
+    let mut r = Rig::with(&[("FS_GCS_ENABLE", 3.0), ("FS_PILOT_INPUT", 0.0)]);
+    r.arm(A);
+    for _ in 0..60 {
+        r.stick(A, 0);
+        r.run(Duration::from_millis(100));
+    }
+    // The board link goes down: no depth hold without it.
+    r.input(Input::Link {
+        state: LinkState::Down,
+        reason: Some("test".into()),
+    });
+    assert!(!r.v.armed(), "the board-link failsafe disarms at once");
 }
 
 // ---- the board's dead-man ----

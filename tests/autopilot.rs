@@ -40,7 +40,7 @@ fn depth_hold_in_current_with_tether_and_lag_stays_within_15_cm() {
     let err = o.metric("max_depth_error");
     assert!(err <= 0.15, "max error {err} m");
     // The current really pushed the vehicle: it moved.
-    let last = o.samples.last().unwrap();
+    let last = o.samples.last().expect("recorded samples");
     let moved = last.north_m.hypot(last.east_m);
     assert!(moved > 1.0, "moved only {moved} m in 65 s");
 }
@@ -62,7 +62,7 @@ fn surface_rises_then_goes_neutral() {
     let o = report::surface();
     let t = o.metric("time_to_surface");
     assert!(t < 20.0, "surfaced after {t} s");
-    let last = o.samples.last().unwrap();
+    let last = o.samples.last().expect("recorded samples");
     assert_eq!(last.vertical_us, 1500, "neutral once surfaced");
 }
 
@@ -86,13 +86,13 @@ fn heave_stick_commands_a_climb_rate_and_release_holds_the_depth() {
     // Full down stick (z = 0 in ArduSub's 0..1000 convention) for 3 s.
     s.set_sticks(Sticks { x: 0, z: 0, r: 0 });
     s.run(secs(3));
-    let deeper = s.samples().last().unwrap().depth_true_m;
+    let deeper = s.samples().last().expect("recorded samples").depth_true_m;
     assert!(deeper > 2.3, "dove only to {deeper} m");
     s.set_sticks(Sticks::CENTRED);
     s.run(secs(5));
     let held = s.vehicle().targets().0.expect("depth captured on release");
     s.run(secs(20));
-    let end = s.samples().last().unwrap().depth_true_m;
+    let end = s.samples().last().expect("recorded samples").depth_true_m;
     assert!((end - held).abs() < 0.1, "held {held} m, at {end} m");
 }
 
@@ -112,13 +112,21 @@ fn yaw_stick_turns_and_release_holds_the_heading() {
         r: 600,
     });
     s.run(secs(2));
-    let rate = s.samples().last().unwrap().yaw_rate_true_dps;
+    let rate = s
+        .samples()
+        .last()
+        .expect("recorded samples")
+        .yaw_rate_true_dps;
     assert!(rate > 10.0, "turning at {rate} deg/s");
     s.set_sticks(Sticks::CENTRED);
     s.run(secs(3));
     let held = s.vehicle().targets().1.expect("heading captured");
     s.run(secs(15));
-    let end = s.samples().last().unwrap().heading_true_deg;
+    let end = s
+        .samples()
+        .last()
+        .expect("recorded samples")
+        .heading_true_deg;
     let err = (end - held + 540.0).rem_euclid(360.0) - 180.0;
     assert!(err.abs() < 3.0, "held {held}, at {end}");
 }
@@ -139,7 +147,7 @@ fn position_target_moves_the_held_depth_only_in_alt_hold() {
     s.set_depth_target(2.0);
     s.run(secs(15));
     assert_eq!(s.vehicle().targets().0, Some(2.0));
-    let end = s.samples().last().unwrap().depth_true_m;
+    let end = s.samples().last().expect("recorded samples").depth_true_m;
     assert!((end - 2.0).abs() < 0.1, "at {end} m");
 }
 
@@ -251,7 +259,7 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
     };
     // The real board gets stop() and neutral; the simulator starts from neutral.
     assert!(out.contains(&Output::Board(Command::Stop)), "{out:?}");
-    assert!(out.contains(&Output::Board(neutral.clone())), "{out:?}");
+    assert!(out.contains(&Output::Board(neutral)), "{out:?}");
     assert!(out.contains(&Output::SimBoard(neutral)), "{out:?}");
     assert!(out.iter().any(|o| matches!(
         o,
@@ -338,7 +346,7 @@ fn only_the_owner_switches_run_mode_or_sets_targets() {
     );
     assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
     assert_eq!(v.targets().0, Some(3.0));
-    assert!((v.targets().1.unwrap() - 120.0).abs() < 1e-6);
+    assert!((v.targets().1.expect("heading held") - 120.0).abs() < 1e-6);
     // Out of range: denied, nothing changes.
     let (result, _) = command(
         &mut v,

@@ -351,7 +351,9 @@ fn specified_defaults() {
         "ATC_RAT_YAW_P",
         "PSC_POSZ_P",
         "PSC_VELZ_P",
-        "PSC_ACCZ_I",
+        "PSC_VELZ_I",
+        "PILOT_SPEED_UP",
+        "ACRO_YAW_P",
     ] {
         assert_eq!(def(name).used, Use::Neptunus, "{name}");
     }
@@ -359,6 +361,8 @@ fn specified_defaults() {
         "ATC_ANG_PIT_P",
         "ATC_RAT_RLL_P",
         "PSC_POSXY_P",
+        // No vertical accelerometer reading from the board: no acceleration loop.
+        "PSC_ACCZ_I",
         "WPNAV_SPEED",
         "LOIT_SPEED",
     ] {

@@ -409,9 +409,16 @@ fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason()
         "{:?}",
         texts(&out)
     );
+    // ALT_HOLD needs a depth estimate: refused with the reason before telemetry.
     let out = r.cmd(MavCmd::MAV_CMD_DO_SET_MODE, p(&[1.0, 2.0]));
     assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_FAILED);
-    assert!(texts(&out).iter().any(|t| t.contains("ALT_HOLD")));
+    assert!(
+        texts(&out)
+            .iter()
+            .any(|t| t.contains("ALT_HOLD") && t.contains("depth")),
+        "{:?}",
+        texts(&out)
+    );
     assert_eq!(r.v.mode(), 19);
     // SET_MODE message: acknowledged with command 11.
     let out = r.msg(MavMessage::SET_MODE(SET_MODE_DATA {

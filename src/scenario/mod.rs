@@ -142,14 +142,13 @@ impl Scenario {
         for out in std::mem::take(&mut self.outputs) {
             match out {
                 Output::Board(cmd) => self.board.send(&cmd, self.now),
-                Output::Healthy => {
-                    if self
-                        .last_ping
-                        .is_none_or(|t| self.now.saturating_sub(t) >= Duration::from_millis(500))
-                    {
-                        self.last_ping = Some(self.now);
-                        self.board.send(&Command::Ping(0), self.now);
-                    }
+                Output::Healthy
+                    if self.last_ping.is_none_or(|t| {
+                        self.now.saturating_sub(t) >= Duration::from_millis(500)
+                    }) =>
+                {
+                    self.last_ping = Some(self.now);
+                    self.board.send(&Command::Ping(0), self.now);
                 }
                 Output::Send { msg, .. } => self.sent.push(msg),
                 _ => {}
@@ -280,7 +279,7 @@ impl Scenario {
             }
             self.input(Input::Tick);
             self.steps += 1;
-            if self.steps % self.record_every == 0 {
+            if self.steps.is_multiple_of(self.record_every) {
                 self.record();
             }
         }

@@ -343,7 +343,7 @@ mod tests {
         for _ in 0..100 {
             d.step(&g, &m, 0.0, 0.01);
         }
-        let r = d.reference_m.unwrap();
+        let r = d.reference_m.expect("a reference once a target is held");
         assert!((r - 0.25).abs() < 1e-9, "{r}");
     }
 }

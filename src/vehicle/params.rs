@@ -299,7 +299,7 @@ const HEAD: &[ParamDef] = &[
         "Extra gain on the throttle (vertical) axis, on top of the pilot gain."),
     def("JS_LIGHTS_STEPS", Int16, 8.0, 1.0, 10.0, "", Neptunus,
         "Number of brightness steps of the lights buttons from off to full."),
-    def("NEPT_ESC_DEADZONE", Int16, 50.0, 0.0, 200.0, "µs", Neptunus,
+    def("NEPT_ESC_DEADZN", Int16, 50.0, 0.0, 200.0, "µs", Neptunus,
         "The board firmware's ESC deadzone around 1500 µs (OpenROV: 50). The estimator counts a thruster inside it as giving no thrust."),
     def("NEPT_LIGHTS_MAX", Int16, 255.0, 0.0, 255.0, "", Neptunus,
         "Lamp level sent to the OpenROV board (ligt) at full brightness; lower it to cap the lamp's power."),
@@ -932,7 +932,7 @@ impl ParamStore {
     }
 
     pub fn esc_deadzone_us(&self) -> u16 {
-        self.u16_of("NEPT_ESC_DEADZONE")
+        self.u16_of("NEPT_ESC_DEADZN")
     }
 
     pub fn mot_pwm_min(&self) -> u16 {

@@ -17,22 +17,25 @@ pub const STREAMABLE: &[(u32, f64)] = &[
     (30, 10.0),    // ATTITUDE
     (33, 3.0),     // GLOBAL_POSITION_INT
     (36, 2.0),     // SERVO_OUTPUT_RAW
+    (62, 4.0),     // NAV_CONTROLLER_OUTPUT (autopilot setpoints and errors)
     (74, 10.0),    // VFR_HUD
     (137, 2.0),    // SCALED_PRESSURE2
     (147, 3.0),    // BATTERY_STATUS
     (251, 2.0),    // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
     (512, 1.0),    // CONTROL_STATUS
     (44101, 10.0), // NEPTUNUS_SIM_STATE (only while simulating)
+    (44102, 10.0), // NEPTUNUS_ESTIMATE (raw readings beside the estimates)
+    (44103, 4.0),  // NEPTUNUS_AUTOPILOT (setpoints and controller outputs)
 ];
 
 /// Legacy REQUEST_DATA_STREAM groups, as ArduPilot maps them for a submarine.
 pub fn stream_group(stream_id: u8) -> &'static [u32] {
     match stream_id {
         1 => &[137],          // RAW_SENSORS
-        2 => &[1],            // EXTENDED_STATUS
+        2 => &[1, 62, 44103], // EXTENDED_STATUS (with the controllers, as ArduPilot)
         3 => &[36],           // RC_CHANNELS
         6 => &[33],           // POSITION
-        10 => &[30],          // EXTRA1
+        10 => &[30, 44102],   // EXTRA1 (attitude and the estimates)
         11 => &[74],          // EXTRA2
         12 => &[2, 147, 251], // EXTRA3
         _ => &[],

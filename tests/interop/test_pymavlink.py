@@ -43,11 +43,11 @@ def test_arm_modes_disarm(pymav):
     assert ack.result == mavlink.MAV_RESULT_ACCEPTED
 
     texts: list[str] = []
-    conn.set_mode("ALT_HOLD")
+    conn.set_mode("POSHOLD")  # needs a position estimate: refused with the reason
     ack = wait_ack(conn, mavlink.MAV_CMD_DO_SET_MODE, texts=texts)
     assert ack.result == mavlink.MAV_RESULT_FAILED
-    if not any("ALT_HOLD" in t for t in texts):
-        st = recv(conn, "STATUSTEXT", 3.0, lambda m: from_vehicle(m) and "ALT_HOLD" in m.text)
+    if not any("POSHOLD" in t for t in texts):
+        st = recv(conn, "STATUSTEXT", 3.0, lambda m: from_vehicle(m) and "POSHOLD" in m.text)
         assert st is not None, f"no STATUSTEXT explaining the refusal; saw {texts}"
     # Still MANUAL and still armed after the refusal.
     hb = recv(conn, "HEARTBEAT", 3.0, from_vehicle)

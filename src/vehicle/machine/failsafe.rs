@@ -10,7 +10,7 @@ use std::time::Duration;
 use super::{
     MODE_ALT_HOLD, MODE_MANUAL, MODE_MANUAL_THRUSTERS, MODE_SURFACE, MODES, Now, Output, Vehicle,
 };
-use crate::dialect::neptunus::MavSeverity;
+use crate::dialect::neptunus::{MavResult, MavSeverity};
 use crate::firmware::link::LinkState;
 use crate::vehicle::params::{FailsafeAction, ParamStore};
 
@@ -225,16 +225,22 @@ impl Vehicle {
             FailsafeAction::DepthHold => MODE_ALT_HOLD,
             FailsafeAction::Surface => MODE_SURFACE,
         };
-        let available = MODES.iter().any(|m| m.0 == mode && m.2.is_none());
-        if available && self.armed && self.link == LinkState::Up {
-            self.set_mode(mode, None, now, out);
+        let why = if !MODES.iter().any(|m| m.0 == mode && m.2.is_none()) {
+            Some("not available on this vehicle")
+        } else if !self.armed || self.link != LinkState::Up {
+            Some("not possible without the board link")
+        } else {
+            self.hold_unavailable(mode, now)
+        };
+        if why.is_none() && self.set_mode(mode, None, now, out) == MavResult::MAV_RESULT_ACCEPTED {
             self.failsafes.mode = Some(mode);
         } else {
             self.statustext(
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!(
-                    "Failsafe {name}: {} is not available on this vehicle, disarming instead",
-                    super::mode_name(mode)
+                    "Failsafe {name}: {} is {}, disarming instead",
+                    super::mode_name(mode),
+                    why.unwrap_or("refused")
                 ),
                 out,
             );
