@@ -37,13 +37,14 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
         }) => profiles_check(dir.as_deref())?,
         Some(CliCommand::SimReport { dir }) => {
             let outcomes = neptunus::scenario::report::all();
+            let mut out = std::io::stdout();
             for o in &outcomes {
                 for (name, value, unit) in &o.metrics {
-                    println!("{:<22} {name:<28} {value:>9.3} {unit}", o.name);
+                    writeln!(out, "{:<22} {name:<28} {value:>9.3} {unit}", o.name)?;
                 }
             }
             let written = neptunus::scenario::report::write(&dir, &outcomes)?;
-            println!("wrote {} files to {}", written.len(), dir.display());
+            writeln!(out, "wrote {} files to {}", written.len(), dir.display())?;
         }
         Some(CliCommand::Signing { command }) => {
             let data_dir = config::resolve(&cli.run)?.data_dir;
