@@ -222,7 +222,8 @@ pub async fn run(
                         sway_mps: s.sway_mps,
                         heave_mps: s.heave_mps,
                         yaw_rate_rps: s.yaw_rate_dps.to_radians(),
-                        ..SimTruth::default()
+                        roll_rad: s.roll_deg.to_radians(),
+                        pitch_rad: s.pitch_deg.to_radians(),
                     };
                     vehicle.handle(Input::SimTruth(t), clock(), &mut outputs);
                 }
