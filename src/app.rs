@@ -280,7 +280,8 @@ fn sim_truth(s: &crate::firmware::emulator::SimSnapshot) -> SimTruth {
         sway_mps: s.sway_mps,
         heave_mps: s.heave_mps,
         yaw_rate_rps: s.yaw_rate_dps.to_radians(),
-        ..SimTruth::default()
+        roll_rad: s.roll_deg.to_radians(),
+        pitch_rad: s.pitch_deg.to_radians(),
     }
 }
 

@@ -13,6 +13,7 @@ use crate::firmware::codec::Framing;
 use crate::firmware::emulator::{EmulatorOptions, FaultOptions};
 use crate::firmware::link::LinkConfig;
 use crate::mavlink::endpoint::{DEFAULT_ENDPOINTS, EndpointUrl};
+use crate::sim::SimError;
 use crate::vehicle::machine::Identity;
 
 /// The BeagleBone UART wired to the OpenROV board.
@@ -268,6 +269,15 @@ impl FileConfig {
                     "emulator.wiring_directions contains {d} — each must be 1 or -1"
                 ));
             }
+        }
+        match self.emulator.sim.validate() {
+            Ok(()) => {}
+            Err(SimError::Invalid { key, value, fix }) => {
+                return Err(format!(
+                    "emulator.sim.{key} = {value} is out of range — {fix}"
+                ));
+            }
+            Err(e) => return Err(format!("emulator.sim: {e}")),
         }
         Ok(())
     }

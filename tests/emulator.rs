@@ -348,9 +348,11 @@ fn telemetry_is_10_hz_nav_and_1_hz_status() {
     assert_eq!(dec.stats().rejected_total(), 0);
 }
 
+/// The thesis' exact physics (`tests/sim_models.rs` covers the realistic
+/// model, where the reversed port ESC at full reverse gives half thrust).
 #[test]
 fn forward_thrust_moves_the_simulated_vehicle() {
-    let (mut b, _) = booted(EmulatorOptions::default());
+    let (mut b, _) = booted(EmulatorOptions::ideal_thesis());
     // Port wired reversed: full forward is port 1000, starboard 2000.
     send(
         &mut b,

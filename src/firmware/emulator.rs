@@ -22,9 +22,13 @@
 //!   two seconds without `ping` stop the motors until the next ping;
 //! - navigation lines at 10 Hz and status lines at 1 Hz from the simulator.
 //!
-//! The simulator is driven with the thruster values the board accepted
-//! (after its deadzone; the reverse multiplier compensates for weaker
-//! reverse propellers, which the thesis model does not have).
+//! The simulator ([`crate::sim::Plant`]) is driven with the ESC outputs, as
+//! on the vehicle: after the board's deadzone and its reverse multiplier
+//! (which compensates for propellers that push less in reverse — the plant
+//! models that), and neutral while the motors are detached, the ESCs are
+//! powered off or the dead-man switch has tripped. The navigation line
+//! reports the plant's readings: heading, 1 Hz depth, pitch and roll, with
+//! the noise the options ask for.
 //!
 //! Fault injection (all off by default) reproduces what the thesis saw on
 //! the real link: garbage bytes, torn lines, wild points, dropped lines and
@@ -46,10 +50,7 @@ use tokio::sync::{broadcast, oneshot, watch};
 
 use super::codec::{Framing, crc8, physical_range};
 use super::pty::{PtyError, PtyPair};
-use crate::sim::{
-    Demand, Readings, SensorModel, SensorParams, SimState, ThesisModel, ThesisParams,
-    demand_from_thrusters,
-};
+use crate::sim::{Plant, Readings, SimError, SimOptions, SimState, Truth, thesis::wrap_deg_360};
 
 /// Bytes the board buffers for one frame before giving up on it.
 pub const FRAME_BUFFER_BYTES: usize = 80;
@@ -109,6 +110,23 @@ pub struct EmulatorOptions {
     /// Firmware version printed in status lines.
     pub version: String,
     pub faults: FaultOptions,
+    /// The simulated vehicle (`[emulator.sim]`).
+    pub sim: SimOptions,
+}
+
+impl EmulatorOptions {
+    /// The board with the thesis' ideal simulator, reproducing the emulator
+    /// from before the plant existed: [`SimOptions::ideal_thesis`], and a
+    /// reverse multiplier of 1 so the ESC outputs are the accepted `go()`
+    /// values (the old emulator fed those to the physics, never the
+    /// multiplied ones). For tests that check exact physics.
+    pub fn ideal_thesis() -> Self {
+        Self {
+            reverse_multiplier: 1.0,
+            sim: SimOptions::ideal_thesis(),
+            ..Self::default()
+        }
+    }
 }
 
 impl Default for EmulatorOptions {
@@ -122,6 +140,7 @@ impl Default for EmulatorOptions {
             status_period_ms: 1000,
             version: "30.0.3-neptunus-emu".into(),
             faults: FaultOptions::default(),
+            sim: SimOptions::default(),
         }
     }
 }
@@ -192,20 +211,30 @@ pub struct BoardSnapshot {
     pub faults: FaultStats,
 }
 
-/// Simulated vehicle state in plain units.
+/// Simulated vehicle state in plain units (the truth, not the readings).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SimSnapshot {
     pub north_m: f64,
     pub east_m: f64,
     pub depth_m: f64,
+    /// Wrapped into `[0, 360)`.
     pub heading_deg: f64,
     pub surge_mps: f64,
     pub sway_mps: f64,
     pub heave_mps: f64,
     pub yaw_rate_dps: f64,
+    /// 0 in the 4-DOF model.
+    pub roll_deg: f64,
+    /// Positive nose up; 0 in the 4-DOF model.
+    pub pitch_deg: f64,
+    /// `[port, vertical, starboard]` (N), positive forward / down.
+    pub thrust_n: [f64; 3],
+    /// 0 with the tether off.
+    pub tether_length_m: f64,
 }
 
 impl From<&SimState> for SimSnapshot {
+    /// A 4-DOF state: level, thrust and tether unknown (0).
     fn from(s: &SimState) -> Self {
         Self {
             north_m: s.eta[0],
@@ -216,6 +245,29 @@ impl From<&SimState> for SimSnapshot {
             sway_mps: s.nu[1],
             heave_mps: s.nu[2],
             yaw_rate_dps: s.nu[3].to_degrees(),
+            roll_deg: 0.0,
+            pitch_deg: 0.0,
+            thrust_n: [0.0; 3],
+            tether_length_m: 0.0,
+        }
+    }
+}
+
+impl From<&Truth> for SimSnapshot {
+    fn from(t: &Truth) -> Self {
+        Self {
+            north_m: t.north_m,
+            east_m: t.east_m,
+            depth_m: t.depth_m,
+            heading_deg: wrap_deg_360(t.heading_rad.to_degrees()),
+            surge_mps: t.surge_mps,
+            sway_mps: t.sway_mps,
+            heave_mps: t.heave_mps,
+            yaw_rate_dps: t.yaw_rate_rps.to_degrees(),
+            roll_deg: t.roll_rad.to_degrees(),
+            pitch_deg: t.pitch_rad.to_degrees(),
+            thrust_n: t.thrust_n,
+            tether_length_m: t.tether_length_m,
         }
     }
 }
@@ -225,9 +277,7 @@ impl From<&SimState> for SimSnapshot {
 pub struct Board {
     opts: EmulatorOptions,
     rng: SmallRng,
-    model: ThesisModel,
-    sensors: SensorModel,
-    sim: SimState,
+    plant: Plant,
     sim_time: Duration,
     frame: Vec<u8>,
     frame_overflow: bool,
@@ -263,14 +313,26 @@ pub struct Board {
 
 impl Board {
     /// A board at power-up; nothing is printed until [`Board::start`].
+    ///
+    /// # Panics
+    /// If `opts.sim` is invalid (see [`SimOptions::validate`]); the defaults
+    /// and [`EmulatorOptions::ideal_thesis`] never are. Use
+    /// [`Board::try_new`] for options that come from a user.
     pub fn new(opts: EmulatorOptions) -> Self {
+        match Self::try_new(opts) {
+            Ok(board) => board,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// A board at power-up, or why its simulator options are unusable.
+    pub fn try_new(opts: EmulatorOptions) -> Result<Self, SimError> {
         let seed = opts.faults.seed;
-        Self {
+        let plant = Plant::new(&opts.sim, opts.wiring_directions)?;
+        Ok(Self {
             opts,
             rng: SmallRng::seed_from_u64(seed),
-            model: ThesisModel::new(ThesisParams::default()),
-            sensors: SensorModel::new(SensorParams::default()),
-            sim: SimState::default(),
+            plant,
             sim_time: Duration::ZERO,
             frame: Vec::with_capacity(FRAME_BUFFER_BYTES),
             frame_overflow: false,
@@ -302,7 +364,7 @@ impl Board {
             log_executed: false,
             faults: FaultStats::default(),
             now: Duration::ZERO,
-        }
+        })
     }
 
     /// Keep every received frame and executed command (read back with
@@ -316,9 +378,24 @@ impl Board {
         std::mem::take(&mut self.executed_log)
     }
 
-    /// Sets the simulated vehicle's state (tests, scenario start).
+    /// Sets the simulated vehicle's pose and 4-DOF velocities (tests,
+    /// scenario start): [`Plant::set_pose`] then [`Plant::set_velocities`].
+    /// With the 6-DOF model the vehicle starts level with no roll or pitch
+    /// rate, and the thrusters restart from rest.
     pub fn set_sim_state(&mut self, s: SimState) {
-        self.sim = s;
+        self.plant.set_pose(s.eta[0], s.eta[1], s.eta[2], s.eta[3]);
+        self.plant
+            .set_velocities(s.nu[0], s.nu[1], s.nu[2], s.nu[3]);
+    }
+
+    /// The simulated vehicle.
+    pub fn plant(&self) -> &Plant {
+        &self.plant
+    }
+
+    /// The simulated vehicle, to set a scenario up.
+    pub fn plant_mut(&mut self) -> &mut Plant {
+        &mut self.plant
     }
 
     /// Stalls the board: it neither reads nor prints, as a hung firmware.
@@ -460,13 +537,15 @@ impl Board {
         }
         self.step_sim(now);
         while now >= self.next_nav {
+            let due = self.next_nav;
             self.next_nav += Duration::from_millis(self.opts.nav_period_ms);
-            let line = self.nav_line();
+            let line = self.nav_line(due);
             self.emit_telemetry(line, out);
         }
         while now >= self.next_status {
+            let due = self.next_status;
             self.next_status += Duration::from_millis(self.opts.status_period_ms);
-            let line = self.status_line();
+            let line = self.status_line(due);
             self.emit_telemetry(line, out);
             if self.reported_motors_us != Some(self.motors_us) {
                 self.reported_motors_us = Some(self.motors_us);
@@ -487,30 +566,21 @@ impl Board {
     }
 
     fn step_sim(&mut self, now: Duration) {
-        let demand = self.demand();
+        let esc_us = self.esc_drive_us();
         while self.sim_time + SIM_STEP <= now {
-            self.sim = self.model.step(&self.sim, &demand, SIM_STEP.as_secs_f64());
+            self.plant.step(esc_us, SIM_STEP.as_secs_f64());
             self.sim_time += SIM_STEP;
         }
     }
 
-    /// The demand the thrusters currently produce.
-    fn demand(&self) -> Demand {
+    /// What the ESCs are driven with: the motor outputs, or neutral while
+    /// the motors are detached, the ESCs unpowered or the dead-man tripped
+    /// (no thrust in any of those).
+    fn esc_drive_us(&self) -> [u16; 3] {
         if !self.motors_attached || !self.esc_power || self.dms_tripped {
-            return Demand::default();
+            return [NEUTRAL_US as u16; 3];
         }
-        let dz = i32::from(self.opts.deadzone_us);
-        let applied = self.target_us.map(|v| {
-            if (v - NEUTRAL_US).abs() <= dz {
-                NEUTRAL_US
-            } else {
-                v
-            }
-        });
-        demand_from_thrusters(
-            applied.map(|v| v.clamp(1000, 2000) as u16),
-            self.opts.wiring_directions,
-        )
+        self.motors_us.map(|v| v.clamp(1000, 2000) as u16)
     }
 
     fn update_motors(&mut self) {
@@ -588,7 +658,9 @@ impl Board {
                 self.dms_armed = arg(0) != 0;
                 self.last_ping = self.now;
             }
-            "dzer" | "depth_zero" => self.depth_offset_m += self.readings().depth_m,
+            // The board zeroes on the pressure sensor's last sample, not on
+            // a line's (possibly wild) value.
+            "dzer" | "depth_zero" => self.depth_offset_m = self.plant.depth_sample_m(),
             "rcap" => self.print(&format!("CAPA:{CAPABILITIES};"), out),
             "thro" | "yaw" | "lift" => self.board_mix(&name, arg(0)),
             _ => self.print(&format!("log:UnknownCommand {name};"), out),
@@ -608,22 +680,23 @@ impl Board {
         self.update_motors();
     }
 
-    fn readings(&self) -> Readings {
-        let mut r = self.sensors.read(&self.sim, &self.demand());
+    /// The plant's readings at board time `at`, as the board reports them.
+    fn readings(&mut self, at: Duration) -> Readings {
+        let mut r = self.plant.read(at);
         r.depth_m -= self.depth_offset_m;
         r
     }
 
-    fn nav_line(&self) -> String {
-        let r = self.readings();
+    fn nav_line(&mut self, at: Duration) -> String {
+        let r = self.readings(at);
         format!(
             "hdgd:{:.2};deep:{:.2};pitc:{:.2};roll:{:.2};yaw:{:.2};fthr:{:.2};",
             r.heading_deg, r.depth_m, r.pitch_deg, r.roll_deg, r.yaw_deg, r.fthr_pct
         )
     }
 
-    fn status_line(&self) -> String {
-        let r = self.readings();
+    fn status_line(&mut self, at: Duration) -> String {
+        let r = self.readings(at);
         let t = self.target_us;
         format!(
             "vout:{:.2};iout:{:.2};btti:{:.2};pres:{:.2};temp:{:.2};time:{};fmem:{};motorAttached:{};servo:{};starg:{};mtarg:{},{},{};ver:{};",
@@ -791,7 +864,7 @@ impl Board {
             overruns: self.overruns,
             stalled: self.stalled,
             executed_total: self.executed_total,
-            sim: SimSnapshot::from(&self.sim),
+            sim: SimSnapshot::from(&self.plant.truth()),
             faults: self.faults,
         }
     }
@@ -859,13 +932,14 @@ impl PtyBoard {
     /// Creates the pty, optionally a stable symlink to it, boots the board
     /// and runs it until [`PtyBoard::shutdown`] or drop.
     pub fn spawn(opts: EmulatorOptions, symlink: Option<PathBuf>) -> Result<Self, PtyError> {
+        // Bad simulator options fail before a pty or a symlink exists.
+        let mut board = Board::try_new(opts)?;
+        board.record(true);
         let mut pty = PtyPair::open()?;
         if let Some(link) = &symlink {
             pty.make_symlink(link)?;
         }
         let path = symlink.unwrap_or_else(|| pty.slave_path().to_path_buf());
-        let mut board = Board::new(opts);
-        board.record(true);
         let (stall_tx, stall_rx) = watch::channel(false);
         let (snap_tx, snap_rx) = watch::channel(board.snapshot());
         let (records_tx, _) = broadcast::channel(4096);

@@ -14,9 +14,12 @@ use nix::fcntl::{FcntlArg, OFlag, fcntl};
 use nix::sys::termios::{SetArg, cfmakeraw, tcgetattr, tcsetattr};
 use tokio::io::unix::AsyncFd;
 
-/// Errors creating or using a pseudo-terminal.
+/// Errors creating or using a pseudo-terminal, or starting the board
+/// emulator behind it.
 #[derive(Debug, thiserror::Error)]
 pub enum PtyError {
+    #[error("{0} (in the emulator's [emulator.sim] options)")]
+    Simulator(#[from] crate::sim::SimError),
     #[error("cannot create a pseudo-terminal: {0}")]
     Create(nix::Error),
     #[error("cannot configure the pseudo-terminal: {0}")]

@@ -56,6 +56,7 @@ impl Outcome {
 pub fn options(seed: u64) -> EmulatorOptions {
     let mut o = EmulatorOptions::default();
     o.faults.seed = seed;
+    o.sim.seed = seed;
     o
 }
 
@@ -264,12 +265,14 @@ pub fn all() -> Vec<Outcome> {
     ]
 }
 
+/// A current across the vehicle's heading (it flows towards the east).
 fn set_current(opts: &mut EmulatorOptions, speed_mps: f64) {
-    let _ = (opts, speed_mps);
+    opts.sim.current.speed_mps = speed_mps;
+    opts.sim.current.direction_deg = 90.0;
 }
 
 fn set_wild_rate(opts: &mut EmulatorOptions, rate: f64) {
-    let _ = (opts, rate);
+    opts.sim.wild_rate = rate;
 }
 
 /// Writes `DIR/<scenario>.csv`, `DIR/<scenario>.png` and `DIR/summary.md`.

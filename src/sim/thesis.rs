@@ -32,7 +32,9 @@
 //! The model has no free surface: with no thrust the vehicle keeps rising
 //! past z = 0. The sensor model reads surface pressure above the surface.
 
-use nalgebra::{Cholesky, Matrix4, Vector4};
+use nalgebra::{Cholesky, Matrix4, Vector3, Vector4};
+
+use super::environment::Environment;
 
 /// Pulse width that stops a thruster (µs).
 pub const PWM_NEUTRAL_US: u16 = 1500;
@@ -97,6 +99,12 @@ pub enum ParamsError {
         name: &'static str,
         index: usize,
         value: f64,
+    },
+    #[error("simulator parameter {name} = {value} is not positive — {fix}")]
+    NotPositive {
+        name: &'static str,
+        value: f64,
+        fix: &'static str,
     },
 }
 
@@ -272,6 +280,54 @@ impl ThesisModel {
         SimState {
             eta: s.eta + (k1.eta + 2.0 * (k2.eta + k3.eta) + k4.eta) * sixth,
             nu: s.nu + (k1.nu + 2.0 * (k2.nu + k3.nu) + k4.nu) * sixth,
+        }
+    }
+
+    /// One RK4 step in moving water and on a tether: as [`ThesisModel::step`],
+    /// but the damping acts on the velocity relative to the water,
+    /// `D(ν_r)ν_r` as the thesis writes it (eq. 12.10), and the tether's drag
+    /// is added to τ in surge, sway and heave (the 4-DOF model has no roll or
+    /// pitch for it to act on). With [`Environment::is_calm`] this is the
+    /// same motion as `step` to rounding.
+    pub fn step_in(&self, s: &SimState, d: &Demand, env: &Environment, dt_s: f64) -> SimState {
+        let tau = self.tau(d);
+        let half = 0.5 * dt_s;
+        let k1 = self.derivative_env(s, &tau, env);
+        let k2 = self.derivative_env(&axpy(s, half, &k1), &tau, env);
+        let k3 = self.derivative_env(&axpy(s, half, &k2), &tau, env);
+        let k4 = self.derivative_env(&axpy(s, dt_s, &k3), &tau, env);
+        let sixth = dt_s / 6.0;
+        SimState {
+            eta: s.eta + (k1.eta + 2.0 * (k2.eta + k3.eta) + k4.eta) * sixth,
+            nu: s.nu + (k1.nu + 2.0 * (k2.nu + k3.nu) + k4.nu) * sixth,
+        }
+    }
+
+    fn derivative_env(&self, s: &SimState, tau: &Vector4<f64>, env: &Environment) -> SimState {
+        let p = &self.params;
+        let nu = &s.nu;
+        let (sin, cos) = s.eta[3].sin_cos();
+        let eta_dot = Vector4::new(
+            nu[0] * cos - nu[1] * sin,
+            nu[0] * sin + nu[1] * cos,
+            nu[2],
+            nu[3],
+        );
+        let c = &env.current_ned_mps;
+        // The current in the body frame: Rᵀ(ψ)·v_c.
+        let current_body =
+            Vector4::new(c[0] * cos + c[1] * sin, -c[0] * sin + c[1] * cos, c[2], 0.0);
+        let nu_r = nu - current_body;
+        let damping = (p.d_l + p.d_q.component_mul(&nu_r.abs())).component_mul(&nu_r);
+        let position = Vector3::new(s.eta[0], s.eta[1], s.eta[2]);
+        let v_rel_ned = Vector3::new(eta_dot[0], eta_dot[1], eta_dot[2]) - c;
+        let f = env.tether_force_ned_n(&position, &v_rel_ned);
+        let tether_body =
+            Vector4::new(f[0] * cos + f[1] * sin, -f[0] * sin + f[1] * cos, f[2], 0.0);
+        let nu_dot = self.m_inv * (tau + tether_body - damping - p.g);
+        SimState {
+            eta: eta_dot,
+            nu: nu_dot,
         }
     }
 
