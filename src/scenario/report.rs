@@ -96,7 +96,7 @@ fn angle_diff(a: f64, b: f64) -> f64 {
 
 /// Depth step 0 → 2 m in ALT_HOLD.
 pub fn depth_step() -> Outcome {
-    let mut s = armed_in(MODE_ALT_HOLD, options(1), 0.0, 0.0);
+    let mut s = armed_in(MODE_ALT_HOLD, options(1), 0.0, 45.0);
     s.run(Duration::from_secs(2));
     let start = s.now().as_secs_f64();
     s.set_depth_target(2.0);
@@ -122,31 +122,35 @@ pub fn depth_step() -> Outcome {
     }
 }
 
-/// Heading step 0 → 90° in STABILIZE.
+/// Heading step 30° → 120° in STABILIZE. Judged on the compass reading
+/// without noise (true heading plus the compass' configured bias): a
+/// heading hold can only hold the heading its compass reports.
 pub fn heading_step() -> Outcome {
-    let mut s = armed_in(MODE_STABILIZE, options(2), 1.0, 0.0);
+    let opts = options(2);
+    let bias = opts.sim.noise.heading_bias_deg;
+    let mut s = armed_in(MODE_STABILIZE, opts, 1.0, 30.0);
     s.run(Duration::from_secs(2));
     let start = s.now().as_secs_f64();
-    s.set_heading_target(90.0);
+    s.set_heading_target(120.0);
     s.run(Duration::from_secs(20));
     let samples = s.samples().to_vec();
+    let compass = |x: &Sample| x.heading_true_deg + bias;
     let peak = samples
         .iter()
         .filter(|x| x.t_s >= start)
-        .map(|x| angle_diff(x.heading_true_deg, 0.0))
+        .map(|x| angle_diff(compass(x), 120.0))
         .fold(f64::MIN, f64::max);
     Outcome {
         name: "heading_step",
-        title: "Heading step 0 → 90° (STABILIZE)",
+        title: "Heading step 30° → 120° (STABILIZE)",
         metrics: vec![
             (
                 "settling_time_3deg",
-                settling_time_s(&samples, start, 0.0, 3.0, |x| {
-                    angle_diff(x.heading_true_deg, 90.0)
-                }),
+                settling_time_s(&samples, start, 0.0, 3.0, |x| angle_diff(compass(x), 120.0)),
                 "s",
             ),
-            ("overshoot", (peak - 90.0).max(0.0), "deg"),
+            ("overshoot", peak.max(0.0), "deg"),
+            ("compass_bias", bias, "deg"),
         ],
         samples,
     }
@@ -156,7 +160,7 @@ pub fn heading_step() -> Outcome {
 pub fn depth_hold_in_current() -> Outcome {
     let mut opts = options(3);
     set_current(&mut opts, 0.2);
-    let mut s = armed_in(MODE_ALT_HOLD, opts, 2.0, 0.0);
+    let mut s = armed_in(MODE_ALT_HOLD, opts, 2.0, 45.0);
     s.set_depth_target(2.0);
     // The vehicle drifts with the current while the pilot drives forward a little.
     s.set_sticks(Sticks {
@@ -238,7 +242,7 @@ pub fn wild_points() -> Outcome {
 
 /// SURFACE from 3 m.
 pub fn surface() -> Outcome {
-    let mut s = armed_in(MODE_SURFACE, options(5), 3.0, 0.0);
+    let mut s = armed_in(MODE_SURFACE, options(5), 3.0, 45.0);
     let start = s.now().as_secs_f64();
     s.run(Duration::from_secs(25));
     let samples = s.samples().to_vec();

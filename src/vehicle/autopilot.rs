@@ -58,6 +58,12 @@ impl Pid {
         *self = Self::default();
     }
 
+    /// A step with no output: the integrator keeps its value and the
+    /// derivative its reference.
+    pub fn hold(&mut self, measurement: f64) {
+        self.last_measurement = Some(finite(measurement));
+    }
+
     /// One step: `target` and `measurement` in the loop's units; output clamped to ±`limit`.
     pub fn step(&mut self, g: PidGains, target: f64, measurement: f64, dt: f64, limit: f64) -> f64 {
         let (target, measurement, dt) = (finite(target), finite(measurement), finite(dt));
@@ -108,6 +114,10 @@ pub struct HeadingGains {
     pub rate: PidGains,
     /// Full yaw stick and the largest rate the hold commands (rad/s).
     pub max_rate_rps: f64,
+    /// Held heading error below which the thrusters rest (rad): the ESCs'
+    /// deadzone makes the smallest yaw moment a sizeable one, so correcting
+    /// every tenth of a degree would only make the vehicle hunt.
+    pub band_rad: f64,
 }
 
 /// Depth-hold settings from the parameters.
@@ -293,6 +303,7 @@ mod tests {
             angle_p: 1.0,
             rate: PidGains::default(),
             max_rate_rps: f64::NAN,
+            band_rad: f64::NAN,
         };
         assert!(
             h.step(&hg, &Measured::default(), f64::NAN, 0.01)
@@ -309,6 +320,7 @@ mod tests {
                 ..PidGains::default()
             },
             max_rate_rps: 0.8,
+            band_rad: 0.02,
         };
         let mut h = HeadingHold::default();
         let turning = Measured {
