@@ -203,6 +203,8 @@ pub enum ConfigError {
 }
 
 /// Where the vehicle's board is.
+// Built once at start: the size difference costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum BoardSource {
     /// The emulator behind an internal pseudo-terminal.
