@@ -198,6 +198,10 @@ pub enum ConfigError {
 
 /// Where the vehicle's board is.
 #[derive(Debug, Clone, PartialEq)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "resolved once at start; boxing would only move the bytes"
+)]
 pub enum BoardSource {
     /// The emulator behind an internal pseudo-terminal.
     Simulated(EmulatorOptions),

@@ -468,8 +468,10 @@ mod tests {
 
     #[test]
     fn bad_params_are_rejected() {
-        let mut p = SixDofParams::default();
-        p.bg_m = -0.01;
+        let p = SixDofParams {
+            bg_m: -0.01,
+            ..SixDofParams::default()
+        };
         assert!(matches!(
             SixDofModel::try_new(p),
             Err(ParamsError::NotPositive { name: "bg_m", .. })
