@@ -206,6 +206,10 @@ pub enum ConfigError {
 // Built once at start: the size difference costs nothing.
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
+#[allow(
+    clippy::large_enum_variant,
+    reason = "resolved once at start; boxing would only move the bytes"
+)]
 pub enum BoardSource {
     /// The emulator behind an internal pseudo-terminal.
     Simulated(EmulatorOptions),

@@ -3,6 +3,7 @@
 
 use clap::Parser;
 use neptunus::config::{BoardSource, Cli, FileConfig, resolve};
+use neptunus::sim::{ModelKind, NoiseOptions, SimOptions, TetherOptions};
 
 fn readme_example() -> String {
     let readme =
@@ -19,6 +20,8 @@ fn readme_example_config_parses() {
     let cfg = FileConfig::parse(&readme_example()).unwrap();
     assert_eq!(cfg.emulator.wiring_directions, [-1, 1, 1]);
     assert_eq!(cfg.mavlink.endpoints.as_ref().unwrap().len(), 2);
+    // The README documents the simulator's defaults: they must be the defaults.
+    assert_eq!(cfg.emulator.sim, SimOptions::default());
 }
 
 #[test]
@@ -101,4 +104,128 @@ fn bad_values_are_refused_with_the_key() {
         let err = resolve(&cli.run).map(|_| ()).unwrap_err().to_string();
         assert!(err.contains(needle), "{text:?} → {err}");
     }
+}
+
+#[test]
+fn emulator_sim_table_parses() {
+    let cfg = FileConfig::parse(
+        "[emulator.sim]\nmodel = \"thesis-4dof\"\nthruster_rise_time_s = 0.1\nreverse_thrust_ratio = 0.6\n\
+         depth_update_hz = 0.0\nwild_rate = 0.01\nseed = 7\n\
+         [emulator.sim.tether]\nenabled = false\nmin_length_m = 30.0\n\
+         [emulator.sim.current]\nspeed_mps = 0.2\ndirection_deg = 90.0\n\
+         [emulator.sim.noise]\nheading_std_deg = 0.5\ndepth_bias_m = 0.0\n",
+    )
+    .unwrap();
+    let sim = &cfg.emulator.sim;
+    assert_eq!(sim.model, ModelKind::Thesis4Dof);
+    assert_eq!(sim.thruster_rise_time_s, 0.1);
+    assert_eq!(sim.reverse_thrust_ratio, 0.6);
+    assert_eq!(sim.seed, 7);
+    assert!(!sim.tether.enabled);
+    assert_eq!(sim.tether.min_length_m, 30.0);
+    assert_eq!(sim.tether.diameter_m, TetherOptions::default().diameter_m);
+    assert_eq!(sim.current.direction_deg, 90.0);
+    assert_eq!(sim.noise.heading_std_deg, 0.5);
+    assert_eq!(
+        sim.noise.roll_bias_deg,
+        NoiseOptions::default().roll_bias_deg
+    );
+    // No table: the realistic defaults.
+    let cfg = FileConfig::parse("").unwrap();
+    assert_eq!(cfg.emulator.sim, SimOptions::default());
+    assert_eq!(cfg.emulator.sim.model, ModelKind::SixDof);
+    assert!(FileConfig::parse("[emulator.sim]\nmodel = \"six-dof\"\n").is_ok());
+}
+
+#[test]
+fn emulator_sim_bad_values_name_the_key_the_value_and_the_fix() {
+    for (text, needles) in [
+        (
+            "[emulator.sim]\nthruster_rise_time_s = 1.5\n",
+            &["emulator.sim.thruster_rise_time_s", "1.5", "0..1 s"][..],
+        ),
+        (
+            "[emulator.sim]\nthruster_rise_time_s = -0.1\n",
+            &["thruster_rise_time_s", "-0.1"],
+        ),
+        (
+            "[emulator.sim]\nreverse_thrust_ratio = 0.0\n",
+            &["emulator.sim.reverse_thrust_ratio", "= 0", "(0, 1]"],
+        ),
+        (
+            "[emulator.sim]\nreverse_thrust_ratio = nan\n",
+            &["reverse_thrust_ratio", "NaN"],
+        ),
+        (
+            "[emulator.sim]\nwild_rate = 1.2\n",
+            &["emulator.sim.wild_rate", "1.2", "probability"],
+        ),
+        (
+            "[emulator.sim]\ndepth_update_hz = -1.0\n",
+            &["emulator.sim.depth_update_hz", "-1"],
+        ),
+        (
+            "[emulator.sim.tether]\ndiameter_m = -0.003\n",
+            &["emulator.sim.tether.diameter_m", "-0.003", "diameter"],
+        ),
+        (
+            "[emulator.sim.tether]\nmin_length_m = inf\n",
+            &["emulator.sim.tether.min_length_m", "inf"],
+        ),
+        (
+            "[emulator.sim.current]\nspeed_mps = nan\n",
+            &["emulator.sim.current.speed_mps", "NaN"],
+        ),
+        (
+            "[emulator.sim.noise]\nheading_std_deg = -1.0\n",
+            &[
+                "emulator.sim.noise.heading_std_deg",
+                "-1",
+                "standard deviation",
+            ],
+        ),
+        (
+            "[emulator.sim.noise]\ndepth_std_m = 20.0\n",
+            &["emulator.sim.noise.depth_std_m", "20"],
+        ),
+        ("[emulator.sim]\nbogus = 1\n", &["bogus"]),
+        ("[emulator.sim.tether]\nlength_m = 3.0\n", &["length_m"]),
+        (
+            "[emulator.sim.noise]\nyaw_std_deg = 1.0\n",
+            &["yaw_std_deg"],
+        ),
+        (
+            "[emulator.sim]\nmodel = \"7dof\"\n",
+            &["7dof", "six-dof", "thesis-4dof"],
+        ),
+        (
+            "[emulator.sim]\nthruster_rise_time_s = \"fast\"\n",
+            &["thruster_rise_time_s"],
+        ),
+    ] {
+        let err = FileConfig::parse(text).map(|_| ()).unwrap_err();
+        for needle in needles {
+            assert!(err.contains(needle), "{text:?} → {err} (wanted {needle:?})");
+        }
+    }
+}
+
+#[test]
+fn emulator_sim_errors_reach_the_user_through_resolve() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("n.toml");
+    std::fs::write(&path, "[emulator.sim]\nwild_rate = 2.0\n").unwrap();
+    let cli = Cli::parse_from([
+        "neptunus",
+        "--sim",
+        "--config",
+        path.to_str().unwrap(),
+        "--data-dir",
+        "/tmp/x",
+    ]);
+    let err = resolve(&cli.run).map(|_| ()).unwrap_err().to_string();
+    assert!(
+        err.contains("n.toml") && err.contains("emulator.sim.wild_rate = 2"),
+        "{err}"
+    );
 }

@@ -832,3 +832,51 @@ fn bad_options_are_refused_by_the_board_not_simulated() {
         "{err}"
     );
 }
+
+// Integration accuracy -----------------------------------------------------------
+
+#[test]
+fn thesis_step_in_calm_water_is_the_thesis_step() {
+    let model = ThesisModel::new(ThesisParams::default());
+    let env = neptunus::sim::Environment::default();
+    let d = Demand {
+        surge: 0.7,
+        heave: -0.3,
+        yaw: 0.4,
+    };
+    let (mut a, mut b) = (SimState::default(), SimState::default());
+    for _ in 0..2000 {
+        a = model.step(&a, &d, DT_S);
+        b = model.step_in(&b, &d, &env, DT_S);
+    }
+    assert!((a.eta - b.eta).norm() < 1e-9 && (a.nu - b.nu).norm() < 1e-12);
+    assert!(a.eta.norm() > 10.0);
+}
+
+#[test]
+fn six_dof_rk4_at_10_ms_matches_a_1_ms_reference() {
+    use neptunus::sim::{Environment, SixDofModel, SixDofParams, SixDofState};
+    let model = SixDofModel::try_new(SixDofParams::default()).unwrap();
+    let env = Environment::new(
+        &CurrentOptions {
+            speed_mps: 0.3,
+            direction_deg: 40.0,
+        },
+        &TetherOptions::default(),
+    );
+    let thrust = |t_s: f64| [6.0 * (0.3 * t_s).sin(), 12.0 * (0.7 * t_s).cos(), 4.0];
+    let mut start = SixDofState::default();
+    start.eta[3] = 0.3;
+    start.eta[4] = -0.2;
+    let (mut coarse, mut fine) = (start, start);
+    for k in 0..2000 {
+        let t_s = k as f64 * DT_S;
+        coarse = model.step(&coarse, &thrust(t_s), &env, DT_S);
+        for _ in 0..10 {
+            fine = model.step(&fine, &thrust(t_s), &env, DT_S / 10.0);
+        }
+    }
+    let err = (coarse.eta - fine.eta).norm();
+    assert!(err < 1e-6, "20 s apart by {err}");
+    assert!(coarse.eta.xyz().norm() > 1.0);
+}

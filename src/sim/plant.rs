@@ -139,7 +139,7 @@ impl SimOptions {
             "thruster_rise_time_s",
             rise,
             (0.0..=1.0).contains(&rise),
-            "use a rise time in 0..1 s (0.1–0.3 s for OpenROV thrusters; 0 = no lag)",
+            "use a rise time in 0..1 s (0.1–0.3 s is typical of small ROV thrusters; 0 = no lag)",
         )?;
         let ratio = self.reverse_thrust_ratio;
         check(
@@ -274,7 +274,7 @@ pub struct Truth {
 #[derive(Debug, Clone)]
 enum Model {
     Thesis {
-        model: ThesisModel,
+        model: Box<ThesisModel>,
         state: SimState,
     },
     SixDof {
@@ -309,7 +309,7 @@ impl Plant {
                 let f = model.params().thrust_n;
                 (
                     Model::Thesis {
-                        model,
+                        model: Box::new(model),
                         state: SimState::default(),
                     },
                     // The per-thruster reading of τ = [fX, 0, fZ, 2flM]
@@ -534,5 +534,84 @@ impl Plant {
     /// The water and tether.
     pub fn environment(&self) -> &Environment {
         &self.env
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_and_ideal_are_valid_and_differ_where_documented() {
+        assert_eq!(SimOptions::default().validate(), Ok(()));
+        assert_eq!(SimOptions::ideal_thesis().validate(), Ok(()));
+        let d = SimOptions::default();
+        assert_eq!(d.model, ModelKind::SixDof);
+        assert!(d.tether.enabled && d.noise != NoiseOptions::none());
+        assert_eq!((d.depth_update_hz, d.wild_rate), (1.0, 0.0));
+        let i = SimOptions::ideal_thesis();
+        assert_eq!(i.model, ModelKind::Thesis4Dof);
+        assert_eq!((i.thruster_rise_time_s, i.reverse_thrust_ratio), (0.0, 1.0));
+    }
+
+    #[test]
+    fn every_bad_value_is_named() {
+        type Spoil = fn(&mut SimOptions);
+        let cases: [(&str, Spoil); 6] = [
+            ("thruster_rise_time_s", |o| o.thruster_rise_time_s = 2.0),
+            ("reverse_thrust_ratio", |o| o.reverse_thrust_ratio = 1.5),
+            ("tether.drag_coefficient", |o| {
+                o.tether.drag_coefficient = f64::NAN
+            }),
+            ("current.direction_deg", |o| {
+                o.current.direction_deg = f64::INFINITY
+            }),
+            ("noise.roll_bias_deg", |o| o.noise.roll_bias_deg = 200.0),
+            ("noise.depth_bias_m", |o| o.noise.depth_bias_m = -11.0),
+        ];
+        for (key, spoil) in cases {
+            let mut o = SimOptions::default();
+            spoil(&mut o);
+            match o.validate() {
+                Err(SimError::Invalid { key: k, .. }) => assert_eq!(k, key),
+                other => panic!("{key}: {other:?}"),
+            }
+            assert!(Plant::new(&o, [1, 1, 1]).is_err());
+        }
+    }
+
+    #[test]
+    fn a_bad_step_is_ignored_and_a_disabled_thruster_pushes_nothing() {
+        let mut p =
+            Plant::new(&SimOptions::ideal_thesis(), [0, 1, 1]).unwrap_or_else(|e| panic!("{e}"));
+        p.step([2000; 3], f64::NAN);
+        p.step([2000; 3], -0.01);
+        assert_eq!(p.truth(), Truth::default());
+        p.step([2000, 1500, 1500], 0.01);
+        assert_eq!(p.truth().thrust_n, [0.0; 3]);
+        assert_eq!(p.truth().surge_mps, 0.0);
+    }
+
+    #[test]
+    fn set_pose_starts_level_at_rest_with_thrusters_stopped() {
+        let mut p =
+            Plant::new(&SimOptions::default(), [-1, 1, 1]).unwrap_or_else(|e| panic!("{e}"));
+        for _ in 0..100 {
+            p.step([1200, 1800, 1800], 0.01);
+        }
+        p.set_attitude(0.1, 0.2);
+        p.set_pose(3.0, 4.0, 5.0, 7.0);
+        let t = p.truth();
+        assert_eq!(
+            (t.north_m, t.east_m, t.depth_m, t.heading_rad),
+            (3.0, 4.0, 5.0, 7.0)
+        );
+        assert_eq!(
+            (t.roll_rad, t.pitch_rad, t.surge_mps, t.yaw_rate_rps),
+            (0.0, 0.0, 0.0, 0.0)
+        );
+        assert_eq!(t.thrust_n, [0.0; 3]);
+        // √(3² + 4² + 5²) beyond the 2 m minimum.
+        assert!((t.tether_length_m - 50f64.sqrt()).abs() < 1e-12);
     }
 }
