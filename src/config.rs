@@ -203,8 +203,6 @@ pub enum ConfigError {
 }
 
 /// Where the vehicle's board is.
-// Built once at start: the size difference costs nothing.
-#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 #[allow(
     clippy::large_enum_variant,

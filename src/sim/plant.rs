@@ -269,8 +269,6 @@ pub struct Truth {
     pub tether_length_m: f64,
 }
 
-// One plant per simulator, never moved in a hot path.
-#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone)]
 enum Model {
     Thesis {
