@@ -418,3 +418,23 @@ fn estimates_and_setpoints_are_published() {
         Some(MavMessage::NAV_CONTROLLER_OUTPUT(_))
     ));
 }
+
+#[test]
+fn sim_report_writes_a_png_and_a_csv_per_scenario() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let outcome = report::surface();
+    let written = report::write(dir.path(), std::slice::from_ref(&outcome)).expect("report");
+    let png = std::fs::read(dir.path().join("surface.png")).expect("png");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    assert!(png.len() > 10_000, "a real plot, {} bytes", png.len());
+    let csv = std::fs::read_to_string(dir.path().join("surface.csv")).expect("csv");
+    let mut lines = csv.lines();
+    assert!(
+        lines
+            .next()
+            .expect("header")
+            .starts_with("t_s,depth_true_m,")
+    );
+    assert_eq!(lines.count(), outcome.samples.len());
+    assert_eq!(written.len(), 3, "{written:?}");
+}

@@ -13,6 +13,13 @@ echo "== formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked -- -D warnings
 
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+
+# The step-response plots (neptunus sim-report, tested) label axes with a system font.
+if ! find /usr/share/fonts -name '*.ttf' -print -quit 2>/dev/null | grep -q .; then
+    as_root apt-get update -q && as_root apt-get install -y -q fonts-dejavu-core
+fi
+
 echo "== tests"
 status=0
 cargo test --all-targets --locked 2>&1 | tee target/test-output.txt || status=1
@@ -21,7 +28,6 @@ echo "== interoperability tests (real ground-station clients against the binary)
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
 venv=target/interop-venv
 reqs=tests/interop/requirements.txt
-as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 if ! python3 -c 'import ensurepip, venv' 2>/dev/null; then
     # Debian/Ubuntu split venv/ensurepip out of the interpreter package.
     as_root apt-get update -q && as_root apt-get install -y -q python3-venv
