@@ -161,7 +161,9 @@ pub struct HmiContext {
     pub camera_rotation_deg: i32,
     /// `tlogs/` and `events/` are listed by `/api/logs`.
     pub data_dir: PathBuf,
-    /// Routes merged into the server (the camera's `/video.mjpg`, …).
+    /// Routes merged into the server: the camera's (`/video.mjpg`,
+    /// `/snapshot.jpg`, `/camera/status`). With them the page shows video;
+    /// without, a "no video" placeholder.
     pub extra_routes: Option<axum::Router>,
 }
 
@@ -174,6 +176,8 @@ pub(crate) struct Shared {
     pub pilot_password: Option<String>,
     pub camera_rotation_deg: i32,
     pub data_dir: PathBuf,
+    /// Camera routes are merged: `/video.mjpg` exists.
+    pub video: bool,
     pub free_sysids: Mutex<BTreeSet<u8>>,
     pub sysid_range: (u8, u8),
     pub next_session: AtomicU64,
@@ -259,6 +263,7 @@ pub async fn serve(
         pilot_password: ctx.pilot_password.filter(|p| !p.is_empty()),
         camera_rotation_deg: ctx.camera_rotation_deg,
         data_dir: ctx.data_dir,
+        video: ctx.extra_routes.is_some(),
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
         next_session: AtomicU64::new(1),

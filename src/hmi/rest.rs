@@ -94,6 +94,7 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/ws", get(ws))
         .route("/api/status", get(status))
         .route("/api/params", get(params))
+        .route("/api/video", get(video))
         .route("/api/logs", get(logs))
         .route("/api/logs/{kind}/{name}", get(log_file))
         .fallback(asset)
@@ -136,6 +137,12 @@ async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
             .load(std::sync::atomic::Ordering::Relaxed),
         telemetry: shared.status.borrow().telemetry.clone(),
     })
+}
+
+/// Whether the page should load `/video.mjpg` (asked first, so a vehicle
+/// without a camera costs the page no failed request).
+async fn video(State(shared): State<Arc<Shared>>) -> Json<serde_json::Value> {
+    Json(serde_json::json!({ "available": shared.video, "url": "/video.mjpg" }))
 }
 
 #[derive(Serialize)]
