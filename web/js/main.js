@@ -118,7 +118,6 @@ function onTelemetry(t) {
     document.querySelectorAll('input[name=mode]').forEach((r) => { r.checked = Number(r.value) === t.mode; });
     labelTouchpad();
   }
-  if (prev && t.control.owner !== prev.control.owner) onControl(t.control);
   updateControl(t.control);
   syncSlider('gain', t.gain, (v) => v.toFixed(2));
   syncSlider('lights', t.lights, (v) => String(v));
