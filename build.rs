@@ -116,8 +116,15 @@ fn upstream_definitions_dir() -> Option<PathBuf> {
 /// The HMI embeds uPlot's dist files from `web/node_modules` (rust-embed):
 /// install them from `web/package-lock.json` when they are not there.
 fn web_dependencies(web: &Path) {
-    let marker = web.join("node_modules").join("uplot").join("dist").join("uPlot.esm.js");
-    println!("cargo:rerun-if-changed={}", web.join("package-lock.json").display());
+    let marker = web
+        .join("node_modules")
+        .join("uplot")
+        .join("dist")
+        .join("uPlot.esm.js");
+    println!(
+        "cargo:rerun-if-changed={}",
+        web.join("package-lock.json").display()
+    );
     println!("cargo:rerun-if-changed={}", marker.display());
     if marker.is_file() {
         return;

@@ -126,8 +126,8 @@ pub async fn run(
     // HMI: one more endpoint after the MAVLink ones, for the browser sessions.
     let hmi_ep = settings.mavlink.endpoints.len();
     let hmi_profiles = profiles.clone();
-    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
-        .with_profiles(profiles);
+    let mut vehicle =
+        Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1).with_profiles(profiles);
     let event_log = EventLog::start(EventLogConfig::new(settings.data_dir.join("events")))?;
     let signing = LinkSigning::load(SigningStore::new(&settings.data_dir))?;
     vehicle.set_signing_active(signing.active());
@@ -143,7 +143,15 @@ pub async fn run(
     };
     let z_centered = crate::hmi::z_centered_by(hmi_profiles);
     let hmi_dir = settings.data_dir.clone();
-    let mut hmi = crate::hmi::Hmi::start(&settings.hmi, hmi_ep, vehicle.sysid(), z_centered, hmi_dir, None).await?;
+    let mut hmi = crate::hmi::Hmi::start(
+        &settings.hmi,
+        hmi_ep,
+        vehicle.sysid(),
+        z_centered,
+        hmi_dir,
+        None,
+    )
+    .await?;
     let mut io = Io {
         hmi: hmi.outlet(),
         router: router.clone(),

@@ -84,7 +84,9 @@ impl std::str::FromStr for HttpAddr {
             return Ok(Self::Off);
         }
         s.parse().map(Self::At).map_err(|_| {
-            format!("\"{s}\" is not an HTTP listen address — use HOST:PORT (e.g. 0.0.0.0:8080) or off")
+            format!(
+                "\"{s}\" is not an HTTP listen address — use HOST:PORT (e.g. 0.0.0.0:8080) or off"
+            )
         })
     }
 }

@@ -85,7 +85,8 @@ fn spawn_board_here() -> PtyBoard {
     PtyBoard::spawn(Default::default(), None).unwrap()
 }
 
-type Ws = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
 /// A protocol client: sends JSON, waits for messages that match.
 struct Client {
@@ -191,7 +192,8 @@ async fn drive_until_moving(c: &mut Client, board: &BoardControl) -> [u16; 3] {
     loop {
         c.send(json!({"type": "sticks", "surge": 1.0, "heave_up": 0.0, "yaw": 0.0}))
             .await;
-        c.try_wait("none", Duration::from_millis(50), |_| false).await;
+        c.try_wait("none", Duration::from_millis(50), |_| false)
+            .await;
         let m = board.snapshot().motors_us;
         if m != NEUTRAL_US {
             return m;
@@ -204,7 +206,11 @@ async fn drive_until_moving(c: &mut Client, board: &BoardControl) -> [u16; 3] {
 async fn wait_neutral(board: &BoardControl) {
     let end = Instant::now() + GENEROUS;
     while board.snapshot().motors_us != NEUTRAL_US {
-        assert!(Instant::now() < end, "motors not neutral: {:?}", board.snapshot());
+        assert!(
+            Instant::now() < end,
+            "motors not neutral: {:?}",
+            board.snapshot()
+        );
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
 }
@@ -366,7 +372,10 @@ async fn pilot_password_gates_control() {
     drop(c);
     rig.vehicle.check_running().unwrap();
     let log = rig.vehicle.stderr_text();
-    assert!(!log.contains("tide-pool"), "the password leaked into the log");
+    assert!(
+        !log.contains("tide-pool"),
+        "the password leaked into the log"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -401,7 +410,8 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     .await;
     b.send(json!({"type": "request_control"})).await;
     a.wait("control_request", |_| true).await;
-    a.send(json!({"type": "answer_request", "accept": true})).await;
+    a.send(json!({"type": "answer_request", "accept": true}))
+        .await;
     b.wait("control", |v| v["you"] == true && v["owner"] == 201)
         .await;
     a.wait("control", |v| v["you"] == false).await;
@@ -456,7 +466,10 @@ async fn rest_api_and_assets() {
     // The page and its assets, with their MIME types.
     let (status, head, body) = rig.get("/").await;
     assert_eq!(status, 200);
-    assert!(head.to_lowercase().contains("content-type: text/html"), "{head}");
+    assert!(
+        head.to_lowercase().contains("content-type: text/html"),
+        "{head}"
+    );
     assert!(body.contains("<html"), "{body}");
     for (path, mime) in [
         ("/js/main.js", "javascript"),

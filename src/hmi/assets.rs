@@ -36,7 +36,10 @@ pub fn response(path: &str) -> Response {
         return (StatusCode::NOT_FOUND, format!("no such file: /{path}")).into_response();
     };
     let mime = file.metadata.mimetype().to_owned();
-    let mime = if mime.starts_with("text/") || mime == "application/javascript" || mime == "text/javascript" {
+    let mime = if mime.starts_with("text/")
+        || mime == "application/javascript"
+        || mime == "text/javascript"
+    {
         format!("{mime}; charset=utf-8")
     } else {
         mime

@@ -253,7 +253,10 @@ pub async fn serve(
     ctx: HmiContext,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let (lo, hi) = (ctx.sysid_min.min(ctx.sysid_max), ctx.sysid_max.max(ctx.sysid_min));
+    let (lo, hi) = (
+        ctx.sysid_min.min(ctx.sysid_max),
+        ctx.sysid_max.max(ctx.sysid_min),
+    );
     let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
     let shared = Arc::new(Shared {
         outlet: ctx.outlet.clone(),
@@ -319,17 +322,18 @@ impl Hmi {
         let listener = match TcpListener::bind(addr).await {
             Ok(l) => l,
             Err(source) if !settings.http_explicit => {
-                tracing::warn!("{} — the browser HMI is off", HmiError::Bind { addr, source });
+                tracing::warn!(
+                    "{} — the browser HMI is off",
+                    HmiError::Bind { addr, source }
+                );
                 return Ok(off);
             }
             Err(source) => return Err(HmiError::Bind { addr, source }),
         };
         let local = listener.local_addr().unwrap_or(addr);
-        std::fs::write(&addr_file, format!("{local}\n")).map_err(|source| {
-            HmiError::AddrFile {
-                path: addr_file.clone(),
-                source,
-            }
+        std::fs::write(&addr_file, format!("{local}\n")).map_err(|source| HmiError::AddrFile {
+            path: addr_file.clone(),
+            source,
         })?;
         tracing::info!(addr = %local, "browser HMI listening on http://{local}/");
         let (tx, rx) = mpsc::channel(1024);

@@ -81,7 +81,9 @@ impl Model {
         match msg {
             MavMessage::HEARTBEAT(h) => {
                 self.last_heartbeat = Some(now);
-                t.armed = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                t.armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
                 self.hil = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED);
                 t.simulated = self.hil || t.estimate.is_some_and(|e| e.simulated);
                 t.mode = Some(h.custom_mode);
@@ -194,7 +196,9 @@ impl Model {
             MavMessage::COMMAND_ACK(a) => {
                 // Our own telemetry-rate requests are plumbing, not news.
                 if a.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
-                    && self.me.is_none_or(|me| a.target_system == me || a.target_system == 0)
+                    && self
+                        .me
+                        .is_none_or(|me| a.target_system == me || a.target_system == 0)
                 {
                     events.push(ServerMsg::Ack {
                         command: a.command as u32,

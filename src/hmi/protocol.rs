@@ -136,10 +136,14 @@ pub enum ClientMsg {
 
 fn in_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<(), String> {
     if !v.is_finite() {
-        return Err(format!("{name} is not a finite number — send a number in {lo}..{hi}"));
+        return Err(format!(
+            "{name} is not a finite number — send a number in {lo}..{hi}"
+        ));
     }
     if v < lo || v > hi {
-        return Err(format!("{name} = {v} is out of range — send a number in {lo}..{hi}"));
+        return Err(format!(
+            "{name} = {v} is out of range — send a number in {lo}..{hi}"
+        ));
     }
     Ok(())
 }

@@ -166,9 +166,14 @@ async fn params(State(shared): State<Arc<Shared>>) -> Response {
         .await
         .is_err()
     {
-        return (StatusCode::SERVICE_UNAVAILABLE, "the vehicle task is not running").into_response();
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the vehicle task is not running",
+        )
+            .into_response();
     }
-    let complete = |v: &ServerView| v.param_count > 0 && v.params.len() >= usize::from(v.param_count);
+    let complete =
+        |v: &ServerView| v.param_count > 0 && v.params.len() >= usize::from(v.param_count);
     let _ = tokio::time::timeout(Duration::from_secs(2), rx.wait_for(complete)).await;
     let v = rx.borrow().clone();
     Json(ParamsBody {
@@ -233,7 +238,11 @@ async fn log_file(
 ) -> Response {
     // Only a name the listing itself produced is served.
     let Some((kind, folder)) = LOG_KINDS.iter().find(|(k, _)| *k == kind) else {
-        return (StatusCode::NOT_FOUND, "no such log kind: use tlogs or events").into_response();
+        return (
+            StatusCode::NOT_FOUND,
+            "no such log kind: use tlogs or events",
+        )
+            .into_response();
     };
     let listed = list_logs(&shared)
         .into_iter()

@@ -159,7 +159,10 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>) {
         }
     };
     if let End::SendFailed = end {
-        tracing::info!(session = id, "HMI session dropped: the browser stopped reading");
+        tracing::info!(
+            session = id,
+            "HMI session dropped: the browser stopped reading"
+        );
     }
     // Whatever the browser did, the core hears that this station is gone.
     if let Some(sysid) = sysid {
