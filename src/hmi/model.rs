@@ -193,24 +193,23 @@ impl Model {
                 }
             }
             MavMessage::STATUSTEXT(s) => self.on_statustext(s, events),
-            MavMessage::COMMAND_ACK(a) => {
-                // Our own telemetry-rate requests are plumbing, not news.
+            // Our own telemetry-rate requests are plumbing, not news.
+            MavMessage::COMMAND_ACK(a)
                 if a.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
                     && self
                         .me
-                        .is_none_or(|me| a.target_system == me || a.target_system == 0)
-                {
-                    events.push(ServerMsg::Ack {
-                        command: a.command as u32,
-                        command_name: format!("{:?}", a.command)
-                            .trim_start_matches("MAV_CMD_")
-                            .to_owned(),
-                        result: a.result as u32,
-                        result_name: format!("{:?}", a.result)
-                            .trim_start_matches("MAV_RESULT_")
-                            .to_owned(),
-                    });
-                }
+                        .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
+            {
+                events.push(ServerMsg::Ack {
+                    command: a.command as u32,
+                    command_name: format!("{:?}", a.command)
+                        .trim_start_matches("MAV_CMD_")
+                        .to_owned(),
+                    result: a.result as u32,
+                    result_name: format!("{:?}", a.result)
+                        .trim_start_matches("MAV_RESULT_")
+                        .to_owned(),
+                });
             }
             MavMessage::COMMAND_LONG(c)
                 if c.command == MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL
