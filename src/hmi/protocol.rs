@@ -76,7 +76,8 @@ pub enum RunMode {
 #[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
 #[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
 pub enum ClientMsg {
-    Alive,
+    // Empty braces, not unit variants: serde then refuses unknown fields on them too.
+    Alive {},
     Login {
         password: String,
     },
@@ -92,8 +93,8 @@ pub enum ClientMsg {
         vertical: f64,
         starboard: f64,
     },
-    Stop,
-    FocusLost,
+    Stop {},
+    FocusLost {},
     InputMode {
         mode: InputMode,
     },
@@ -128,7 +129,7 @@ pub enum ClientMsg {
         #[serde(default)]
         takeover_allowed: bool,
     },
-    ReleaseControl,
+    ReleaseControl {},
     AnswerRequest {
         accept: bool,
     },
@@ -417,6 +418,14 @@ mod tests {
         assert!(ClientMsg::parse(r#"{"type":"autopilot_target"}"#).is_err());
         assert!(ClientMsg::parse(r#"{"type":"autopilot_target","depth_m":2.5}"#).is_ok());
         assert!(ClientMsg::parse(r#"{"type":"stop","extra":1}"#).is_err());
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"alive"}"#),
+            Ok(ClientMsg::Alive {})
+        );
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"stop"}"#),
+            Ok(ClientMsg::Stop {})
+        );
         assert!(ClientMsg::parse(r#"{"type":"input_mode","mode":"gamepad"}"#).is_ok());
     }
 

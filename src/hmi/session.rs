@@ -307,7 +307,10 @@ impl Session {
         let sysid = self.sysid();
         let drives = !matches!(
             msg,
-            ClientMsg::Alive | ClientMsg::Login { .. } | ClientMsg::Stop | ClientMsg::FocusLost
+            ClientMsg::Alive {}
+                | ClientMsg::Login { .. }
+                | ClientMsg::Stop {}
+                | ClientMsg::FocusLost {}
         );
         if drives && sysid.is_none() {
             return Some(ServerMsg::Error {
@@ -315,7 +318,7 @@ impl Session {
             });
         }
         match msg {
-            ClientMsg::Alive => {}
+            ClientMsg::Alive {} => {}
             ClientMsg::Login { password } => return Some(self.login(&password)),
             ClientMsg::Sticks {
                 surge,
@@ -334,8 +337,8 @@ impl Session {
                 self.to_vehicle(self.thrusters(port, vertical, starboard))
                     .await
             }
-            ClientMsg::Stop => self.stop().await,
-            ClientMsg::FocusLost => {
+            ClientMsg::Stop {} => self.stop().await,
+            ClientMsg::FocusLost {} => {
                 self.stop().await;
                 self.hmi_event(HmiEvent::FocusLost).await;
             }
@@ -407,7 +410,7 @@ impl Session {
                 )
                 .await
             }
-            ClientMsg::ReleaseControl => {
+            ClientMsg::ReleaseControl {} => {
                 self.command(MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL, [0.0])
                     .await
             }
