@@ -1,4 +1,6 @@
-//! Generates the `neptunus` MAVLink dialect from `dialect/*.xml`.
+//! Generates the `neptunus` MAVLink dialect from `dialect/*.xml`, and
+//! installs the browser HMI's plotting library (`npm ci` in `web/`) when
+//! `web/node_modules/uplot` is missing.
 //!
 //! The upstream definitions (development.xml, common.xml, standard.xml,
 //! minimal.xml) are taken from the `mavlink` crate's own package, so the
@@ -15,6 +17,7 @@ const MAVLINK_VERSION: &str = "0.21.0";
 fn main() {
     let manifest_dir =
         PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
+    web_dependencies(&manifest_dir.join("web"));
     let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     let dialect_dir = manifest_dir.join("dialect");
     println!("cargo:rerun-if-changed={}", dialect_dir.display());
@@ -108,4 +111,40 @@ fn upstream_definitions_dir() -> Option<PathBuf> {
         .filter(|s| s.contains(&needle) && s.ends_with("Cargo.toml"))
         .map(|s| Path::new(s).parent().map(|p| p.join(&rel)))
         .find_map(|p| p.filter(|p| p.join("development.xml").is_file()))
+}
+
+/// The HMI embeds uPlot's dist files from `web/node_modules` (rust-embed):
+/// install them from `web/package-lock.json` when they are not there.
+fn web_dependencies(web: &Path) {
+    let marker = web
+        .join("node_modules")
+        .join("uplot")
+        .join("dist")
+        .join("uPlot.esm.js");
+    println!(
+        "cargo:rerun-if-changed={}",
+        web.join("package-lock.json").display()
+    );
+    println!("cargo:rerun-if-changed={}", marker.display());
+    if marker.is_file() {
+        return;
+    }
+    let npm = env::var("NPM").unwrap_or_else(|_| "npm".into());
+    let status = Command::new(&npm)
+        .args(["ci", "--no-audit", "--no-fund", "--ignore-scripts"])
+        .current_dir(web)
+        .status();
+    match status {
+        Ok(s) if s.success() && marker.is_file() => {}
+        Ok(s) => panic!(
+            "`npm ci` in {} failed ({s}): the browser HMI needs its plotting library (uPlot) — \
+             check the network to the npm registry, or run `npm ci` in web/ yourself",
+            web.display()
+        ),
+        Err(e) => panic!(
+            "cannot run `{npm} ci` in {} ({e}): the browser HMI's plotting library (uPlot) is \
+             installed with npm — install Node.js and npm (Debian: apt-get install npm), or set NPM",
+            web.display()
+        ),
+    }
 }

@@ -46,6 +46,8 @@ pub enum AppError {
     EventLog(#[from] EventLogError),
     #[error("message signing: {0}")]
     Signing(#[from] SigningError),
+    #[error(transparent)]
+    Hmi(#[from] crate::hmi::HmiError),
     #[error("cannot create the data directory {path}: {source}")]
     DataDir {
         path: std::path::PathBuf,
@@ -125,12 +127,11 @@ pub async fn run(
         Some(dir) => crate::vehicle::input::Profiles::load_dir(dir)?,
         None => crate::vehicle::input::Profiles::builtin(),
     };
-    let mut vehicle = Vehicle::new(
-        settings.mavlink.identity,
-        store,
-        settings.mavlink.endpoints.len(),
-    )
-    .with_profiles(profiles);
+    // HMI: one more endpoint after the MAVLink ones, for the browser sessions.
+    let hmi_ep = settings.mavlink.endpoints.len();
+    let hmi_profiles = profiles.clone();
+    let mut vehicle =
+        Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1).with_profiles(profiles);
     let event_log = EventLog::start(EventLogConfig::new(settings.data_dir.join("events")))?;
     let signing = LinkSigning::load(SigningStore::new(&settings.data_dir))?;
     vehicle.set_signing_active(signing.active());
@@ -144,7 +145,19 @@ pub async fn run(
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_micros() as u64),
     };
+    let z_centered = crate::hmi::z_centered_by(hmi_profiles);
+    let hmi_dir = settings.data_dir.clone();
+    let mut hmi = crate::hmi::Hmi::start(
+        &settings.hmi,
+        hmi_ep,
+        vehicle.sysid(),
+        z_centered,
+        hmi_dir,
+        None,
+    )
+    .await?;
     let mut io = Io {
+        hmi: hmi.outlet(),
         router: router.clone(),
         link: link.clone(),
         params: param_file,
@@ -186,6 +199,7 @@ pub async fn run(
                 }
                 vehicle.handle(Input::Tick, now, &mut outputs);
             }
+            input = hmi.recv() => vehicle.handle(input, clock(), &mut outputs),
             ev = events.recv() => match ev {
                 None => break,
                 Some(LinkEvent::State { state, reason }) => vehicle.handle(Input::Link { state, reason }, clock(), &mut outputs),
@@ -261,6 +275,7 @@ pub async fn run(
     // Give the link a moment to put the neutral command on the wire.
     tokio::time::sleep(Duration::from_millis(50)).await;
     drop(link);
+    hmi.shutdown().await;
     router.shutdown().await;
     io.signing.persist();
     let _ = tokio::task::spawn_blocking(move || event_log.shutdown()).await;
@@ -295,6 +310,7 @@ fn route(to: To) -> Route {
 
 /// Carries the core's outputs to the router, the link and the parameter file.
 struct Io {
+    hmi: crate::hmi::Outlet,
     router: RouterHandle,
     link: link::LinkHandle,
     params: ParamFile,
@@ -312,6 +328,10 @@ impl Io {
         for out in outputs.drain(..) {
             match out {
                 Output::Send { to, msg } => {
+                    self.hmi.deliver(to, &msg);
+                    if self.hmi.only_hmi(to) {
+                        continue;
+                    }
                     let mut bytes = encode_v2(vehicle.sysid(), COMPONENT_ID, self.seq, &msg);
                     self.seq = self.seq.wrapping_add(1);
                     self.signing.sign(&mut bytes, now);

@@ -65,6 +65,31 @@ pub struct RunArgs {
     /// checked at start.
     #[arg(long, value_name = "DIR")]
     pub profiles: Option<PathBuf>,
+    /// Browser HMI address, or `off` [default: 0.0.0.0:8080]; port 0 picks a
+    /// free port (logged, and written to DATA_DIR/http.addr).
+    #[arg(long, value_name = "ADDR|off")]
+    pub http: Option<HttpAddr>,
+}
+
+/// `--http`: an address to listen on, or `off`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HttpAddr {
+    Off,
+    At(std::net::SocketAddr),
+}
+
+impl std::str::FromStr for HttpAddr {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("off") {
+            return Ok(Self::Off);
+        }
+        s.parse().map(Self::At).map_err(|_| {
+            format!(
+                "\"{s}\" is not an HTTP listen address — use HOST:PORT (e.g. 0.0.0.0:8080) or off"
+            )
+        })
+    }
 }
 
 #[derive(Debug, Subcommand)]
@@ -150,6 +175,22 @@ pub struct FileConfig {
     pub mavlink: MavlinkFileConfig,
     /// Ground-station profiles directory replacing the built-in profiles.
     pub profiles_dir: Option<PathBuf>,
+    pub hmi: HmiFileConfig,
+}
+
+/// `[hmi]` section: the browser HMI.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HmiFileConfig {
+    /// Listen address (`HOST:PORT`) or "off".
+    pub http: Option<String>,
+    /// System ids lent to browser sessions, one each.
+    pub sysid_min: Option<u8>,
+    pub sysid_max: Option<u8>,
+    /// Sessions must give this before they may arm, drive or take control.
+    pub pilot_password: Option<String>,
+    /// Rotation of the camera image in the page: 0, 90, 180 or 270.
+    pub camera_rotation_deg: Option<i32>,
 }
 
 /// `[mavlink]` section.
@@ -228,6 +269,7 @@ pub struct Settings {
     /// The built-in simulator of run mode SIMULATOR (the file's `[emulator]`,
     /// on a real board as in `--sim`).
     pub simulator: EmulatorOptions,
+    pub hmi: crate::hmi::HmiSettings,
 }
 
 impl FileConfig {
@@ -364,7 +406,48 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         mavlink,
         profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
         simulator: file.emulator.clone(),
+        hmi: resolve_hmi(args.http, &file.hmi)?,
     })
+}
+
+/// `--http` over `[hmi]` over the defaults.
+fn resolve_hmi(
+    flag: Option<HttpAddr>,
+    file: &HmiFileConfig,
+) -> Result<crate::hmi::HmiSettings, ConfigError> {
+    let mut hmi = crate::hmi::HmiSettings::default();
+    let from_file = file
+        .http
+        .as_deref()
+        .map(|s| {
+            s.parse::<HttpAddr>()
+                .map_err(|e| ConfigError::Invalid(format!("hmi.http: {e}")))
+        })
+        .transpose()?;
+    if let Some(addr) = flag.or(from_file) {
+        hmi.http_explicit = true;
+        hmi.http = match addr {
+            HttpAddr::Off => None,
+            HttpAddr::At(a) => Some(a),
+        };
+    }
+    hmi.sysid_min = file.sysid_min.unwrap_or(hmi.sysid_min);
+    hmi.sysid_max = file.sysid_max.unwrap_or(hmi.sysid_max);
+    if hmi.sysid_min == 0 || hmi.sysid_min > hmi.sysid_max {
+        return Err(ConfigError::Invalid(format!(
+            "hmi.sysid_min = {}, hmi.sysid_max = {} — use 1 <= sysid_min <= sysid_max <= 255",
+            hmi.sysid_min, hmi.sysid_max
+        )));
+    }
+    hmi.pilot_password = file.pilot_password.clone().filter(|p| !p.is_empty());
+    let rot = file.camera_rotation_deg.unwrap_or(0);
+    if ![0, 90, 180, 270].contains(&rot) {
+        return Err(ConfigError::Invalid(format!(
+            "hmi.camera_rotation_deg = {rot} — use 0, 90, 180 or 270"
+        )));
+    }
+    hmi.camera_rotation_deg = rot;
+    Ok(hmi)
 }
 
 /// Emulator options for `emulate-board`: flags over the file's `[emulator]`.

@@ -10,6 +10,7 @@
 //! - [`config`]: command line and configuration file.
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`app`]: wiring of tasks and shutdown.
+//! - [`hmi`]: the browser HMI (HTTP, WebSocket sessions as in-process ground stations).
 //! - [`vehicle`]: the vehicle core (parameters so far).
 
 pub mod app;
@@ -17,6 +18,7 @@ pub mod config;
 pub mod dialect;
 pub mod eventlog;
 pub mod firmware;
+pub mod hmi;
 pub mod mavlink;
 pub mod scenario;
 pub mod sim;

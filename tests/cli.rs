@@ -93,6 +93,8 @@ fn sim_runs_and_logs_telemetry() {
             "udpin:127.0.0.1:0",
             "--mavlink",
             "tcpin:127.0.0.1:0",
+            "--http",
+            "127.0.0.1:0",
         ])
         .env("RUST_LOG", "info")
         .stdout(Stdio::null())

@@ -40,6 +40,8 @@ impl Sim {
                 "--sim",
                 "--mavlink",
                 &format!("udpout:127.0.0.1:{port}"),
+                "--http",
+                "127.0.0.1:0",
                 "--data-dir",
             ])
             .arg(dir.path())

@@ -49,23 +49,40 @@ rm -f target/interop-junit.xml
 NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest tests/interop -q \
     -p no:cacheprovider --timeout 300 --junitxml target/interop-junit.xml || status=1
 
+echo "== browser tests (Debian's Chromium, driven by playwright-core)"
+# Debian's Chromium, never a browser a tool downloads; npm ci from the lock.
+if [ ! -x /usr/bin/chromium ]; then
+    as_root apt-get update -q && as_root apt-get install -y -q chromium
+fi
+if ! command -v npm >/dev/null 2>&1; then
+    as_root apt-get update -q && as_root apt-get install -y -q nodejs npm
+fi
+(cd tests/browser && npm ci --no-audit --no-fund --ignore-scripts) || status=1
+rm -f target/browser-junit.xml
+(cd tests/browser && NEPTUNUS_BIN="$PWD/../../target/debug/neptunus" node --test --test-concurrency=1 \
+    --test-reporter=spec --test-reporter-destination=stdout \
+    --test-reporter=junit --test-reporter-destination=../../target/browser-junit.xml \
+    ./*.test.js) || status=1
+
 # Summarise as one plain line for CI: cargo prints one result line per test
-# binary; pytest's counts come from its JUnit XML.
-read -r py_pass py_fail py_skip < <("$venv/bin/python" - target/interop-junit.xml <<'PY' || echo "0 1 0"
+# binary; pytest's and node's counts come from their JUnit XML.
+junit_counts() {
+    "$venv/bin/python" - "$1" <<'PY' || echo "0 1 0"
 import sys, xml.etree.ElementTree as ET
 try:
     root = ET.parse(sys.argv[1]).getroot()
 except (OSError, ET.ParseError):
-    print(0, 1, 0)  # pytest did not even produce a report: count it as a failure
+    print(0, 1, 0)  # the runner did not even produce a report: count it as a failure
     raise SystemExit
-suites = [root] if root.tag == "testsuite" else root.findall("testsuite")
-t = sum(int(s.get("tests", 0)) for s in suites)
-f = sum(int(s.get("failures", 0)) + int(s.get("errors", 0)) for s in suites)
-k = sum(int(s.get("skipped", 0)) for s in suites)
-print(t - f - k, f, k)
+cases = list(root.iter("testcase"))
+f = sum(1 for c in cases if c.find("failure") is not None or c.find("error") is not None)
+k = sum(1 for c in cases if c.find("skipped") is not None)
+print(len(cases) - f - k, f, k)
 PY
-)
-awk -v pp="$py_pass" -v pf="$py_fail" -v ps="$py_skip" \
+}
+read -r py_pass py_fail py_skip < <(junit_counts target/interop-junit.xml)
+read -r br_pass br_fail br_skip < <(junit_counts target/browser-junit.xml)
+awk -v pp="$((py_pass + br_pass))" -v pf="$((py_fail + br_fail))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
 exit "$status"

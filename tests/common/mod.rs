@@ -123,12 +123,15 @@ fn newest_mtime(dir: &Path) -> Option<std::time::SystemTime> {
 pub struct Vehicle {
     pub child: Child,
     stderr_path: PathBuf,
+    data_dir: PathBuf,
 }
 
 impl Vehicle {
     /// Starts `bin args… --data-dir DIR/data` with its stderr in
     /// `DIR/neptunus.stderr`. A non-empty `params_toml` is written to
     /// `DIR/data/params.toml` first (flat TOML, `NAME = value` lines).
+    /// Without `--http` in `args`, the browser HMI listens on a free
+    /// loopback port (never the default 8080: tests run side by side).
     pub fn spawn(bin: &Path, args: &[&str], dir: &Path, params_toml: &str) -> anyhow::Result<Self> {
         let data = dir.join("data");
         if !params_toml.is_empty() {
@@ -137,8 +140,12 @@ impl Vehicle {
         }
         let stderr_path = dir.join("neptunus.stderr");
         let stderr = File::create(&stderr_path)?;
-        let child = Command::new(bin)
-            .args(args)
+        let mut cmd = Command::new(bin);
+        cmd.args(args);
+        if !args.contains(&"--http") {
+            cmd.args(["--http", "127.0.0.1:0"]);
+        }
+        let child = cmd
             .arg("--data-dir")
             .arg(&data)
             .env("RUST_LOG", "warn")
@@ -147,7 +154,34 @@ impl Vehicle {
             .stderr(stderr)
             .spawn()
             .with_context(|| format!("cannot start {}", bin.display()))?;
-        Ok(Self { child, stderr_path })
+        Ok(Self {
+            child,
+            stderr_path,
+            data_dir: data,
+        })
+    }
+
+    /// The browser HMI's address, from `DATA_DIR/http.addr` (waits for it).
+    pub fn http_addr(&mut self, within: Duration) -> anyhow::Result<std::net::SocketAddr> {
+        let path = self.data_dir.join("http.addr");
+        let end = Instant::now() + within;
+        loop {
+            if let Ok(text) = std::fs::read_to_string(&path)
+                && let Ok(addr) = text.trim().parse()
+            {
+                return Ok(addr);
+            }
+            self.check_running()?;
+            if Instant::now() >= end {
+                bail!("no {} within {within:?}", path.display());
+            }
+            thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// The whole of its stderr.
+    pub fn stderr_text(&self) -> String {
+        std::fs::read_to_string(&self.stderr_path).unwrap_or_default()
     }
 
     pub fn pid(&self) -> u32 {

@@ -70,7 +70,8 @@ class Vehicle:
         self.starts += 1
         err_path = self.log_dir / f"neptunus-stderr-{self.starts}.txt"
         self.stderr_paths.append(err_path)
-        args = [str(BIN), "--sim", "--data-dir", str(self.data_dir)]
+        # The browser HMI on a free loopback port: parallel tests never share 8080.
+        args = [str(BIN), "--sim", "--data-dir", str(self.data_dir), "--http", "127.0.0.1:0"]
         for url in self.endpoints + [f"tcpin:127.0.0.1:{self.control_port}"]:
             args += ["--mavlink", url]
         env = dict(os.environ, NO_COLOR="1", RUST_LOG=os.environ.get("RUST_LOG", "info"))

@@ -1,0 +1,400 @@
+//! The browser HMI: an HTTP server (axum) with the operator and developer
+//! interfaces (`web/`, embedded), a JSON WebSocket at `/ws` and a small REST
+//! API.
+//!
+//! Each WebSocket session is a MAVLink ground station inside the process:
+//! it gets its own system id from `[hmi] sysid_min..=sysid_max`, turns the
+//! browser's JSON into `MavMessage`s and hands them to the vehicle task as
+//! [`Input::Mavlink`] from its own [`Sender`] (endpoint = the HMI's endpoint
+//! index, peer = the session id), exactly like a ground station on a socket.
+//! The vehicle's [`Output::Send`](crate::vehicle::machine::Output) messages
+//! for that endpoint come back through a broadcast hub ([`Outlet`]) as the
+//! `MavMessage`s themselves, and each session keeps its own view of the
+//! vehicle from them.
+//!
+//! This module must never touch vehicle state or bypass the core: it has no
+//! handle on the vehicle, only the input channel every station's traffic
+//! goes through, so the core's authority rules apply to the browser as to
+//! any other station (the HMI is not a back door).
+
+pub mod assets;
+pub mod model;
+pub mod protocol;
+pub mod rest;
+pub mod session;
+
+use std::collections::BTreeSet;
+use std::future::Future;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use tokio::net::TcpListener;
+use tokio::sync::{broadcast, mpsc, watch};
+
+use crate::dialect::neptunus::MavMessage;
+use crate::vehicle::machine::{Input, Sender, To};
+
+/// MAVLink component id of every HMI session (MAV_COMP_ID_MISSIONPLANNER, a GCS).
+pub const SESSION_COMPID: u8 = 190;
+/// The peer id of the server's own requests (parameter list for `/api/params`).
+pub const SERVER_PEER: u64 = 0;
+/// Capacity of the hub: telemetry a slow session may fall behind by.
+const HUB_CAPACITY: usize = 1024;
+
+/// Errors starting the HMI.
+#[derive(Debug, thiserror::Error)]
+pub enum HmiError {
+    #[error(
+        "cannot listen for the browser HMI on {addr}: {source} — pass --http ADDR (e.g. 0.0.0.0:8081) or --http off"
+    )]
+    Bind {
+        addr: SocketAddr,
+        source: std::io::Error,
+    },
+    #[error("cannot write the HMI address file {path}: {source}")]
+    AddrFile {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// HMI settings, resolved from `--http` and the `[hmi]` section.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct HmiSettings {
+    /// Where to listen; `None` = HMI off.
+    pub http: Option<SocketAddr>,
+    /// The address was asked for (flag or file): failing to bind it is an
+    /// error. The default address only warns, so a second vehicle on the
+    /// same machine still runs.
+    pub http_explicit: bool,
+    pub sysid_min: u8,
+    pub sysid_max: u8,
+    /// Sessions must log in with this before they may drive or take control.
+    pub pilot_password: Option<String>,
+    /// Rotation of the camera image in the page (0, 90, 180, 270).
+    pub camera_rotation_deg: i32,
+}
+
+impl Default for HmiSettings {
+    fn default() -> Self {
+        Self {
+            http: Some(SocketAddr::from(([0, 0, 0, 0], 8080))),
+            http_explicit: false,
+            sysid_min: 200,
+            sysid_max: 209,
+            pilot_password: None,
+            camera_rotation_deg: 0,
+        }
+    }
+}
+
+/// One message from the vehicle to HMI sessions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Delivery {
+    /// `None`: for every session; `Some(peer)`: for one session (or the server).
+    pub peer: Option<u64>,
+    pub msg: MavMessage,
+}
+
+/// The vehicle task's side of the hub: delivers the core's messages for the
+/// HMI endpoint to the sessions.
+#[derive(Debug, Clone)]
+pub struct Outlet {
+    endpoint: usize,
+    hub: broadcast::Sender<Arc<Delivery>>,
+}
+
+impl Outlet {
+    pub fn new(endpoint: usize) -> Self {
+        Self {
+            endpoint,
+            hub: broadcast::channel(HUB_CAPACITY).0,
+        }
+    }
+
+    pub fn endpoint(&self) -> usize {
+        self.endpoint
+    }
+
+    /// Hands `msg` to the sessions it is addressed to (no encoding: sessions
+    /// read the message itself).
+    pub fn deliver(&self, to: To, msg: &MavMessage) {
+        let peer = match to {
+            To::All => None,
+            To::Endpoint(e) if e == self.endpoint => None,
+            To::Peer(e, p) if e == self.endpoint => Some(p),
+            _ => return,
+        };
+        if self.hub.receiver_count() > 0 {
+            let _ = self.hub.send(Arc::new(Delivery {
+                peer,
+                msg: msg.clone(),
+            }));
+        }
+    }
+
+    /// Whether `to` reaches nobody but HMI sessions (nothing to encode for the wire).
+    pub fn only_hmi(&self, to: To) -> bool {
+        matches!(to, To::Endpoint(e) | To::Peer(e, _) if e == self.endpoint)
+    }
+
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<Delivery>> {
+        self.hub.subscribe()
+    }
+}
+
+/// Everything the HMI server needs, passed in (tests run many side by side).
+pub struct HmiContext {
+    pub outlet: Outlet,
+    /// Where sessions' traffic goes: the vehicle task's input.
+    pub inputs: mpsc::Sender<Input>,
+    pub vehicle_sysid: u8,
+    pub sysid_min: u8,
+    pub sysid_max: u8,
+    /// For each sysid, whether its ground-station profile reads MANUAL_CONTROL
+    /// z centred (±1000) rather than ArduSub's 0..1000.
+    pub z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
+    pub pilot_password: Option<String>,
+    pub camera_rotation_deg: i32,
+    /// `tlogs/` and `events/` are listed by `/api/logs`.
+    pub data_dir: PathBuf,
+    /// Routes merged into the server: the camera's (`/video.mjpg`,
+    /// `/snapshot.jpg`, `/camera/status`). With them the page shows video;
+    /// without, a "no video" placeholder.
+    pub extra_routes: Option<axum::Router>,
+}
+
+/// State shared by the server's handlers and sessions.
+pub(crate) struct Shared {
+    pub outlet: Outlet,
+    pub inputs: mpsc::Sender<Input>,
+    pub vehicle_sysid: u8,
+    pub z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
+    pub pilot_password: Option<String>,
+    pub camera_rotation_deg: i32,
+    pub data_dir: PathBuf,
+    /// Camera routes are merged: `/video.mjpg` exists.
+    pub video: bool,
+    pub free_sysids: Mutex<BTreeSet<u8>>,
+    pub sysid_range: (u8, u8),
+    pub next_session: AtomicU64,
+    pub bad_messages: AtomicU64,
+    pub last_bad_report: Mutex<Option<Instant>>,
+    /// The server's own view of the vehicle (`/api/status`, `/api/params`).
+    pub status: watch::Receiver<rest::ServerView>,
+}
+
+/// A system id lent to one session; back in the pool when dropped, whatever
+/// way the session ends.
+pub(crate) struct SysidLease {
+    shared: Arc<Shared>,
+    pub sysid: u8,
+}
+
+impl Drop for SysidLease {
+    fn drop(&mut self) {
+        if let Ok(mut free) = self.shared.free_sysids.lock() {
+            free.insert(self.sysid);
+        }
+    }
+}
+
+impl Shared {
+    pub fn lease_sysid(self: &Arc<Self>) -> Option<SysidLease> {
+        let mut free = self.free_sysids.lock().ok()?;
+        let sysid = free.pop_first()?;
+        Some(SysidLease {
+            shared: Arc::clone(self),
+            sysid,
+        })
+    }
+
+    /// Counts a bad web message; logs at most every 5 s.
+    pub fn note_bad_message(&self, session: u64, why: &str) {
+        let n = self.bad_messages.fetch_add(1, Ordering::Relaxed) + 1;
+        let Ok(mut last) = self.last_bad_report.lock() else {
+            return;
+        };
+        if last.is_none_or(|t| t.elapsed() >= Duration::from_secs(5)) {
+            *last = Some(Instant::now());
+            tracing::warn!("HMI session {session}: bad web message dropped ({n} in all): {why}");
+        }
+    }
+
+    /// The sender identity of a session.
+    pub fn sender(&self, peer: u64, sysid: u8, pilot: bool) -> Sender {
+        Sender {
+            // In-process: the message never crossed a wire where it could be forged.
+            signed: true,
+            trusted: false,
+            pilot,
+            ..Sender::new(self.outlet.endpoint(), peer, sysid, SESSION_COMPID)
+        }
+    }
+}
+
+/// For each sysid, whether its ground-station profile reads MANUAL_CONTROL z
+/// centred (the sessions send what the core will read correctly, even when
+/// `[hmi]` lends ids that the neptunus-web profile does not list).
+pub fn z_centered_by(
+    profiles: crate::vehicle::input::Profiles,
+) -> Arc<dyn Fn(u8) -> bool + Send + Sync> {
+    Arc::new(move |sysid| {
+        profiles.for_sysid(sysid).z_convention == crate::vehicle::input::ZConvention::Centered
+    })
+}
+
+/// Serves the HMI on `listener` until `shutdown` resolves.
+pub async fn serve(
+    listener: TcpListener,
+    ctx: HmiContext,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let (lo, hi) = (
+        ctx.sysid_min.min(ctx.sysid_max),
+        ctx.sysid_max.max(ctx.sysid_min),
+    );
+    let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
+    let shared = Arc::new(Shared {
+        outlet: ctx.outlet.clone(),
+        inputs: ctx.inputs,
+        vehicle_sysid: ctx.vehicle_sysid,
+        z_centered: ctx.z_centered,
+        pilot_password: ctx.pilot_password.filter(|p| !p.is_empty()),
+        camera_rotation_deg: ctx.camera_rotation_deg,
+        data_dir: ctx.data_dir,
+        video: ctx.extra_routes.is_some(),
+        free_sysids: Mutex::new((lo..=hi).collect()),
+        sysid_range: (lo, hi),
+        next_session: AtomicU64::new(1),
+        bad_messages: AtomicU64::new(0),
+        last_bad_report: Mutex::new(None),
+        status: status_rx,
+    });
+    let watcher = tokio::spawn(rest::watch_vehicle(ctx.outlet.subscribe(), status_tx));
+    let mut app = rest::routes(Arc::clone(&shared));
+    if let Some(extra) = ctx.extra_routes {
+        app = app.merge(extra);
+    }
+    let result = axum::serve(listener, app)
+        .with_graceful_shutdown(shutdown)
+        .await;
+    watcher.abort();
+    result
+}
+
+/// The app's handle on a running HMI: the inputs its sessions produce.
+pub struct Hmi {
+    inputs: Option<mpsc::Receiver<Input>>,
+    outlet: Outlet,
+    stop: Option<tokio::sync::oneshot::Sender<()>>,
+    task: Option<tokio::task::JoinHandle<()>>,
+}
+
+impl Hmi {
+    /// Binds and starts the HMI server for endpoint index `endpoint`
+    /// (or does nothing with `--http off`). The bound address is logged
+    /// and written to `DATA_DIR/http.addr`.
+    pub async fn start(
+        settings: &HmiSettings,
+        endpoint: usize,
+        vehicle_sysid: u8,
+        z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
+        data_dir: PathBuf,
+        extra_routes: Option<axum::Router>,
+    ) -> Result<Self, HmiError> {
+        let outlet = Outlet::new(endpoint);
+        let off = Self {
+            inputs: None,
+            outlet: outlet.clone(),
+            stop: None,
+            task: None,
+        };
+        let addr_file = data_dir.join("http.addr");
+        let _ = std::fs::remove_file(&addr_file);
+        let Some(addr) = settings.http else {
+            tracing::info!("browser HMI off (--http off)");
+            return Ok(off);
+        };
+        let listener = match TcpListener::bind(addr).await {
+            Ok(l) => l,
+            Err(source) if !settings.http_explicit => {
+                tracing::warn!(
+                    "{} — the browser HMI is off",
+                    HmiError::Bind { addr, source }
+                );
+                return Ok(off);
+            }
+            Err(source) => return Err(HmiError::Bind { addr, source }),
+        };
+        let local = listener.local_addr().unwrap_or(addr);
+        std::fs::write(&addr_file, format!("{local}\n")).map_err(|source| HmiError::AddrFile {
+            path: addr_file.clone(),
+            source,
+        })?;
+        tracing::info!(addr = %local, "browser HMI listening on http://{local}/");
+        let (tx, rx) = mpsc::channel(1024);
+        let ctx = HmiContext {
+            outlet: outlet.clone(),
+            inputs: tx,
+            vehicle_sysid,
+            sysid_min: settings.sysid_min,
+            sysid_max: settings.sysid_max,
+            z_centered,
+            pilot_password: settings.pilot_password.clone(),
+            camera_rotation_deg: settings.camera_rotation_deg,
+            data_dir,
+            extra_routes,
+        };
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let task = tokio::spawn(async move {
+            let shutdown = async move {
+                let _ = stop_rx.await;
+            };
+            if let Err(e) = serve(listener, ctx, shutdown).await {
+                tracing::error!("browser HMI server stopped: {e}");
+            }
+        });
+        Ok(Self {
+            inputs: Some(rx),
+            outlet,
+            stop: Some(stop_tx),
+            task: Some(task),
+        })
+    }
+
+    /// The next input from a session (pending forever when the HMI is off).
+    pub async fn recv(&mut self) -> Input {
+        match self.inputs.as_mut() {
+            Some(rx) => match rx.recv().await {
+                Some(input) => input,
+                None => std::future::pending().await,
+            },
+            None => std::future::pending().await,
+        }
+    }
+
+    /// The vehicle task's side of the hub.
+    pub fn outlet(&self) -> Outlet {
+        self.outlet.clone()
+    }
+
+    /// Stops the server; sessions' sockets close.
+    pub async fn shutdown(mut self) {
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(mut task) = self.task.take() {
+            // Sessions with open sockets keep a graceful shutdown waiting; do not hang on them.
+            if tokio::time::timeout(Duration::from_millis(500), &mut task)
+                .await
+                .is_err()
+            {
+                task.abort();
+            }
+        }
+    }
+}

@@ -1,0 +1,309 @@
+//! A session's view of the vehicle, built only from the MAVLink messages the
+//! vehicle sent to it (as any ground station builds its view).
+//!
+//! Owns the translation of telemetry into [`Telemetry`] and of event-like
+//! messages (STATUSTEXT, COMMAND_ACK, CONTROL_STATUS changes, forwarded
+//! control requests) into [`ServerMsg`]s. It must never send anything: it
+//! only reads.
+
+use std::time::{Duration, Instant};
+
+use super::protocol::{
+    AutopilotView, ControlView, EstimateView, HealthView, ServerMsg, SimView, Telemetry,
+    ThrustersUs,
+};
+use crate::dialect::neptunus::*;
+use crate::vehicle::machine::mode_name;
+
+/// No vehicle HEARTBEAT for this long: the vehicle is "not seen".
+const VEHICLE_SEEN: Duration = Duration::from_secs(3);
+
+/// What one session knows about the vehicle.
+#[derive(Debug)]
+pub struct Model {
+    started: Instant,
+    last_heartbeat: Option<Instant>,
+    hil: bool,
+    tel: Telemetry,
+    /// This session's system id (None: watch only).
+    me: Option<u8>,
+    /// The vehicle's system id: acks and requests must come for us.
+    statustext: Option<(u16, String, u8)>,
+}
+
+fn deg(rad: f32) -> f64 {
+    f64::from(rad).to_degrees()
+}
+
+fn nan_none(v: f32) -> Option<f32> {
+    (!v.is_nan()).then_some(v)
+}
+
+fn text_of(t: &[u8]) -> String {
+    let end = t.iter().position(|&b| b == 0).unwrap_or(t.len());
+    String::from_utf8_lossy(&t[..end]).into_owned()
+}
+
+impl Model {
+    pub fn new(me: Option<u8>, started: Instant) -> Self {
+        Self {
+            started,
+            last_heartbeat: None,
+            hil: false,
+            tel: Telemetry::default(),
+            me,
+            statustext: None,
+        }
+    }
+
+    pub fn control(&self) -> ControlView {
+        self.tel.control
+    }
+
+    /// Whether this session is in control.
+    pub fn in_control(&self) -> bool {
+        self.tel.control.you
+    }
+
+    /// The telemetry as of `now`.
+    pub fn snapshot(&self, now: Instant) -> Telemetry {
+        let mut t = self.tel.clone();
+        t.t_ms = now.saturating_duration_since(self.started).as_millis() as u64;
+        t.vehicle_seen = self
+            .last_heartbeat
+            .is_some_and(|h| now.saturating_duration_since(h) <= VEHICLE_SEEN);
+        t
+    }
+
+    /// Takes in one message from the vehicle; events for the browser go to `events`.
+    pub fn on_message(&mut self, msg: &MavMessage, now: Instant, events: &mut Vec<ServerMsg>) {
+        let t = &mut self.tel;
+        match msg {
+            MavMessage::HEARTBEAT(h) => {
+                self.last_heartbeat = Some(now);
+                t.armed = h
+                    .base_mode
+                    .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
+                self.hil = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED);
+                t.simulated = self.hil || t.estimate.is_some_and(|e| e.simulated);
+                t.mode = Some(h.custom_mode);
+                t.mode_name = Some(mode_name(h.custom_mode).to_owned());
+                t.critical = matches!(
+                    h.system_status,
+                    MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY
+                );
+            }
+            MavMessage::ATTITUDE(a) => {
+                t.heading_deg = Some(deg(a.yaw).rem_euclid(360.0));
+                t.roll_deg = Some(deg(a.roll));
+                t.pitch_deg = Some(deg(a.pitch));
+                t.yaw_rate_dps = Some(deg(a.yawspeed));
+            }
+            MavMessage::VFR_HUD(v) => t.depth_m = Some(-f64::from(v.alt)),
+            MavMessage::SYS_STATUS(s) => {
+                use MavSysStatusSensor as S;
+                let h = s.onboard_control_sensors_health;
+                t.health = Some(HealthView {
+                    board_link: h.contains(S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS),
+                    depth: h.contains(S::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE),
+                    attitude: h.contains(S::MAV_SYS_STATUS_SENSOR_3D_GYRO),
+                    pilot_input: h.contains(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
+                    battery: h.contains(S::MAV_SYS_STATUS_SENSOR_BATTERY),
+                    prearm: h.contains(S::MAV_SYS_STATUS_PREARM_CHECK),
+                });
+                t.voltage_v =
+                    (s.voltage_battery != u16::MAX).then(|| f64::from(s.voltage_battery) / 1000.0);
+                t.current_a =
+                    (s.current_battery >= 0).then(|| f64::from(s.current_battery) / 100.0);
+                t.battery_pct = (s.battery_remaining >= 0).then_some(s.battery_remaining);
+            }
+            MavMessage::SERVO_OUTPUT_RAW(s) => {
+                t.thrusters_us = Some(ThrustersUs {
+                    starboard: s.servo1_raw,
+                    port: s.servo2_raw,
+                    vertical: s.servo3_raw,
+                });
+                t.laser = Some(s.servo6_raw > 1500);
+            }
+            MavMessage::NAMED_VALUE_FLOAT(n) => {
+                let v = f64::from(n.value);
+                match text_of(n.name.as_ref()).as_str() {
+                    "Lights1" => t.lights = Some((v * 255.0).round().clamp(0.0, 255.0) as u8),
+                    "PilotGain" => t.gain = Some(v),
+                    "CamTilt" => t.tilt = Some(v),
+                    "Laser" => t.laser = Some(v > 0.0),
+                    _ => {}
+                }
+            }
+            MavMessage::NEPTUNUS_SIM_STATE(s) => {
+                t.sim = Some(SimView {
+                    north_m: s.x,
+                    east_m: s.y,
+                    depth_m: s.z,
+                    heading_deg: s.psi.to_degrees().rem_euclid(360.0),
+                    surge_mps: s.u,
+                    sway_mps: s.v,
+                    heave_mps: s.w,
+                    yaw_rate_dps: s.r.to_degrees(),
+                    roll_deg: s.phi.to_degrees(),
+                    pitch_deg: s.theta.to_degrees(),
+                });
+            }
+            MavMessage::NEPTUNUS_ESTIMATE(e) => {
+                use NeptunusEstimateFlags as F;
+                let simulated = e.flags.contains(F::NEPTUNUS_ESTIMATE_FLAGS_SIMULATED);
+                t.estimate = Some(EstimateView {
+                    depth_m: e.depth,
+                    depth_measured_m: e.depth_measured,
+                    climb_rate_mps: e.climb_rate,
+                    heading_deg: e.heading,
+                    heading_measured_deg: e.heading_measured,
+                    yaw_rate_dps: e.yaw_rate,
+                    depth_valid: e.flags.contains(F::NEPTUNUS_ESTIMATE_FLAGS_DEPTH_VALID),
+                    heading_valid: e.flags.contains(F::NEPTUNUS_ESTIMATE_FLAGS_HEADING_VALID),
+                    simulated,
+                });
+                t.simulated = self.hil || simulated;
+            }
+            MavMessage::NEPTUNUS_AUTOPILOT(a) => {
+                use NeptunusAutopilotFlags as F;
+                t.autopilot = Some(AutopilotView {
+                    depth_target_m: nan_none(a.depth_target),
+                    heading_target_deg: nan_none(a.heading_target),
+                    climb_target_mps: a.climb_target,
+                    yaw_rate_target_dps: a.yaw_rate_target,
+                    heave_output: a.heave_output,
+                    yaw_output: a.yaw_output,
+                    depth_hold: a.flags.contains(F::NEPTUNUS_AUTOPILOT_FLAGS_DEPTH_HOLD),
+                    heading_hold: a.flags.contains(F::NEPTUNUS_AUTOPILOT_FLAGS_HEADING_HOLD),
+                    surfacing: a.flags.contains(F::NEPTUNUS_AUTOPILOT_FLAGS_SURFACING),
+                });
+            }
+            MavMessage::CONTROL_STATUS(c) => {
+                let view = ControlView {
+                    owner: (c.gcs_main != 0).then_some(c.gcs_main),
+                    you: self.me.is_some_and(|me| me == c.gcs_main),
+                    takeover_allowed: c
+                        .flags
+                        .contains(GcsControlStatusFlags::GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED),
+                };
+                if view != t.control {
+                    t.control = view;
+                    events.push(ServerMsg::Control(view));
+                }
+            }
+            MavMessage::STATUSTEXT(s) => self.on_statustext(s, events),
+            // Our own telemetry-rate requests are plumbing, not news.
+            MavMessage::COMMAND_ACK(a)
+                if a.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
+                    && self
+                        .me
+                        .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
+            {
+                events.push(ServerMsg::Ack {
+                    command: a.command as u32,
+                    command_name: format!("{:?}", a.command)
+                        .trim_start_matches("MAV_CMD_")
+                        .to_owned(),
+                    result: a.result as u32,
+                    result_name: format!("{:?}", a.result)
+                        .trim_start_matches("MAV_RESULT_")
+                        .to_owned(),
+                });
+            }
+            MavMessage::COMMAND_LONG(c)
+                if c.command == MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL
+                    && self.me.is_some_and(|me| me == c.target_system)
+                    && c.param1 >= 0.5 =>
+            {
+                events.push(ServerMsg::ControlRequest {
+                    requester: c.param4.clamp(0.0, 255.0) as u8,
+                    timeout_s: c.param3,
+                });
+            }
+            _ => {}
+        }
+    }
+
+    /// STATUSTEXT, with MAVLink 2 chunks (same id) joined.
+    fn on_statustext(&mut self, s: &STATUSTEXT_DATA, events: &mut Vec<ServerMsg>) {
+        let bytes: &[u8] = s.text.as_ref();
+        let chunk = text_of(bytes);
+        let severity = s.severity as u8;
+        let full = !bytes.contains(&0);
+        if s.id == 0 {
+            events.push(ServerMsg::Statustext {
+                severity,
+                text: chunk,
+            });
+            return;
+        }
+        let text = match self.statustext.take() {
+            Some((id, mut text, _)) if id == s.id => {
+                text.push_str(&chunk);
+                text
+            }
+            Some((_, text, sev)) => {
+                events.push(ServerMsg::Statustext {
+                    severity: sev,
+                    text,
+                });
+                chunk
+            }
+            None => chunk,
+        };
+        if full {
+            self.statustext = Some((s.id, text, severity));
+        } else {
+            events.push(ServerMsg::Statustext { severity, text });
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn control_status_and_chunks() {
+        let now = Instant::now();
+        let mut m = Model::new(Some(200), now);
+        let mut ev = Vec::new();
+        m.on_message(
+            &MavMessage::CONTROL_STATUS(CONTROL_STATUS_DATA {
+                flags: GcsControlStatusFlags::GCS_CONTROL_STATUS_FLAGS_SYSTEM_MANAGER,
+                gcs_main: 200,
+                gcs_secondary: [0; 10],
+            }),
+            now,
+            &mut ev,
+        );
+        assert!(m.in_control());
+        assert_eq!(ev.len(), 1);
+        ev.clear();
+        let long = "x".repeat(60);
+        let mut first = [0u8; 50];
+        first.copy_from_slice(&long.as_bytes()[..50]);
+        let mut second = [0u8; 50];
+        second[..10].copy_from_slice(&long.as_bytes()[50..]);
+        for (i, arr) in [first, second].into_iter().enumerate() {
+            m.on_message(
+                &MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                    severity: MavSeverity::MAV_SEVERITY_INFO,
+                    text: arr.into(),
+                    id: 7,
+                    chunk_seq: i as u8,
+                }),
+                now,
+                &mut ev,
+            );
+        }
+        assert_eq!(
+            ev,
+            vec![ServerMsg::Statustext {
+                severity: 6,
+                text: long
+            }]
+        );
+    }
+}

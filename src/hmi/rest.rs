@@ -1,0 +1,267 @@
+//! HTTP routes: the page and its assets, the WebSocket upgrade and the REST
+//! API (`/api/status`, `/api/params`, `/api/logs`, `/api/logs/{kind}/{name}`).
+//!
+//! The server's own view of the vehicle ([`ServerView`]) is built like a
+//! session's, from the messages the core sends to the HMI endpoint. The
+//! parameter list is asked of the core (PARAM_REQUEST_LIST), which stays
+//! the owner of parameters. Log downloads serve only names from the listing:
+//! nothing from the request is ever joined onto a path.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use axum::Router;
+use axum::extract::{Path, State, WebSocketUpgrade};
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Json, Response};
+use axum::routing::get;
+use serde::Serialize;
+use tokio::sync::{broadcast, watch};
+
+use super::model::Model;
+use super::protocol::{MAX_MESSAGE_BYTES, Telemetry};
+use super::{Delivery, SERVER_PEER, Shared, assets, session};
+use crate::dialect::neptunus::*;
+use crate::vehicle::machine::{COMPONENT_ID, Input};
+
+/// One parameter as the core last reported it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ParamEntry {
+    pub index: u16,
+    pub value: f32,
+}
+
+/// The server's own view of the vehicle.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ServerView {
+    pub telemetry: Telemetry,
+    pub params: BTreeMap<String, ParamEntry>,
+    /// PARAM_VALUE's param_count (0 until one arrived).
+    pub param_count: u16,
+}
+
+/// Keeps [`ServerView`] up to date from the hub (messages for every session
+/// and for the server's own peer).
+pub(crate) async fn watch_vehicle(
+    mut hub: broadcast::Receiver<Arc<Delivery>>,
+    out: watch::Sender<ServerView>,
+) {
+    let mut model = Model::new(None, Instant::now());
+    let mut events = Vec::new();
+    let mut last_publish = Instant::now();
+    loop {
+        let d = match hub.recv().await {
+            Ok(d) => d,
+            Err(broadcast::error::RecvError::Lagged(_)) => continue,
+            Err(broadcast::error::RecvError::Closed) => return,
+        };
+        if d.peer.is_some_and(|p| p != SERVER_PEER) {
+            continue;
+        }
+        if let MavMessage::PARAM_VALUE(p) = &d.msg {
+            let name = {
+                let b: &[u8] = p.param_id.as_ref();
+                let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+                String::from_utf8_lossy(&b[..end]).into_owned()
+            };
+            out.send_modify(|v| {
+                v.param_count = p.param_count;
+                v.params.insert(
+                    name,
+                    ParamEntry {
+                        index: p.param_index,
+                        value: p.param_value,
+                    },
+                );
+            });
+            continue;
+        }
+        model.on_message(&d.msg, Instant::now(), &mut events);
+        events.clear();
+        // The REST status needs no more than a few updates a second.
+        if last_publish.elapsed() >= Duration::from_millis(200) {
+            last_publish = Instant::now();
+            let t = model.snapshot(Instant::now());
+            out.send_modify(|v| v.telemetry = t);
+        }
+    }
+}
+
+pub(crate) fn routes(shared: Arc<Shared>) -> Router {
+    Router::new()
+        .route("/", get(index))
+        .route("/ws", get(ws))
+        .route("/api/status", get(status))
+        .route("/api/params", get(params))
+        .route("/api/video", get(video))
+        .route("/api/logs", get(logs))
+        .route("/api/logs/{kind}/{name}", get(log_file))
+        .fallback(asset)
+        .with_state(shared)
+}
+
+async fn index() -> Response {
+    assets::response("index.html")
+}
+
+async fn asset(uri: axum::http::Uri) -> Response {
+    assets::response(uri.path().trim_start_matches('/'))
+}
+
+async fn ws(State(shared): State<Arc<Shared>>, upgrade: WebSocketUpgrade) -> Response {
+    upgrade
+        .max_message_size(MAX_MESSAGE_BYTES)
+        .max_frame_size(MAX_MESSAGE_BYTES)
+        .on_upgrade(move |socket| session::run(socket, shared))
+}
+
+#[derive(Serialize)]
+struct StatusBody {
+    vehicle_sysid: u8,
+    sessions_max: u16,
+    sessions_free: usize,
+    bad_web_messages: u64,
+    telemetry: Telemetry,
+}
+
+async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
+    let (lo, hi) = shared.sysid_range;
+    let free = shared.free_sysids.lock().map_or(0, |f| f.len());
+    Json(StatusBody {
+        vehicle_sysid: shared.vehicle_sysid,
+        sessions_max: u16::from(hi) - u16::from(lo) + 1,
+        sessions_free: free,
+        bad_web_messages: shared
+            .bad_messages
+            .load(std::sync::atomic::Ordering::Relaxed),
+        telemetry: shared.status.borrow().telemetry.clone(),
+    })
+}
+
+/// Whether the page should load `/video.mjpg` (asked first, so a vehicle
+/// without a camera costs the page no failed request).
+async fn video(State(shared): State<Arc<Shared>>) -> Json<serde_json::Value> {
+    Json(serde_json::json!({ "available": shared.video, "url": "/video.mjpg" }))
+}
+
+#[derive(Serialize)]
+struct ParamsBody {
+    complete: bool,
+    count: u16,
+    params: BTreeMap<String, ParamEntry>,
+}
+
+/// Asks the core for its parameter list and waits (2 s at most) for all of it.
+async fn params(State(shared): State<Arc<Shared>>) -> Response {
+    let mut rx = shared.status.clone();
+    let from = shared.sender(SERVER_PEER, 0, false);
+    let request = MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
+        target_system: shared.vehicle_sysid,
+        target_component: COMPONENT_ID,
+    });
+    if shared
+        .inputs
+        .send(Input::Mavlink { from, msg: request })
+        .await
+        .is_err()
+    {
+        return (
+            StatusCode::SERVICE_UNAVAILABLE,
+            "the vehicle task is not running",
+        )
+            .into_response();
+    }
+    let complete =
+        |v: &ServerView| v.param_count > 0 && v.params.len() >= usize::from(v.param_count);
+    let _ = tokio::time::timeout(Duration::from_secs(2), rx.wait_for(complete)).await;
+    let v = rx.borrow().clone();
+    Json(ParamsBody {
+        complete: complete(&v),
+        count: v.param_count,
+        params: v.params,
+    })
+    .into_response()
+}
+
+/// Log kinds and their folders in the data directory.
+const LOG_KINDS: [(&str, &str); 2] = [("tlogs", "tlogs"), ("events", "events")];
+
+#[derive(Serialize)]
+struct LogEntry {
+    kind: &'static str,
+    name: String,
+    bytes: u64,
+    modified_unix_s: u64,
+    url: String,
+}
+
+fn list_logs(shared: &Shared) -> Vec<LogEntry> {
+    let mut out = Vec::new();
+    for (kind, folder) in LOG_KINDS {
+        let Ok(dir) = std::fs::read_dir(shared.data_dir.join(folder)) else {
+            continue;
+        };
+        for entry in dir.flatten() {
+            let Ok(meta) = entry.metadata() else { continue };
+            if !meta.is_file() {
+                continue;
+            }
+            let Some(name) = entry.file_name().to_str().map(str::to_owned) else {
+                continue;
+            };
+            let modified_unix_s = meta
+                .modified()
+                .ok()
+                .and_then(|m| m.duration_since(std::time::UNIX_EPOCH).ok())
+                .map_or(0, |d| d.as_secs());
+            out.push(LogEntry {
+                kind,
+                url: format!("/api/logs/{kind}/{name}"),
+                name,
+                bytes: meta.len(),
+                modified_unix_s,
+            });
+        }
+    }
+    out.sort_by(|a, b| (a.kind, &a.name).cmp(&(b.kind, &b.name)));
+    out
+}
+
+async fn logs(State(shared): State<Arc<Shared>>) -> Json<serde_json::Value> {
+    Json(serde_json::json!({ "logs": list_logs(&shared) }))
+}
+
+async fn log_file(
+    State(shared): State<Arc<Shared>>,
+    Path((kind, name)): Path<(String, String)>,
+) -> Response {
+    // Only a name the listing itself produced is served.
+    let Some((kind, folder)) = LOG_KINDS.iter().find(|(k, _)| *k == kind) else {
+        return (
+            StatusCode::NOT_FOUND,
+            "no such log kind: use tlogs or events",
+        )
+            .into_response();
+    };
+    let listed = list_logs(&shared)
+        .into_iter()
+        .any(|e| e.kind == *kind && e.name == name);
+    if !listed {
+        return (StatusCode::NOT_FOUND, "no such log: see /api/logs").into_response();
+    }
+    match tokio::fs::read(shared.data_dir.join(folder).join(&name)).await {
+        Ok(bytes) => (
+            [
+                (header::CONTENT_TYPE, "application/octet-stream".to_owned()),
+                (
+                    header::CONTENT_DISPOSITION,
+                    format!("attachment; filename=\"{name}\""),
+                ),
+            ],
+            bytes,
+        )
+            .into_response(),
+        Err(e) => (StatusCode::NOT_FOUND, format!("cannot read the log: {e}")).into_response(),
+    }
+}

@@ -1,0 +1,101 @@
+// Shared by the browser tests and the screenshot script: the real
+// `neptunus --sim` binary with its HMI on a free loopback port, and Debian's
+// Chromium driven by playwright-core (never a browser a tool downloads).
+import { spawn } from 'node:child_process';
+import { mkdtempSync, readFileSync, rmSync, existsSync, openSync } from 'node:fs';
+import { tmpdir } from 'node:os';
+import { join, dirname, resolve } from 'node:path';
+import { fileURLToPath } from 'node:url';
+import { chromium } from 'playwright-core';
+
+const here = dirname(fileURLToPath(import.meta.url));
+export const REPO = resolve(here, '..', '..');
+export const BIN = process.env.NEPTUNUS_BIN || join(REPO, 'target', 'debug', 'neptunus');
+export const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
+
+const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+/** Polls `fn` until it returns a truthy value or `ms` pass. */
+export async function until(fn, ms, what) {
+  const end = Date.now() + ms;
+  let last;
+  while (Date.now() < end) {
+    last = await fn();
+    if (last) return last;
+    await sleep(50);
+  }
+  throw new Error(`timed out after ${ms} ms waiting for ${what} (last: ${JSON.stringify(last)})`);
+}
+
+/** `neptunus --sim` with its HMI on 127.0.0.1:0; resolves once the page is served. */
+export async function startVehicle(extraArgs = []) {
+  if (!existsSync(BIN)) throw new Error(`no neptunus binary at ${BIN}: run \`cargo build\` or set NEPTUNUS_BIN`);
+  const dir = mkdtempSync(join(tmpdir(), 'neptunus-browser-'));
+  const data = join(dir, 'data');
+  const log = openSync(join(dir, 'stderr.txt'), 'w');
+  const child = spawn(
+    BIN,
+    ['--sim', '--data-dir', data, '--http', '127.0.0.1:0', '--mavlink', 'udpin:127.0.0.1:0', ...extraArgs],
+    { stdio: ['ignore', log, log], env: { ...process.env, NO_COLOR: '1', RUST_LOG: process.env.RUST_LOG || 'info' } },
+  );
+  let exited = null;
+  child.on('exit', (code) => { exited = code; });
+  const addr = await until(() => {
+    if (exited !== null) throw new Error(`neptunus exited (${exited}): ${readFileSync(join(dir, 'stderr.txt'), 'utf8').slice(-2000)}`);
+    try { return readFileSync(join(data, 'http.addr'), 'utf8').trim(); } catch { return null; }
+  }, 30000, 'the HMI address file');
+  return {
+    url: `http://${addr}/`,
+    dir,
+    stderr: () => readFileSync(join(dir, 'stderr.txt'), 'utf8'),
+    async stop() {
+      if (exited === null) {
+        child.kill('SIGTERM');
+        await until(() => exited !== null, 5000, 'neptunus to exit').catch(() => child.kill('SIGKILL'));
+      }
+      rmSync(dir, { recursive: true, force: true });
+    },
+  };
+}
+
+// playwright-core starts Chromium with a fresh temporary profile of its own
+// (the --user-data-dir the machine notes ask for) and removes it on close.
+export async function launchBrowser() {
+  return chromium.launch({
+    executablePath: CHROMIUM,
+    headless: true,
+    args: [
+      '--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
+      '--disable-background-networking', '--disable-component-update', '--disable-sync',
+    ],
+  });
+}
+
+/** A page on the HMI that records console errors and failed requests. */
+export async function openPage(browser, url, viewport = { width: 1280, height: 800 }) {
+  const context = await browser.newContext({ viewport, acceptDownloads: true });
+  const page = await context.newPage();
+  const problems = [];
+  page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });
+  page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
+  page.on('requestfailed', (r) => {
+    // The video stream is cut when the page closes; that is no failure.
+    if (!r.url().endsWith('/video.mjpg')) problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`);
+  });
+  page.on('response', (r) => { if (r.status() >= 400) problems.push(`HTTP ${r.status()}: ${r.url()}`); });
+  await page.goto(url);
+  await until(() => page.evaluate(() => !!(window.neptunus && window.neptunus.state.t && window.neptunus.state.t.vehicle_seen)), 20000, 'telemetry in the page');
+  return { context, page, problems };
+}
+
+/** The latest telemetry the page holds. */
+export const telemetry = (page) => page.evaluate(() => window.neptunus.state.t);
+
+/** Waits until the vehicle is ready to arm, requests control and arms. */
+export async function takeControlAndArm(page) {
+  await until(async () => (await telemetry(page)).health?.prearm, 20000, 'pre-arm checks');
+  await page.click('[data-testid=request-control]');
+  await until(async () => (await telemetry(page)).control.you, 10000, 'control');
+  await page.click('[data-testid=arm]');
+  await until(async () => (await telemetry(page)).armed, 10000, 'armed');
+}
