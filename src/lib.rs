@@ -11,8 +11,11 @@
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`vehicle`]: the vehicle core (parameters so far).
+//! - [`camera`]: video sources (synthetic, ffmpeg, mjpg-streamer, url) and
+//!   the MJPEG, snapshot and status routes.
 
 pub mod app;
+pub mod camera;
 pub mod config;
 pub mod dialect;
 pub mod eventlog;
