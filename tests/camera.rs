@@ -899,3 +899,29 @@ fn the_splitter_survives_random_bytes() {
     }
     assert!(splitter.stats().skipped_bytes > 0);
 }
+
+// ---------------------------------------------------------------- config
+
+#[test]
+fn the_readme_camera_config_parses_and_is_valid() {
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).expect("README");
+    let start = readme
+        .find("```toml\n[camera]")
+        .expect("README has the camera config");
+    let body = &readme[start + "```toml\n".len()..];
+    let text = &body[..body.find("```").expect("end of block")];
+    let table: toml::Table = toml::from_str(text).expect("TOML");
+    let cfg: CameraConfig = table
+        .get("camera")
+        .expect("[camera]")
+        .clone()
+        .try_into()
+        .expect("a camera config");
+    cfg.validate().expect("valid");
+    assert_eq!(cfg.source, SourceKind::Ffmpeg);
+    assert_eq!(cfg.rotation_deg, 180);
+    assert_eq!(cfg.ffmpeg, CameraConfig::default().ffmpeg);
+    assert_eq!(cfg.mjpg_streamer, CameraConfig::default().mjpg_streamer);
+    assert_eq!(cfg.backoff, CameraConfig::default().backoff);
+}

@@ -9,6 +9,16 @@ echo "== toolchain"
 cargo --version
 rustc --version
 
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+
+echo "== test tools"
+# The camera tests run a real ffmpeg (tests/camera.rs).
+if ! command -v ffmpeg >/dev/null 2>&1; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q ffmpeg
+fi
+ffmpeg -hide_banner -version | sed -n 1p
+
 echo "== formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked -- -D warnings
@@ -21,7 +31,6 @@ echo "== interoperability tests (real ground-station clients against the binary)
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
 venv=target/interop-venv
 reqs=tests/interop/requirements.txt
-as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 if ! python3 -c 'import ensurepip, venv' 2>/dev/null; then
     # Debian/Ubuntu split venv/ensurepip out of the interpreter package.
     as_root apt-get update -q && as_root apt-get install -y -q python3-venv

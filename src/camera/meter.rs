@@ -29,10 +29,11 @@ impl FpsMeter {
         self.stamps.push_back(at);
     }
 
-    /// Frames per second over the window ending at `now`: (n − 1) intervals
-    /// between the n frames in the window, over the time from the first of
-    /// them to `now`, so a source that stops decays to 0 instead of showing
-    /// its last rate forever.
+    /// Frames per second over the window ending at `now`: the n frames in
+    /// the window make n − 1 intervals over the time from the first to the
+    /// last. Once the source is late by more than its mean interval, the
+    /// time since then counts too, so a source that stops decays to 0
+    /// instead of showing its last rate forever.
     pub fn fps(&self, now: Instant) -> f64 {
         let mut in_window = self
             .stamps
@@ -41,12 +42,16 @@ impl FpsMeter {
         let Some(first) = in_window.next() else {
             return 0.0;
         };
-        let n = 1 + in_window.count();
-        let span = now.saturating_duration_since(*first).as_secs_f64();
-        if n < 2 || span <= 0.0 {
+        let (n, last) = in_window.fold((1usize, first), |(n, _), t| (n + 1, t));
+        if n < 2 {
             return 0.0;
         }
-        (n - 1) as f64 / span
+        let intervals = (n - 1) as f64;
+        let frames_span = last.saturating_duration_since(*first).as_secs_f64();
+        let mean_gap = frames_span / intervals;
+        let since_first = now.saturating_duration_since(*first).as_secs_f64();
+        let span = frames_span.max(since_first - mean_gap);
+        if span <= 0.0 { 0.0 } else { intervals / span }
     }
 }
 
@@ -61,8 +66,10 @@ mod tests {
         for i in 0..100 {
             m.record(t0 + Duration::from_millis(100 * i));
         }
-        let now = t0 + Duration::from_millis(9900);
-        assert!((m.fps(now) - 10.0).abs() < 1e-9, "{}", m.fps(now));
+        // At a frame, and between two frames.
+        for now in [9900, 9950, 9999].map(|ms| t0 + Duration::from_millis(ms)) {
+            assert!((m.fps(now) - 10.0).abs() < 1e-9, "{}", m.fps(now));
+        }
         assert!(m.stamps.len() <= 31);
     }
 
