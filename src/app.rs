@@ -145,6 +145,10 @@ pub async fn run(
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_micros() as u64),
     };
+    // The camera: its picture follows the vehicle (the synthetic source draws it).
+    let (scene_tx, scene_rx) = tokio::sync::watch::channel(crate::camera::Scene::default());
+    let camera = crate::camera::Camera::start(settings.camera.clone(), scene_rx);
+    let mut last_scene: Option<Duration> = None;
     let z_centered = crate::hmi::z_centered_by(hmi_profiles);
     let hmi_dir = settings.data_dir.clone();
     let mut hmi = crate::hmi::Hmi::start(
@@ -153,7 +157,7 @@ pub async fn run(
         vehicle.sysid(),
         z_centered,
         hmi_dir,
-        None,
+        Some(camera.routes()),
     )
     .await?;
     let mut io = Io {
@@ -198,6 +202,10 @@ pub async fn run(
                     vehicle.handle(Input::SimTruth(truth), now, &mut outputs);
                 }
                 vehicle.handle(Input::Tick, now, &mut outputs);
+                if last_scene.is_none_or(|t| now.mono.saturating_sub(t) >= Duration::from_millis(50)) {
+                    last_scene = Some(now.mono);
+                    scene_tx.send_replace(scene(&vehicle, now));
+                }
             }
             input = hmi.recv() => vehicle.handle(input, clock(), &mut outputs),
             ev = events.recv() => match ev {
@@ -276,6 +284,7 @@ pub async fn run(
     tokio::time::sleep(Duration::from_millis(50)).await;
     drop(link);
     hmi.shutdown().await;
+    camera.shutdown().await;
     router.shutdown().await;
     io.signing.persist();
     let _ = tokio::task::spawn_blocking(move || event_log.shutdown()).await;
@@ -283,6 +292,22 @@ pub async fn run(
         board.shutdown().await;
     }
     Ok(())
+}
+
+/// What the camera shows: the vehicle as it knows itself.
+fn scene(v: &Vehicle, now: Now) -> crate::camera::Scene {
+    let e = v.estimate(now);
+    let (roll_deg, pitch_deg) = v.attitude_deg();
+    crate::camera::Scene {
+        depth_m: e.depth_m,
+        heading_deg: e.heading_deg,
+        roll_deg,
+        pitch_deg,
+        // 1000..2000 µs spans ±90° (DO_MOUNT_CONTROL's mapping).
+        tilt_deg: (f64::from(v.tilt_us()) - 1500.0) / 500.0 * 90.0,
+        simulated: v.run_mode() == RunMode::Simulator,
+        armed: v.armed(),
+    }
 }
 
 fn sim_truth(s: &crate::firmware::emulator::SimSnapshot) -> SimTruth {

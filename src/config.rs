@@ -176,6 +176,9 @@ pub struct FileConfig {
     /// Ground-station profiles directory replacing the built-in profiles.
     pub profiles_dir: Option<PathBuf>,
     pub hmi: HmiFileConfig,
+    /// `[camera]`: the video source (default: `synthetic` with `--sim`,
+    /// mjpg-streamer on the vehicle).
+    pub camera: Option<crate::camera::CameraConfig>,
 }
 
 /// `[hmi]` section: the browser HMI.
@@ -270,6 +273,7 @@ pub struct Settings {
     /// on a real board as in `--sim`).
     pub simulator: EmulatorOptions,
     pub hmi: crate::hmi::HmiSettings,
+    pub camera: crate::camera::CameraConfig,
 }
 
 impl FileConfig {
@@ -407,6 +411,15 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
         simulator: file.emulator.clone(),
         hmi: resolve_hmi(args.http, &file.hmi)?,
+        camera: match &file.camera {
+            Some(c) => {
+                c.validate()
+                    .map_err(|e| ConfigError::Invalid(format!("camera: {e}")))?;
+                c.clone()
+            }
+            None if sim => crate::camera::CameraConfig::synthetic(),
+            None => crate::camera::CameraConfig::default(),
+        },
     })
 }
 

@@ -12,8 +12,11 @@
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`hmi`]: the browser HMI (HTTP, WebSocket sessions as in-process ground stations).
 //! - [`vehicle`]: the vehicle core (parameters so far).
+//! - [`camera`]: video sources (synthetic, ffmpeg, mjpg-streamer, url) and
+//!   the MJPEG, snapshot and status routes.
 
 pub mod app;
+pub mod camera;
 pub mod config;
 pub mod dialect;
 pub mod eventlog;

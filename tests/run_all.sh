@@ -9,6 +9,16 @@ echo "== toolchain"
 cargo --version
 rustc --version
 
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+
+echo "== test tools"
+# The camera tests run a real ffmpeg (tests/camera.rs).
+if ! command -v ffmpeg >/dev/null 2>&1; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q ffmpeg
+fi
+ffmpeg -hide_banner -version | sed -n 1p
+
 echo "== formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked -- -D warnings

@@ -559,6 +559,16 @@ impl Vehicle {
         self.holds.applied
     }
 
+    /// Roll and pitch the board reported last (deg).
+    pub fn attitude_deg(&self) -> (f64, f64) {
+        (self.roll_deg.value, self.pitch_deg.value)
+    }
+
+    /// Camera tilt servo pulse width (µs).
+    pub fn tilt_us(&self) -> u16 {
+        self.tilt_us
+    }
+
     /// The last depth the board reported (m).
     pub fn raw_depth_m(&self) -> Option<f64> {
         self.holds.est.depth_measured_m
