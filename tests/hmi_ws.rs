@@ -484,3 +484,56 @@ async fn rest_api_and_assets() {
     let (status, _, _) = rig.get("/node_modules/uplot/package.json").await;
     assert_eq!(status, 404);
 }
+
+/// Depth hold from the browser protocol: ALT_HOLD, a depth setpoint, the
+/// simulated vehicle goes there; then the run mode switch stops the board's
+/// thrusters and the telemetry says "simulated".
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn depth_hold_setpoint_and_run_mode_from_the_page() {
+    let rig = HmiRig::start("");
+    let board = rig.control();
+    let mut pilot = rig.connect().await;
+    pilot.ready().await;
+    pilot.send(json!({"type": "request_control"})).await;
+    pilot.wait("control", |c| c["you"] == true).await;
+    pilot.send(json!({"type": "arm", "arm": true})).await;
+    let ack = pilot.ack("COMPONENT_ARM_DISARM").await;
+    assert_eq!(ack["result_name"], "ACCEPTED", "{ack}");
+    pilot.send(json!({"type": "mode", "mode": 2})).await;
+    let ack = pilot.ack("DO_SET_MODE").await;
+    assert_eq!(ack["result_name"], "ACCEPTED", "{ack}");
+    pilot
+        .send(json!({"type": "autopilot_target", "depth_m": 1.0}))
+        .await;
+    let ack = pilot.ack("NEPTUNUS_SET_AUTOPILOT_TARGET").await;
+    assert_eq!(ack["result_name"], "ACCEPTED", "{ack}");
+    // A live page: alive and centred sticks at 5 Hz while it waits.
+    let end = tokio::time::Instant::now() + GENEROUS * 2;
+    let mut reached = None;
+    while reached.is_none() && tokio::time::Instant::now() < end {
+        pilot.send(json!({"type": "alive"})).await;
+        pilot
+            .send(json!({"type": "sticks", "surge": 0.0, "sway": 0.0, "heave_up": 0.0, "yaw": 0.0}))
+            .await;
+        reached = pilot
+            .try_wait("telemetry", Duration::from_millis(200), |t| {
+                t["autopilot"]["depth_target_m"].as_f64() == Some(1.0)
+                    && t["depth_m"]
+                        .as_f64()
+                        .is_some_and(|d| (d - 1.0).abs() < 0.15)
+            })
+            .await;
+    }
+    let last = pilot.seen.iter().rev().find(|m| m["type"] == "telemetry");
+    let t = reached
+        .unwrap_or_else(|| panic!("the held depth was never reached; last telemetry {last:?}"));
+    assert_eq!(t["mode"], 2, "{t}");
+    // The simulator run mode: the board is stopped, the telemetry says so.
+    pilot
+        .send(json!({"type": "run_mode", "mode": "simulator"}))
+        .await;
+    let ack = pilot.ack("NEPTUNUS_SET_RUN_MODE").await;
+    assert_eq!(ack["result_name"], "ACCEPTED", "{ack}");
+    pilot.telemetry_until(|t| t["simulated"] == true).await;
+    wait_neutral(&board).await;
+}
