@@ -137,7 +137,9 @@ async fn client(
         if v["type"] != "telemetry" {
             continue;
         }
-        let Some(h) = v["heading_deg"].as_f64() else {
+        // The raw board reading beside the estimate (the heading shown is
+        // the Kalman estimate, which no longer equals any line's value).
+        let Some(h) = v["estimate"]["heading_measured_deg"].as_f64() else {
             continue;
         };
         let k = key(h);
