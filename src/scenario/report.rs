@@ -91,7 +91,7 @@ pub fn settling_time_s(
 }
 
 fn angle_diff(a: f64, b: f64) -> f64 {
-    (a - b + 540.0).rem_euclid(360.0) - 180.0
+    crate::sim::thesis::wrap_deg_180(a - b)
 }
 
 /// Depth step 0 → 2 m in ALT_HOLD.

@@ -25,6 +25,8 @@
 //! thruster) and conditional integration (the integrator stops growing while
 //! the output is saturated in the same direction, and is clamped to IMAX).
 
+use super::estimator::wrap_pi;
+
 /// Gains of one PID stage.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PidGains {
@@ -89,10 +91,6 @@ impl Pid {
         self.last_d = d;
         (p + self.integrator + d + ff).clamp(-limit, limit)
     }
-}
-
-fn wrap_pi(a: f64) -> f64 {
-    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
 }
 
 /// What the controllers read from the estimator.

@@ -128,7 +128,8 @@ pub struct AxisFilter {
     u: f64,
 }
 
-fn wrap_pi(a: f64) -> f64 {
+/// An angle wrapped into `[−π, π)`; a non-finite angle counts as 0.
+pub(crate) fn wrap_pi(a: f64) -> f64 {
     let w = (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI;
     if w.is_finite() { w } else { 0.0 }
 }

@@ -234,14 +234,10 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if !self.for_us(t.target_system, t.target_component) {
+        let what = "SET_POSITION_TARGET_GLOBAL_INT";
+        if !self.accept_setpoint(from, (t.target_system, t.target_component), what, now, out) {
             return;
         }
-        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
-            self.refuse_input(from, "SET_POSITION_TARGET_GLOBAL_INT", why, now, out);
-            return;
-        }
-        self.note_life(from, now);
         use MavFrame as F;
         let relative = matches!(
             t.coordinate_frame,
@@ -254,7 +250,7 @@ impl Vehicle {
         let depth =
             (mask & Z_IGNORE == 0 && relative && t.alt.is_finite()).then(|| -f64::from(t.alt));
         let yaw = (mask & YAW_IGNORE == 0 && t.yaw.is_finite()).then(|| f64::from(t.yaw));
-        self.apply_targets(from, depth, yaw, "SET_POSITION_TARGET_GLOBAL_INT", now, out);
+        self.apply_targets(from, depth, yaw, what, now, out);
     }
 
     /// SET_ATTITUDE_TARGET: the heading from the quaternion's yaw.
@@ -265,15 +261,10 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if !self.for_us(t.target_system, t.target_component) {
-            return;
-        }
-        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
-            self.refuse_input(from, "SET_ATTITUDE_TARGET", why, now, out);
-            return;
-        }
-        self.note_life(from, now);
-        if t.type_mask.bits() & ATTITUDE_IGNORE != 0 {
+        let target = (t.target_system, t.target_component);
+        if !self.accept_setpoint(from, target, "SET_ATTITUDE_TARGET", now, out)
+            || t.type_mask.bits() & ATTITUDE_IGNORE != 0
+        {
             return;
         }
         let [w, x, y, z] = t.q.map(f64::from);
@@ -286,6 +277,28 @@ impl Vehicle {
             now,
             out,
         );
+    }
+
+    /// A setpoint message addressed to us from the station in control (a
+    /// refusal is counted and reported like refused stick input); it is a
+    /// sign of the owner's life.
+    fn accept_setpoint(
+        &mut self,
+        from: Sender,
+        (system, component): (u8, u8),
+        what: &str,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> bool {
+        if !self.for_us(system, component) {
+            return false;
+        }
+        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
+            self.refuse_input(from, what, why, now, out);
+            return false;
+        }
+        self.note_life(from, now);
+        true
     }
 
     /// Depth (m, down positive) and heading (rad) targets from the owner.
