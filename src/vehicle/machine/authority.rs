@@ -169,6 +169,14 @@ impl Vehicle {
         from.pilot || self.params.gcs_allowed(from.sysid)
     }
 
+    /// May `from` ever control the vehicle: an allowed station whose frames
+    /// are signed when signing is on. The others only watch, and nothing
+    /// they send may change what other stations see (telemetry rates, peer
+    /// slots, broadcast texts).
+    pub fn may_control(&self, from: Sender) -> bool {
+        (!self.signing_active || from.signed) && self.allowed(from)
+    }
+
     /// May `from` change the vehicle's state in this way? Claims an unowned
     /// vehicle for the first allowed station that drives or arms (NEPT_CTRL_CLAIM 0).
     pub(super) fn check_control(
