@@ -19,6 +19,7 @@ use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
 use futures_util::{SinkExt as _, StreamExt as _};
 use tokio::sync::broadcast::error::RecvError;
 
+use super::auth::OpenControl;
 use super::model::Model;
 use super::protocol::{ClientMsg, RunMode, ServerMsg};
 use super::{SERVER_PEER, Shared, SysidLease, guard};
@@ -354,10 +355,15 @@ impl Session {
         } else if self.shared.password.is_some() {
             "log in with the pilot password to pilot".to_owned()
         } else {
-            format!(
-                "no pilot password is set, and only {} addresses may pilot without one ([hmi] open_control): {set}",
-                self.shared.open_control
-            )
+            let who = match self.shared.open_control {
+                OpenControl::None => {
+                    "[hmi] open_control = \"none\" lets no address pilot without one".to_owned()
+                }
+                oc => format!(
+                    "only {oc} addresses may pilot without one ([hmi] open_control = \"{oc}\")"
+                ),
+            };
+            format!("no pilot password is set, and {who}: {set}")
         })
     }
 

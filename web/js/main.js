@@ -110,6 +110,7 @@ function showRights() {
 async function login(password) {
   const note = $('login-note');
   note.textContent = 'checking…';
+  note.classList.remove('refused');
   let r;
   let body = {};
   try {
@@ -124,6 +125,7 @@ async function login(password) {
     return;
   }
   note.textContent = body.message || `HTTP ${r.status}`;
+  note.classList.toggle('refused', !body.ok);
   message(body.ok ? 6 : 4, `login: ${note.textContent}`);
   if (body.ok) reconnect();
 }
