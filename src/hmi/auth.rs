@@ -369,6 +369,18 @@ pub fn machine_hostname() -> Option<String> {
         .and_then(|h| h.into_string().ok())
 }
 
+/// The throttle's key for a client: its IPv4 address, or its IPv6 /64 (one
+/// host may hold a whole /64, so per-address counting would not slow it).
+pub fn throttle_key(ip: IpAddr) -> IpAddr {
+    match ip.to_canonical() {
+        IpAddr::V6(v6) => {
+            let s = v6.segments();
+            IpAddr::from([s[0], s[1], s[2], s[3], 0, 0, 0, 0])
+        }
+        v4 => v4,
+    }
+}
+
 /// What the throttle says about a login attempt.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Admit {
@@ -721,6 +733,17 @@ mod tests {
         assert_eq!(t.admit(ip, later + MAX_DELAY), Admit::Check);
         t.succeeded(ip, later + MAX_DELAY);
         assert!(t.is_empty());
+    }
+
+    #[test]
+    fn ipv6_hosts_are_throttled_per_64() {
+        let a = throttle_key("2001:db8:1:2::5".parse().unwrap());
+        let b = throttle_key("2001:db8:1:2:ffff::9".parse().unwrap());
+        assert_eq!(a, b);
+        assert_ne!(a, throttle_key("2001:db8:1:3::5".parse().unwrap()));
+        let v4: IpAddr = "192.168.2.9".parse().unwrap();
+        assert_eq!(throttle_key(v4), v4);
+        assert_eq!(throttle_key("::ffff:192.168.2.9".parse().unwrap()), v4);
     }
 
     #[test]

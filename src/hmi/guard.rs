@@ -186,7 +186,7 @@ pub(crate) async fn check_password(
     let Some(expected) = shared.password.clone() else {
         return Login::NoPassword;
     };
-    let key = ip.unwrap_or(IpAddr::from([0, 0, 0, 0]));
+    let key = auth::throttle_key(ip.unwrap_or(IpAddr::from([0, 0, 0, 0])));
     let admit = shared
         .throttle
         .lock()
