@@ -483,9 +483,9 @@ impl Throttle {
 
     /// A checked attempt succeeded: the address starts afresh; the summary
     /// of its burst, if one was under way.
-    pub fn succeeded(&mut self, ip: IpAddr, now: Instant) -> Option<ThrottleNote> {
+    pub fn succeeded(&mut self, ip: IpAddr) -> Option<ThrottleNote> {
         let f = self.table.remove(&ip)?;
-        summary(ip, &f, now)
+        summary(ip, &f)
     }
 
     /// Summaries of bursts that went quiet; forgets long-quiet addresses.
@@ -493,7 +493,7 @@ impl Throttle {
         let mut notes = Vec::new();
         for (ip, f) in &mut self.table {
             if now.saturating_duration_since(f.last) >= BURST_QUIET
-                && let Some(n) = summary(*ip, f, now)
+                && let Some(n) = summary(*ip, f)
             {
                 notes.push(n);
                 f.burst = None;
@@ -513,7 +513,7 @@ impl Throttle {
     }
 }
 
-fn summary(ip: IpAddr, f: &Failures, _now: Instant) -> Option<ThrottleNote> {
+fn summary(ip: IpAddr, f: &Failures) -> Option<ThrottleNote> {
     let (start, failures, waited) = f.burst?;
     Some(ThrottleNote::Summary {
         ip,
@@ -731,7 +731,7 @@ mod tests {
         assert!(t.sweep(later).is_empty());
         // A success resets.
         assert_eq!(t.admit(ip, later + MAX_DELAY), Admit::Check);
-        t.succeeded(ip, later + MAX_DELAY);
+        t.succeeded(ip);
         assert!(t.is_empty());
     }
 

@@ -210,7 +210,7 @@ pub(crate) async fn check_password(
         return Login::Wrong;
     };
     if ok {
-        if let Some(note) = throttle.succeeded(key, now) {
+        if let Some(note) = throttle.succeeded(key) {
             log_note(&note);
         }
         drop(throttle);

@@ -214,7 +214,6 @@ struct ParamsBody {
 async fn params(State(shared): State<Arc<Shared>>) -> Response {
     let mut rx = shared.status.clone();
     let from = shared.server_sender();
-    debug_assert_eq!(from.peer, SERVER_PEER);
     let request = MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
         target_system: shared.vehicle_sysid,
         target_component: COMPONENT_ID,
