@@ -106,6 +106,11 @@ pub enum CliCommand {
         #[command(subcommand)]
         command: SigningCommand,
     },
+    /// The browser HMI's pilot password (stored hashed in the data directory).
+    Hmi {
+        #[command(subcommand)]
+        command: HmiCommand,
+    },
     /// Run the autopilot step-response scenarios on the simulator (simulated
     /// time, fixed seeds) and write a CSV and a PNG plot per scenario to DIR.
     SimReport {
@@ -124,6 +129,19 @@ pub enum SigningCommand {
     /// Remove the key: signing off.
     Clear,
     /// Say whether a key is set (never prints it).
+    Status,
+}
+
+/// `neptunus hmi …` (takes effect at the next start of the vehicle).
+#[derive(Debug, Subcommand)]
+pub enum HmiCommand {
+    /// Set the pilot password: asked twice on the terminal without echo,
+    /// or one line read from standard input when it is not a terminal.
+    /// Stored as an argon2 hash in DATA_DIR/hmi-password (mode 0600).
+    SetPassword,
+    /// Remove the pilot password.
+    ClearPassword,
+    /// Say whether a pilot password is set (never prints it).
     Status,
 }
 
@@ -190,8 +208,18 @@ pub struct HmiFileConfig {
     /// System ids lent to browser sessions, one each.
     pub sysid_min: Option<u8>,
     pub sysid_max: Option<u8>,
-    /// Sessions must give this before they may arm, drive or take control.
-    pub pilot_password: Option<String>,
+    /// Client addresses that may pilot without the pilot password:
+    /// "none", "loopback" (default) or "private". Ignored with signing on.
+    pub open_control: Option<crate::hmi::auth::OpenControl>,
+    /// Origins (`scheme://host[:port]`) besides the page's own that may use
+    /// the WebSocket and the REST API.
+    pub allowed_origins: Option<Vec<String>>,
+    /// Sessions holding no system id (watch only) at once.
+    pub max_watchers: Option<usize>,
+    /// No longer read: the password is stored hashed by `neptunus hmi
+    /// set-password`. Kept only to say so, with its line and column.
+    #[serde(skip_serializing)]
+    pub pilot_password: Option<toml::Spanned<toml::Value>>,
     /// Rotation of the camera image in the page: 0, 90, 180 or 270.
     pub camera_rotation_deg: Option<i32>,
 }
@@ -292,6 +320,12 @@ impl FileConfig {
     /// Parses TOML text; the error text carries line and column.
     pub fn parse(text: &str) -> Result<Self, String> {
         let cfg: Self = toml::from_str(text).map_err(|e| e.to_string().trim_end().to_owned())?;
+        if let Some(old) = &cfg.hmi.pilot_password {
+            let (line, column) = line_column(text, old.span().start);
+            return Err(format!(
+                "line {line}, column {column}: hmi.pilot_password is no longer read — a password in a config file is readable by anyone who can read the file; remove the line and run `neptunus hmi set-password` on the vehicle (stores it hashed in DATA_DIR/hmi-password)"
+            ));
+        }
         cfg.validate()?;
         Ok(cfg)
     }
@@ -331,6 +365,14 @@ impl FileConfig {
         }
         Ok(())
     }
+}
+
+/// 1-based line and column of byte `offset` in `text`.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let before = &text[..offset.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
 }
 
 /// The default data directory (`~/.local/share/neptunus` on Linux).
@@ -452,7 +494,23 @@ fn resolve_hmi(
             hmi.sysid_min, hmi.sysid_max
         )));
     }
-    hmi.pilot_password = file.pilot_password.clone().filter(|p| !p.is_empty());
+    hmi.open_control = file.open_control.unwrap_or_default();
+    hmi.allowed_origins = file
+        .allowed_origins
+        .iter()
+        .flatten()
+        .map(|o| {
+            crate::hmi::auth::parse_origin(o)
+                .map_err(|e| ConfigError::Invalid(format!("hmi.allowed_origins: {e}")))
+        })
+        .collect::<Result<_, _>>()?;
+    hmi.max_watchers = file.max_watchers.unwrap_or(hmi.max_watchers);
+    if hmi.max_watchers > 1000 {
+        return Err(ConfigError::Invalid(format!(
+            "hmi.max_watchers = {} — use 0..1000 (each watcher costs the vehicle a 20 Hz telemetry stream)",
+            hmi.max_watchers
+        )));
+    }
     let rot = file.camera_rotation_deg.unwrap_or(0);
     if ![0, 90, 180, 270].contains(&rot) {
         return Err(ConfigError::Invalid(format!(

@@ -4,7 +4,7 @@ use std::io::Write as _;
 
 use anyhow::Context as _;
 use clap::Parser as _;
-use neptunus::config::{self, Cli, CliCommand, ProfilesCommand, SigningCommand};
+use neptunus::config::{self, Cli, CliCommand, HmiCommand, ProfilesCommand, SigningCommand};
 use neptunus::vehicle::input::{Profile, Profiles, ZConvention};
 
 fn main() -> std::process::ExitCode {
@@ -49,6 +49,10 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
         Some(CliCommand::Signing { command }) => {
             let data_dir = config::resolve(&cli.run)?.data_dir;
             signing(&command, &data_dir)?;
+        }
+        Some(CliCommand::Hmi { command }) => {
+            let data_dir = config::resolve(&cli.run)?.data_dir;
+            hmi(&command, &data_dir)?;
         }
         Some(CliCommand::EmulateBoard(args)) => {
             init_logging(None)?;
@@ -117,6 +121,65 @@ fn signing(command: &SigningCommand, data_dir: &std::path::Path) -> anyhow::Resu
         SigningCommand::Status => match store.load_key()? {
             Some(_) => writeln!(out, "signing on: key in {}", path.display())?,
             None => writeln!(out, "signing off: no key in {}", path.display())?,
+        },
+    }
+    Ok(())
+}
+
+/// `neptunus hmi set-password|clear-password|status`.
+fn hmi(command: &HmiCommand, data_dir: &std::path::Path) -> anyhow::Result<()> {
+    use neptunus::hmi::auth::PasswordStore;
+    use std::io::IsTerminal as _;
+    let store = PasswordStore::new(data_dir);
+    let mut out = std::io::stdout();
+    match command {
+        HmiCommand::SetPassword => {
+            let password = if std::io::stdin().is_terminal() {
+                let first = rpassword::prompt_password("New HMI pilot password: ")
+                    .context("cannot read the password from the terminal")?;
+                let again = rpassword::prompt_password("The same again: ")
+                    .context("cannot read the password from the terminal")?;
+                if first != again {
+                    anyhow::bail!(
+                        "the two passwords differ: nothing changed — run `neptunus hmi set-password` again"
+                    );
+                }
+                first
+            } else {
+                let mut line = String::new();
+                std::io::stdin()
+                    .read_line(&mut line)
+                    .context("cannot read the password from standard input")?;
+                line.trim_end_matches(['\r', '\n']).to_owned()
+            };
+            store.set(&password)?;
+            writeln!(
+                out,
+                "HMI pilot password set in {} (argon2 hash, mode 0600); restart neptunus",
+                store.path().display()
+            )?;
+        }
+        HmiCommand::ClearPassword => {
+            if store.clear()? {
+                writeln!(
+                    out,
+                    "HMI pilot password removed: at the next start only [hmi] open_control addresses may pilot"
+                )?;
+            } else {
+                writeln!(
+                    out,
+                    "no HMI pilot password was set ({})",
+                    store.path().display()
+                )?;
+            }
+        }
+        HmiCommand::Status => match store.load()? {
+            Some(_) => writeln!(out, "HMI pilot password set: {}", store.path().display())?,
+            None => writeln!(
+                out,
+                "no HMI pilot password: {} does not exist",
+                store.path().display()
+            )?,
         },
     }
     Ok(())

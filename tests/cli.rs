@@ -151,3 +151,54 @@ fn bad_profiles_dir_stops_the_vehicle_at_start_with_the_place() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("mine.toml") && err.contains(":3:"), "{err}");
 }
+
+/// `neptunus hmi set-password` reads one line from a pipe, stores an argon2
+/// PHC string with mode 0600, and never prints the password;
+/// `clear-password` removes it.
+#[test]
+fn hmi_set_and_clear_password() {
+    use std::io::Write as _;
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str], stdin: &str| {
+        let mut child = Command::new(BIN)
+            .args(args)
+            .arg("--data-dir")
+            .arg(dir.path())
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        child
+            .stdin
+            .take()
+            .unwrap()
+            .write_all(stdin.as_bytes())
+            .unwrap();
+        let out = child.wait_with_output().unwrap();
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+        (out.status.success(), text)
+    };
+    let (ok, text) = run(&["hmi", "set-password"], "short\n");
+    assert!(!ok && text.contains("at least 8"), "{text}");
+    let (ok, text) = run(&["hmi", "set-password"], "tide-pool-42\n");
+    assert!(ok, "{text}");
+    assert!(!text.contains("tide-pool-42"), "{text}");
+    let file = dir.path().join("hmi-password");
+    let phc = std::fs::read_to_string(&file).unwrap();
+    assert!(phc.starts_with("$argon2id$v=19$"), "{phc}");
+    assert_eq!(
+        std::fs::metadata(&file).unwrap().permissions().mode() & 0o777,
+        0o600
+    );
+    let (ok, text) = run(&["hmi", "status"], "");
+    assert!(ok && text.contains("password set"), "{text}");
+    let (ok, text) = run(&["hmi", "clear-password"], "");
+    assert!(ok && text.contains("removed"), "{text}");
+    assert!(!file.exists());
+}

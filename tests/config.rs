@@ -89,6 +89,16 @@ fn bad_values_are_refused_with_the_key() {
         ("[mavlink]\nsysid = 300\n", "sysid"),
         ("[mavlink]\nbogus = 1\n", "bogus"),
         ("[mavlink]\npeer_timeout_s = 1e300\n", "peer_timeout_s"),
+        ("[hmi]\nopen_control = \"everyone\"\n", "open_control"),
+        (
+            "[hmi]\nallowed_origins = [\"topside.local\"]\n",
+            "allowed_origins",
+        ),
+        (
+            "[hmi]\nallowed_origins = [\"http://x/path\"]\n",
+            "scheme://host[:port]",
+        ),
+        ("[hmi]\nmax_watchers = 5000\n", "max_watchers"),
     ] {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("n.toml");
@@ -228,4 +238,42 @@ fn emulator_sim_errors_reach_the_user_through_resolve() {
         err.contains("n.toml") && err.contains("emulator.sim.wild_rate = 2"),
         "{err}"
     );
+}
+
+/// The pilot password left the config file: the old key says where it is
+/// and what to do instead.
+#[test]
+fn pilot_password_key_says_how_to_set_the_password() {
+    let err = FileConfig::parse("[hmi]\nsysid_min = 200\npilot_password = \"tide-pool-42\"\n")
+        .unwrap_err();
+    assert!(err.contains("line 3, column 18"), "{err}");
+    assert!(err.contains("hmi.pilot_password"), "{err}");
+    assert!(err.contains("neptunus hmi set-password"), "{err}");
+    assert!(
+        !err.contains("tide-pool-42"),
+        "the error repeats the password: {err}"
+    );
+}
+
+#[test]
+fn hmi_access_keys_resolve() {
+    use neptunus::hmi::auth::OpenControl;
+    let cfg = FileConfig::parse(
+        "[hmi]\nopen_control = \"private\"\nallowed_origins = [\"HTTPS://Topside.local:8443/\"]\nmax_watchers = 4\n",
+    )
+    .unwrap();
+    assert_eq!(cfg.hmi.open_control, Some(OpenControl::Private));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("n.toml");
+    std::fs::write(&path, toml::to_string(&cfg).unwrap()).unwrap();
+    let cli = Cli::parse_from(["neptunus", "--sim", "--config", path.to_str().unwrap()]);
+    let s = resolve(&cli.run).unwrap();
+    assert_eq!(s.hmi.open_control, OpenControl::Private);
+    assert_eq!(s.hmi.allowed_origins, ["https://topside.local:8443"]);
+    assert_eq!(s.hmi.max_watchers, 4);
+    // The defaults: loopback may pilot, 32 watchers.
+    let s = resolve(&Cli::parse_from(["neptunus", "--sim", "--data-dir", "/tmp/x"]).run).unwrap();
+    assert_eq!(s.hmi.open_control, OpenControl::Loopback);
+    assert_eq!(s.hmi.max_watchers, 32);
+    assert!(s.hmi.allowed_origins.is_empty());
 }

@@ -18,6 +18,8 @@ use neptunus::firmware::emulator::{BoardControl, PtyBoard};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest as _;
+use tokio_tungstenite::tungstenite::http::HeaderValue;
 
 const GENEROUS: Duration = Duration::from_secs(20);
 
@@ -33,10 +35,46 @@ struct HmiRig {
     _dir: tempfile::TempDir,
 }
 
+/// Runs `neptunus ARGS --data-dir DATA` with `stdin` piped in; panics on failure.
+fn cli(data: &Path, args: &[&str], stdin: &str) -> String {
+    use std::io::Write as _;
+    let mut child = std::process::Command::new(bin())
+        .args(args)
+        .arg("--data-dir")
+        .arg(data)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(stdin.as_bytes())
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "neptunus {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+const PASSWORD: &str = "tide-pool-42";
+
 impl HmiRig {
     /// `hmi_toml` is the body of an `[hmi]` section (may be empty).
     fn start(hmi_toml: &str) -> Self {
+        Self::start_with(hmi_toml, |_| {})
+    }
+
+    /// Like [`start`](Self::start), after `setup` ran on the data directory
+    /// (e.g. the CLI setting a password or a signing key).
+    fn start_with(hmi_toml: &str, setup: impl FnOnce(&Path)) -> Self {
         let dir = tempfile::tempdir().unwrap();
+        setup(&dir.path().join("data"));
         let board = spawn_board_here();
         let serial = board.path().to_string_lossy().into_owned();
         let config = dir.path().join("neptunus.toml");
@@ -76,6 +114,53 @@ impl HmiRig {
     async fn get(&self, path: &str) -> (u16, String, String) {
         http_get(self.http, path).await
     }
+
+    /// Any request; `headers` are extra lines (`Name: value`).
+    async fn request(
+        &self,
+        method: &str,
+        path: &str,
+        headers: &[String],
+        body: &str,
+    ) -> (u16, String, String) {
+        http_request(self.http, method, path, headers, body).await
+    }
+
+    /// `POST /api/login`; the login cookie (`name=value`) on success.
+    async fn login(&self, password: &str) -> (u16, Value, Option<String>) {
+        let (status, head, body) = self
+            .request(
+                "POST",
+                "/api/login",
+                &["Content-Type: application/json".into()],
+                &json!({ "password": password }).to_string(),
+            )
+            .await;
+        let cookie = head
+            .lines()
+            .find_map(|l| {
+                l.strip_prefix("set-cookie: ")
+                    .or(l.strip_prefix("Set-Cookie: "))
+            })
+            .map(|c| c.split(';').next().unwrap().to_owned());
+        (
+            status,
+            serde_json::from_str(&body).unwrap_or(Value::Null),
+            cookie,
+        )
+    }
+
+    /// The vehicle's stderr (its log, RUST_LOG=warn).
+    fn log(&self) -> String {
+        self.vehicle.stderr_text()
+    }
+}
+
+/// The rig with a pilot password set by the CLI before the start.
+fn with_password(hmi_toml: &str) -> HmiRig {
+    HmiRig::start_with(hmi_toml, |data| {
+        cli(data, &["hmi", "set-password"], &format!("{PASSWORD}\n"));
+    })
 }
 
 /// The board emulator runs on the test's own runtime.
@@ -97,20 +182,53 @@ struct Client {
 
 impl Client {
     async fn connect(addr: SocketAddr) -> Self {
-        let (ws, _) = tokio_tungstenite::connect_async(format!("ws://{addr}/ws"))
-            .await
-            .unwrap();
+        Self::connect_with(addr, &[]).await.unwrap()
+    }
+
+    /// Connects with extra request headers; the HTTP status when refused.
+    async fn connect_with(
+        addr: SocketAddr,
+        headers: &[(&str, &str)],
+    ) -> Result<Self, (u16, String)> {
+        let mut req = format!("ws://{addr}/ws").into_client_request().unwrap();
+        for (k, v) in headers {
+            let name: tokio_tungstenite::tungstenite::http::HeaderName = k.parse().unwrap();
+            req.headers_mut()
+                .insert(name, HeaderValue::from_str(v).unwrap());
+        }
+        let ws = match tokio_tungstenite::connect_async(req).await {
+            Ok((ws, _)) => ws,
+            Err(tokio_tungstenite::tungstenite::Error::Http(r)) => {
+                let body = String::from_utf8_lossy(r.body().as_deref().unwrap_or_default());
+                return Err((r.status().as_u16(), body.into_owned()));
+            }
+            Err(e) => panic!("WebSocket connect failed: {e}"),
+        };
         let mut c = Self {
             ws,
             welcome: Value::Null,
             seen: Vec::new(),
         };
         c.welcome = c.wait("welcome", |_| true).await;
-        c
+        Ok(c)
     }
 
     fn sysid(&self) -> Option<u64> {
         self.welcome["sysid"].as_u64()
+    }
+
+    /// Asks for control and waits until this session has it; its system id.
+    async fn take_control(&mut self) -> u64 {
+        self.send(json!({"type": "request_control"})).await;
+        let c = self.wait("control", |c| c["you"] == true).await;
+        c["owner"].as_u64().unwrap()
+    }
+
+    /// Sends `login` and returns the `login_result`.
+    async fn ws_login(&mut self, password: &str) -> Value {
+        self.send(json!({"type": "login", "password": password}))
+            .await;
+        self.wait("login_result", |_| true).await
     }
 
     async fn send(&mut self, v: Value) {
@@ -166,10 +284,30 @@ impl Client {
 }
 
 async fn http_get(addr: SocketAddr, path: &str) -> (u16, String, String) {
+    http_request(addr, "GET", path, &[], "").await
+}
+
+/// One HTTP/1.0 request with `Host: ADDR` unless `headers` give one.
+async fn http_request(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[String],
+    body: &str,
+) -> (u16, String, String) {
     let mut s = tokio::net::TcpStream::connect(addr).await.unwrap();
-    s.write_all(format!("GET {path} HTTP/1.0\r\nHost: x\r\n\r\n").as_bytes())
-        .await
-        .unwrap();
+    let mut req = format!("{method} {path} HTTP/1.0\r\n");
+    if !headers
+        .iter()
+        .any(|h| h.to_lowercase().starts_with("host:"))
+    {
+        req.push_str(&format!("Host: {addr}\r\n"));
+    }
+    for h in headers {
+        req.push_str(&format!("{h}\r\n"));
+    }
+    req.push_str(&format!("Content-Length: {}\r\n\r\n{body}", body.len()));
+    s.write_all(req.as_bytes()).await.unwrap();
     let mut buf = Vec::new();
     tokio::time::timeout(GENEROUS, s.read_to_end(&mut buf))
         .await
@@ -220,10 +358,17 @@ async fn sessions_get_telemetry_and_distinct_sysids() {
     let rig = HmiRig::start("");
     let mut a = rig.connect().await;
     let mut b = rig.connect().await;
-    assert_eq!(a.sysid(), Some(200), "{}", a.welcome);
-    assert_eq!(b.sysid(), Some(201), "{}", b.welcome);
+    // Loopback may pilot (open_control "loopback"), but an id is lent only
+    // when the session first asks for something that needs one.
+    assert_eq!(a.sysid(), None, "{}", a.welcome);
     assert_eq!(a.welcome["pilot"], true);
     assert_eq!(a.welcome["password_required"], false);
+    assert!(a.welcome["watch_only_reason"].is_null(), "{}", a.welcome);
+    a.send(json!({"type": "lights", "level": 10})).await;
+    let id = a.wait("identity", |_| true).await;
+    assert_eq!(id["sysid"], 200, "{id}");
+    b.send(json!({"type": "lights", "level": 20})).await;
+    assert_eq!(b.wait("identity", |_| true).await["sysid"], 201);
     let t = a
         .telemetry_until(|t| {
             t["heading_deg"].is_number() && t["depth_m"].is_number() && t["vehicle_seen"] == true
@@ -235,8 +380,9 @@ async fn sessions_get_telemetry_and_distinct_sysids() {
     drop(a);
     let end = Instant::now() + GENEROUS;
     loop {
-        let c = rig.connect().await;
-        if c.sysid() == Some(200) {
+        let mut c = rig.connect().await;
+        c.send(json!({"type": "lights", "level": 10})).await;
+        if c.wait("identity", |_| true).await["sysid"] == 200 {
             break;
         }
         assert!(Instant::now() < end, "sysid 200 never came back");
@@ -348,34 +494,346 @@ async fn bad_messages_get_errors_and_move_nothing() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pilot_password_gates_control() {
-    let mut rig = HmiRig::start("pilot_password = \"tide-pool-42\"");
+    let mut rig = with_password("open_control = \"none\"");
+    // The CLI stored an argon2 PHC string, 0600, never the password itself.
+    let file = rig._dir.path().join("data/hmi-password");
+    let text = std::fs::read_to_string(&file).unwrap();
+    assert!(text.starts_with("$argon2id$"), "{text}");
+    assert!(!text.contains(PASSWORD));
+    use std::os::unix::fs::PermissionsExt as _;
+    assert_eq!(
+        std::fs::metadata(&file).unwrap().permissions().mode() & 0o777,
+        0o600
+    );
+    let board = rig.control();
     let mut c = rig.connect().await;
     assert_eq!(c.welcome["password_required"], true);
     assert_eq!(c.welcome["pilot"], false);
     c.ready().await;
-    c.send(json!({"type": "request_control"})).await;
-    let ack = c.ack("REQUEST_OPERATOR_CONTROL").await;
-    assert_eq!(ack["result_name"], "DENIED", "{ack}");
+    for m in [
+        json!({"type": "request_control"}),
+        json!({"type": "arm", "arm": true}),
+    ] {
+        c.send(m).await;
+        let e = c.wait("error", |_| true).await;
+        assert!(e["message"].as_str().unwrap().contains("log in"), "{e}");
+    }
+    let r = c.ws_login("tide-pool-41").await;
+    assert_eq!(r["ok"], false, "{r}");
+    assert_eq!(r["message"], "wrong pilot password");
+    let r = c.ws_login(PASSWORD).await;
+    assert_eq!(r["ok"], true, "{r}");
+    let id = c.wait("identity", |_| true).await;
+    assert_eq!(id["sysid"], 200, "{id}");
+    assert_eq!(id["logged_in"], true, "{id}");
+    assert_eq!(c.take_control().await, 200);
     c.send(json!({"type": "arm", "arm": true})).await;
-    let ack = c.ack("COMPONENT_ARM_DISARM").await;
-    assert_ne!(ack["result_name"], "ACCEPTED", "{ack}");
-    c.send(json!({"type": "login", "password": "tide-pool-41"}))
-        .await;
-    let r = c.wait("login_result", |_| true).await;
-    assert_eq!(r["ok"], false);
-    c.send(json!({"type": "login", "password": "tide-pool-42"}))
-        .await;
-    let r = c.wait("login_result", |_| true).await;
-    assert_eq!(r["ok"], true);
-    c.send(json!({"type": "request_control"})).await;
-    c.wait("control", |v| v["you"] == true).await;
+    assert_eq!(
+        c.ack("COMPONENT_ARM_DISARM").await["result_name"],
+        "ACCEPTED"
+    );
+    drive_until_moving(&mut c, &board).await;
     drop(c);
+    wait_neutral(&board).await;
     rig.vehicle.check_running().unwrap();
-    let log = rig.vehicle.stderr_text();
+    let log = rig.log();
     assert!(
         !log.contains("tide-pool"),
         "the password leaked into the log"
     );
+}
+
+/// C1: a page from another origin opens a WebSocket to the vehicle (the
+/// browser adds its Origin), or a rebinding page reaches it under a foreign
+/// host name. Both are refused before any session exists; the same-origin
+/// page and scripts without an Origin still work.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn foreign_origin_and_rebinding_are_refused() {
+    let rig = HmiRig::start("");
+    let board = rig.control();
+    let addr = rig.http;
+    for _ in 0..30 {
+        let r = Client::connect_with(addr, &[("Origin", "http://evil.example.com")]).await;
+        assert_eq!(
+            r.err().map(|e| e.0),
+            Some(403),
+            "a foreign origin got a session"
+        );
+    }
+    let r = Client::connect_with(addr, &[("Host", "evil.example.com")]).await;
+    assert_eq!(
+        r.err().map(|e| e.0),
+        Some(403),
+        "a rebinding host got a session"
+    );
+    let r = Client::connect_with(addr, &[("Origin", "null")]).await;
+    assert_eq!(r.err().map(|e| e.0), Some(403));
+    // A state-changing request from the foreign page is refused too.
+    let (status, _, body) = rig
+        .request(
+            "POST",
+            "/api/login",
+            &["Origin: http://evil.example.com".into()],
+            r#"{"password":"x"}"#,
+        )
+        .await;
+    assert_eq!(status, 403, "{body}");
+    // DNS rebinding: the page and the REST API under a foreign name.
+    for path in ["/", "/api/status", "/api/logs"] {
+        let (status, _, body) = rig
+            .request("GET", path, &["Host: evil.example.com:8080".into()], "")
+            .await;
+        assert_eq!(status, 403, "{path}: {body}");
+        assert!(body.contains("host name"), "{body}");
+    }
+    // The vehicle's own page (same origin), and localhost, work.
+    let mut own = Client::connect_with(addr, &[("Origin", &format!("http://{addr}"))])
+        .await
+        .unwrap();
+    own.ready().await;
+    let (status, _, _) = rig
+        .request(
+            "GET",
+            "/",
+            &[format!("Host: localhost:{}", addr.port())],
+            "",
+        )
+        .await;
+    assert_eq!(status, 200);
+    // Nothing armed, nothing moved; no id was lent to the refused ones.
+    let (_, _, body) = rig.get("/api/status").await;
+    let v: Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(v["sessions_free"], 10, "{v}");
+    assert!(v["refused_requests"].as_u64().unwrap() >= 35, "{v}");
+    assert_eq!(v["telemetry"]["armed"], false, "{v}");
+    assert_eq!(board.snapshot().motors_us, NEUTRAL_US);
+    // Counted, and logged once per burst, not per request.
+    let lines = rig.log().lines().filter(|l| l.contains("refused")).count();
+    assert!(
+        (1..=3).contains(&lines),
+        "{lines} log lines:\n{}",
+        rig.log()
+    );
+}
+
+/// With open_control "none" and no password, nobody can pilot from the
+/// browser: sessions hold no id, arming is refused, and the page is told
+/// how to set a password.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn open_control_none_without_login_cannot_arm() {
+    let rig = HmiRig::start("open_control = \"none\"");
+    let mut c = rig.connect().await;
+    assert_eq!(c.welcome["pilot"], false, "{}", c.welcome);
+    let why = c.welcome["watch_only_reason"].as_str().unwrap().to_owned();
+    assert!(why.contains("neptunus hmi set-password"), "{why}");
+    c.ready().await;
+    c.send(json!({"type": "arm", "arm": true})).await;
+    c.wait("error", |_| true).await;
+    c.send(json!({"type": "sticks", "surge": 1.0, "heave_up": 0.0, "yaw": 0.0}))
+        .await;
+    c.send(json!({"type": "login", "password": "anything"}))
+        .await;
+    let r = c.wait("login_result", |_| true).await;
+    assert!(
+        r["message"].as_str().unwrap().contains("set-password"),
+        "{r}"
+    );
+    c.telemetry_until(|t| t["armed"] == false && t["control"]["owner"].is_null())
+        .await;
+    let (_, _, body) = rig.get("/api/status").await;
+    let v: Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(v["sessions_free"], 10, "{v}");
+    assert_eq!(rig.control().snapshot().motors_us, NEUTRAL_US);
+    // Logs and parameters are for the addresses open_control admits.
+    assert_eq!(rig.get("/api/logs").await.0, 401);
+    assert_eq!(rig.get("/api/params").await.0, 401);
+    assert_eq!(rig.get("/api/status").await.0, 200);
+}
+
+/// C2: with MAVLink signing on, a browser session that did not log in
+/// cannot arm or drive, even from loopback; after the login it can.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn signing_on_needs_the_pilot_login() {
+    let rig = HmiRig::start_with("", |data| {
+        cli(data, &["signing", "set-passphrase"], "long and secret\n");
+        cli(data, &["hmi", "set-password"], &format!("{PASSWORD}\n"));
+    });
+    let board = rig.control();
+    let mut c = rig.connect().await;
+    assert_eq!(c.welcome["pilot"], false, "{}", c.welcome);
+    assert!(
+        c.welcome["watch_only_reason"]
+            .as_str()
+            .unwrap()
+            .contains("signing is on"),
+        "{}",
+        c.welcome
+    );
+    c.ready().await;
+    c.send(json!({"type": "arm", "arm": true})).await;
+    c.wait("error", |_| true).await;
+    for _ in 0..20 {
+        c.send(json!({"type": "sticks", "surge": 1.0, "heave_up": 0.0, "yaw": 0.0}))
+            .await;
+    }
+    c.telemetry_until(|t| t["armed"] == false).await;
+    assert_eq!(board.snapshot().motors_us, NEUTRAL_US);
+    // With the login (cookie this time) it pilots.
+    let (status, body, cookie) = rig.login(PASSWORD).await;
+    assert_eq!(status, 200, "{body}");
+    let cookie = cookie.unwrap();
+    let mut p = Client::connect_with(rig.http, &[("Cookie", &cookie)])
+        .await
+        .unwrap();
+    assert_eq!(p.welcome["logged_in"], true, "{}", p.welcome);
+    assert_eq!(p.sysid(), Some(200), "{}", p.welcome);
+    p.ready().await;
+    p.take_control().await;
+    p.send(json!({"type": "arm", "arm": true})).await;
+    assert_eq!(
+        p.ack("COMPONENT_ARM_DISARM").await["result_name"],
+        "ACCEPTED"
+    );
+    drive_until_moving(&mut p, &board).await;
+}
+
+/// H4: ten sessions that never log in used to hold all ten ids; now they
+/// hold none, and the pilot logs in and arms.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idle_sessions_do_not_lock_out_the_pilot() {
+    let rig = with_password("open_control = \"none\"");
+    let mut idle = Vec::new();
+    for _ in 0..10 {
+        idle.push(rig.connect().await);
+    }
+    assert!(idle.iter().all(|c| c.sysid().is_none()));
+    let mut p = rig.connect().await;
+    let r = p.ws_login(PASSWORD).await;
+    assert_eq!(r["ok"], true, "{r}");
+    p.ready().await;
+    assert_eq!(p.take_control().await, 200);
+    p.send(json!({"type": "arm", "arm": true})).await;
+    assert_eq!(
+        p.ack("COMPONENT_ARM_DISARM").await["result_name"],
+        "ACCEPTED"
+    );
+    // The watchers still hold nothing.
+    assert!(idle.iter().all(|c| c.sysid().is_none()));
+}
+
+/// H8: guessing the password as fast as one WebSocket allows gets a few
+/// real checks a second at most, and a handful of log lines, not thousands.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn password_guessing_is_throttled_and_quiet() {
+    let rig = with_password("open_control = \"none\"");
+    let mut c = rig.connect().await;
+    let (mut checked, mut waited) = (0u32, 0u32);
+    let start = Instant::now();
+    let mut i = 0;
+    while start.elapsed() < Duration::from_secs(3) {
+        i += 1;
+        let r = c.ws_login(&format!("guess-{i}")).await;
+        let m = r["message"].as_str().unwrap();
+        if m == "wrong pilot password" {
+            checked += 1;
+        } else {
+            assert!(m.starts_with("too many attempts — wait"), "{r}");
+            waited += 1;
+        }
+    }
+    // 3 free, then 1 s, 2 s: about 5 in 3 s (one more for slack).
+    assert!(checked <= 6, "{checked} real checks in 3 s");
+    assert!(waited > 10, "only {waited} attempts were throttled");
+    // The REST login from the same address is throttled as well, unchecked.
+    let (status, body, cookie) = rig.login(PASSWORD).await;
+    assert_eq!(status, 429, "{body}");
+    assert!(cookie.is_none());
+    let log = rig.log();
+    let lines = log.lines().filter(|l| l.contains("password")).count();
+    assert!(lines <= 3, "{lines} log lines about passwords:\n{log}");
+    assert!(!log.contains("guess-"), "a guess reached the log");
+}
+
+/// L1: with a password, the REST API needs the login cookie (HttpOnly,
+/// SameSite=Strict), and logging out ends it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rest_needs_the_login_cookie() {
+    let rig = with_password("");
+    for path in [
+        "/api/status",
+        "/api/params",
+        "/api/logs",
+        "/api/logs/tlogs/x",
+    ] {
+        let (status, _, body) = rig.get(path).await;
+        assert_eq!(status, 401, "{path}: {body}");
+        assert!(body.contains("log in"), "{body}");
+    }
+    assert_eq!(rig.get("/api/video").await.0, 200);
+    assert_eq!(rig.get("/").await.0, 200);
+    let (status, body, cookie) = rig.login("not-it-at-all").await;
+    assert_eq!(
+        (status, &body["message"]),
+        (401, &json!("wrong pilot password"))
+    );
+    assert!(cookie.is_none());
+    let (status, _, head_body) = rig
+        .request("POST", "/api/login", &[], "{\"pass\": 1}")
+        .await;
+    assert_eq!(status, 400, "{head_body}");
+    let (status, head, _) = rig
+        .request(
+            "POST",
+            "/api/login",
+            &["Content-Type: application/json".into()],
+            &json!({ "password": PASSWORD }).to_string(),
+        )
+        .await;
+    assert_eq!(status, 200, "{head}");
+    let set = head
+        .lines()
+        .find(|l| l.to_lowercase().starts_with("set-cookie:"))
+        .unwrap();
+    for attr in ["HttpOnly", "SameSite=Strict", "Path=/", "Max-Age=43200"] {
+        assert!(set.contains(attr), "{set}");
+    }
+    assert!(!set.contains("Secure"), "no TLS here: {set}");
+    let cookie = format!("Cookie: {}", set[12..].trim().split(';').next().unwrap());
+    let (status, _, body) = rig
+        .request("GET", "/api/logs", std::slice::from_ref(&cookie), "")
+        .await;
+    assert_eq!(status, 200, "{body}");
+    let (status, _, _) = rig
+        .request("GET", "/api/status", std::slice::from_ref(&cookie), "")
+        .await;
+    assert_eq!(status, 200);
+    let (status, _, _) = rig
+        .request("POST", "/api/logout", std::slice::from_ref(&cookie), "")
+        .await;
+    assert_eq!(status, 200);
+    let (status, _, _) = rig.request("GET", "/api/logs", &[cookie], "").await;
+    assert_eq!(status, 401);
+}
+
+/// L5: sessions that only watch are capped; the cap says why.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watchers_are_capped() {
+    let rig = HmiRig::start("max_watchers = 3\nopen_control = \"none\"");
+    let mut w = Vec::new();
+    for _ in 0..3 {
+        w.push(rig.connect().await);
+    }
+    for _ in 0..5 {
+        let (status, body) = Client::connect_with(rig.http, &[]).await.err().unwrap();
+        assert_eq!(status, 503);
+        assert!(body.contains("max_watchers"), "{body}");
+    }
+    // One leaves: a place is free again.
+    drop(w.pop());
+    let end = Instant::now() + GENEROUS;
+    while Client::connect_with(rig.http, &[]).await.is_err() {
+        assert!(Instant::now() < end, "the watcher's place never came back");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -384,20 +842,20 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     let mut a = rig.connect().await;
     let mut b = rig.connect().await;
     let mut c = rig.connect().await;
-    assert_eq!(c.sysid(), None);
+    a.ready().await;
+    assert_eq!(a.take_control().await, 200);
+    b.send(json!({"type": "lights", "level": 10})).await;
+    assert_eq!(b.wait("identity", |_| true).await["sysid"], 201);
+    // Both ids are held by pilots: the third may only watch, and is told why.
+    c.send(json!({"type": "request_control"})).await;
+    let e = c.wait("error", |_| true).await;
     assert!(
-        c.welcome["watch_only_reason"]
+        e["message"]
             .as_str()
             .unwrap()
-            .contains("in use"),
-        "{}",
-        c.welcome
+            .contains("held by other pilots"),
+        "{e}"
     );
-    c.send(json!({"type": "request_control"})).await;
-    c.wait("error", |_| true).await;
-    a.ready().await;
-    a.send(json!({"type": "request_control"})).await;
-    a.wait("control", |v| v["you"] == true).await;
     // b asks; a is asked and refuses; then b asks again and a accepts.
     b.send(json!({"type": "request_control"})).await;
     let req = a.wait("control_request", |_| true).await;
@@ -429,7 +887,9 @@ async fn rest_api_and_assets() {
     let v: Value = serde_json::from_str(&body).unwrap();
     assert_eq!(v["vehicle_sysid"], 1);
     assert_eq!(v["sessions_max"], 10);
-    assert_eq!(v["sessions_free"], 9, "{v}");
+    // A session that only watches holds no id.
+    assert_eq!(v["sessions_free"], 10, "{v}");
+    assert_eq!(v["watchers"], 1, "{v}");
     assert!(v["telemetry"]["heading_deg"].is_number(), "{v}");
 
     let (status, _, body) = rig.get("/api/params").await;

@@ -16,8 +16,18 @@
 //! handle on the vehicle, only the input channel every station's traffic
 //! goes through, so the core's authority rules apply to the browser as to
 //! any other station (the HMI is not a back door).
+//!
+//! Who may use it ([`auth`], [`guard`]): every request must name the vehicle
+//! in its `Host` (no DNS rebinding); the WebSocket and every state-changing
+//! request must come from the page's own origin or an allowed one (no
+//! foreign web page); a session holds a system id — and so may pilot — only
+//! once it logged in with the pilot password, or when `[hmi] open_control`
+//! admits its address and MAVLink signing is off. A session is `signed`
+//! (for the core's signing rule) only after a real password login.
 
 pub mod assets;
+pub mod auth;
+pub mod guard;
 pub mod model;
 pub mod protocol;
 pub mod rest;
@@ -27,7 +37,7 @@ use std::collections::BTreeSet;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -43,6 +53,8 @@ pub const SESSION_COMPID: u8 = 190;
 pub const SERVER_PEER: u64 = 0;
 /// Capacity of the hub: telemetry a slow session may fall behind by.
 const HUB_CAPACITY: usize = 1024;
+/// `[hmi] max_watchers` default: a room of onlookers, not a crowd.
+pub const DEFAULT_MAX_WATCHERS: usize = 32;
 
 /// Errors starting the HMI.
 #[derive(Debug, thiserror::Error)]
@@ -59,6 +71,21 @@ pub enum HmiError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Password(#[from] auth::PasswordError),
+}
+
+/// One start-up line saying who may pilot from the browser.
+fn log_access_policy(settings: &HmiSettings, password: bool, signing: bool) {
+    let who = match (signing, password, settings.open_control) {
+        (true, true, _) => "MAVLink signing is on: only sessions logged in with the pilot password may pilot".to_owned(),
+        (true, false, _) => "MAVLink signing is on and no pilot password is set: no browser session may pilot — set one with `neptunus hmi set-password`".to_owned(),
+        (false, _, auth::OpenControl::None) if !password => "no pilot password is set and open_control = \"none\": no browser session may pilot — set one with `neptunus hmi set-password`".to_owned(),
+        (false, _, auth::OpenControl::None) => "sessions must log in with the pilot password to pilot".to_owned(),
+        (false, true, oc) => format!("sessions from {oc} addresses may pilot without logging in (open_control = \"{oc}\"), others must log in with the pilot password"),
+        (false, false, oc) => format!("sessions from {oc} addresses may pilot (open_control = \"{oc}\"); others may only watch until a pilot password is set with `neptunus hmi set-password`"),
+    };
+    tracing::info!("browser HMI: {who}");
 }
 
 /// HMI settings, resolved from `--http` and the `[hmi]` section.
@@ -72,8 +99,14 @@ pub struct HmiSettings {
     pub http_explicit: bool,
     pub sysid_min: u8,
     pub sysid_max: u8,
-    /// Sessions must log in with this before they may drive or take control.
-    pub pilot_password: Option<String>,
+    /// Client addresses that may pilot without the pilot password (the
+    /// password itself is in `DATA_DIR/hmi-password`, never in the config).
+    pub open_control: auth::OpenControl,
+    /// Origins (`scheme://host[:port]`) besides the page's own whose pages
+    /// may use the WebSocket and the REST API; their hosts are accepted in `Host`.
+    pub allowed_origins: Vec<String>,
+    /// Sessions that hold no system id (watch only) at once.
+    pub max_watchers: usize,
     /// Rotation of the camera image in the page (0, 90, 180, 270).
     pub camera_rotation_deg: i32,
 }
@@ -85,7 +118,9 @@ impl Default for HmiSettings {
             http_explicit: false,
             sysid_min: 200,
             sysid_max: 209,
-            pilot_password: None,
+            open_control: auth::OpenControl::default(),
+            allowed_origins: Vec::new(),
+            max_watchers: DEFAULT_MAX_WATCHERS,
             camera_rotation_deg: 0,
         }
     }
@@ -157,7 +192,14 @@ pub struct HmiContext {
     /// For each sysid, whether its ground-station profile reads MANUAL_CONTROL
     /// z centred (±1000) rather than ArduSub's 0..1000.
     pub z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
-    pub pilot_password: Option<String>,
+    /// The pilot password (from `DATA_DIR/hmi-password`); `None`: none set.
+    pub password: Option<auth::PilotPassword>,
+    pub open_control: auth::OpenControl,
+    pub allowed_origins: Vec<String>,
+    pub max_watchers: usize,
+    /// MAVLink signing is on: only a logged-in session may control
+    /// (open_control does not apply: the browser cannot sign frames).
+    pub signing: bool,
     pub camera_rotation_deg: i32,
     /// `tlogs/` and `events/` are listed by `/api/logs`.
     pub data_dir: PathBuf,
@@ -173,7 +215,21 @@ pub(crate) struct Shared {
     pub inputs: mpsc::Sender<Input>,
     pub vehicle_sysid: u8,
     pub z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
-    pub pilot_password: Option<String>,
+    pub password: Option<auth::PilotPassword>,
+    pub open_control: auth::OpenControl,
+    pub signing: bool,
+    pub gate: auth::Gate,
+    pub throttle: Mutex<auth::Throttle>,
+    pub tokens: Mutex<auth::Tokens>,
+    /// Requests refused for a foreign Host or Origin.
+    pub refused: Mutex<auth::Bursts>,
+    /// WebSocket upgrades refused because `max_watchers` were watching.
+    pub refused_watchers: Mutex<auth::Bursts>,
+    /// One password check at a time: argon2 is slow on purpose.
+    pub checks: tokio::sync::Semaphore,
+    /// Sessions holding no system id now, and the cap.
+    pub watchers: AtomicUsize,
+    pub max_watchers: usize,
     pub camera_rotation_deg: i32,
     pub data_dir: PathBuf,
     /// Camera routes are merged: `/video.mjpg` exists.
@@ -224,15 +280,24 @@ impl Shared {
         }
     }
 
-    /// The sender identity of a session.
-    pub fn sender(&self, peer: u64, sysid: u8, pilot: bool) -> Sender {
+    /// The sender identity of a session. `signed` only for a session that
+    /// logged in with the pilot password: with MAVLink signing on, that is
+    /// what stands in for the signature a browser cannot make.
+    pub fn sender(&self, peer: u64, sysid: u8, pilot: bool, signed: bool) -> Sender {
         Sender {
-            // In-process: the message never crossed a wire where it could be forged.
-            signed: true,
+            signed,
             trusted: false,
             pilot,
             ..Sender::new(self.outlet.endpoint(), peer, sysid, SESSION_COMPID)
         }
+    }
+
+    /// The server's own identity. Its peer only ever sends the telemetry
+    /// rate requests at start and PARAM_REQUEST_LIST for `/api/params`,
+    /// never control, so it may count as a signed pilot: the core refuses
+    /// rate changes from stations that may not control.
+    pub fn server_sender(&self) -> Sender {
+        self.sender(SERVER_PEER, 0, true, true)
     }
 }
 
@@ -258,12 +323,23 @@ pub async fn serve(
         ctx.sysid_max.max(ctx.sysid_min),
     );
     let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
+    let hostname = auth::machine_hostname();
     let shared = Arc::new(Shared {
         outlet: ctx.outlet.clone(),
         inputs: ctx.inputs,
         vehicle_sysid: ctx.vehicle_sysid,
         z_centered: ctx.z_centered,
-        pilot_password: ctx.pilot_password.filter(|p| !p.is_empty()),
+        password: ctx.password,
+        open_control: ctx.open_control,
+        signing: ctx.signing,
+        gate: auth::Gate::new(&ctx.allowed_origins, hostname.as_deref()),
+        throttle: Mutex::new(auth::Throttle::default()),
+        tokens: Mutex::new(auth::Tokens::default()),
+        refused: Mutex::new(auth::Bursts::default()),
+        refused_watchers: Mutex::new(auth::Bursts::default()),
+        checks: tokio::sync::Semaphore::new(1),
+        watchers: AtomicUsize::new(0),
+        max_watchers: ctx.max_watchers,
         camera_rotation_deg: ctx.camera_rotation_deg,
         data_dir: ctx.data_dir,
         video: ctx.extra_routes.is_some(),
@@ -275,14 +351,23 @@ pub async fn serve(
         status: status_rx,
     });
     let watcher = tokio::spawn(rest::watch_vehicle(ctx.outlet.subscribe(), status_tx));
+    // The HMI's telemetry rates, asked once for the endpoint: sessions no
+    // longer ask (a watcher may not change rates).
+    session::request_rates(&shared).await;
+    let sweeper = tokio::spawn(guard::sweep(Arc::clone(&shared)));
     let mut app = rest::routes(Arc::clone(&shared));
     if let Some(extra) = ctx.extra_routes {
         app = app.merge(extra);
     }
-    let result = axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown)
-        .await;
+    let app = guard::layer(app, Arc::clone(&shared));
+    let result = axum::serve(
+        listener,
+        app.into_make_service_with_connect_info::<SocketAddr>(),
+    )
+    .with_graceful_shutdown(shutdown)
+    .await;
     watcher.abort();
+    sweeper.abort();
     result
 }
 
@@ -336,6 +421,11 @@ impl Hmi {
             source,
         })?;
         tracing::info!(addr = %local, "browser HMI listening on http://{local}/");
+        let password = auth::PasswordStore::new(&data_dir).load()?;
+        let signing = crate::mavlink::signing::SigningStore::new(&data_dir)
+            .load_key_checked()
+            .is_ok_and(|(k, _)| k.is_some());
+        log_access_policy(settings, password.is_some(), signing);
         let (tx, rx) = mpsc::channel(1024);
         let ctx = HmiContext {
             outlet: outlet.clone(),
@@ -344,7 +434,11 @@ impl Hmi {
             sysid_min: settings.sysid_min,
             sysid_max: settings.sysid_max,
             z_centered,
-            pilot_password: settings.pilot_password.clone(),
+            password,
+            open_control: settings.open_control,
+            allowed_origins: settings.allowed_origins.clone(),
+            max_watchers: settings.max_watchers,
+            signing,
             camera_rotation_deg: settings.camera_rotation_deg,
             data_dir,
             extra_routes,

@@ -56,6 +56,11 @@ impl Model {
         }
     }
 
+    /// This session's system id (it may lease one after it started).
+    pub fn set_me(&mut self, me: Option<u8>) {
+        self.me = me;
+    }
+
     pub fn control(&self) -> ControlView {
         self.tel.control
     }

@@ -10,7 +10,7 @@
 //! | type | fields | becomes |
 //! |---|---|---|
 //! | `alive` | — | nothing; any message shows the tab is alive (HEARTBEAT goes out at 1 Hz only while the browser showed life within 1.5 s) |
-//! | `login` | `password` | pilot rights if it matches `[hmi] pilot_password` → `login_result` |
+//! | `login` | `password` | pilot rights (and a system id) if it is the pilot password (`neptunus hmi set-password`) → `login_result`; throttled per address like `POST /api/login` |
 //! | `sticks` | `surge`, `sway`, `heave_up`, `yaw`: −1..1 | MANUAL_CONTROL (x, y, z, r ×1000) |
 //! | `thrusters` | `port`, `vertical`, `starboard`: −1..1 (vertical + = down) | NEPTUNUS_THRUSTERS |
 //! | `stop` | — | neutral MANUAL_CONTROL and NEPTUNUS_THRUSTERS |
@@ -31,7 +31,8 @@
 //! # Server → browser ([`ServerMsg`])
 //! | type | when | fields |
 //! |---|---|---|
-//! | `welcome` | on connect | `session`, `sysid` (null: watch only), `watch_only_reason`, `password_required`, `pilot`, `vehicle_sysid`, `camera_rotation_deg`, `version` |
+//! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version` |
+//! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
 //! | `telemetry` | 20 Hz | see [`Telemetry`] |
 //! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text` |
 //! | `ack` | at once | `command`, `command_name`, `result`, `result_name` |
@@ -214,8 +215,11 @@ impl ClientMsg {
             Self::Gain { value } => in_range("gain", *value, 0.0, 1.0),
             Self::Lights { level } => in_range("lights level", *level, 0.0, 255.0),
             Self::Tilt { deg } => in_range("tilt deg", *deg, -90.0, 90.0),
-            Self::Login { password } if password.len() > 256 => {
-                Err("password longer than 256 bytes".into())
+            Self::Login { password } if password.len() > super::auth::MAX_PASSWORD_BYTES => {
+                Err(format!(
+                    "password longer than {} bytes",
+                    super::auth::MAX_PASSWORD_BYTES
+                ))
             }
             _ => Ok(()),
         }
@@ -347,10 +351,18 @@ pub enum ServerMsg {
         sysid: Option<u8>,
         watch_only_reason: Option<String>,
         password_required: bool,
+        password_set: bool,
         pilot: bool,
+        logged_in: bool,
         vehicle_sysid: u8,
         camera_rotation_deg: i32,
         version: &'static str,
+    },
+    Identity {
+        sysid: Option<u8>,
+        pilot: bool,
+        logged_in: bool,
+        watch_only_reason: Option<String>,
     },
     Telemetry(Box<Telemetry>),
     Statustext {

@@ -1,5 +1,7 @@
 //! HTTP routes: the page and its assets, the WebSocket upgrade and the REST
-//! API (`/api/status`, `/api/params`, `/api/logs`, `/api/logs/{kind}/{name}`).
+//! API (`/api/status`, `/api/params`, `/api/logs`, `/api/logs/{kind}/{name}`,
+//! `/api/login`, `/api/logout`). Who may use which is decided in front of
+//! them by [`guard`](super::guard).
 //!
 //! The server's own view of the vehicle ([`ServerView`]) is built like a
 //! session's, from the messages the core sends to the HMI endpoint. The
@@ -12,16 +14,16 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use axum::Router;
-use axum::extract::{Path, State, WebSocketUpgrade};
+use axum::extract::{Path, Request, State, WebSocketUpgrade};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Json, Response};
-use axum::routing::get;
+use axum::routing::{get, post};
 use serde::Serialize;
 use tokio::sync::{broadcast, watch};
 
 use super::model::Model;
 use super::protocol::{MAX_MESSAGE_BYTES, Telemetry};
-use super::{Delivery, SERVER_PEER, Shared, assets, session};
+use super::{Delivery, SERVER_PEER, Shared, assets, guard, session};
 use crate::dialect::neptunus::*;
 use crate::vehicle::machine::{COMPONENT_ID, Input};
 
@@ -97,6 +99,8 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/api/video", get(video))
         .route("/api/logs", get(logs))
         .route("/api/logs/{kind}/{name}", get(log_file))
+        .route("/api/login", post(guard::login))
+        .route("/api/logout", post(guard::logout))
         .fallback(asset)
         .with_state(shared)
 }
@@ -109,11 +113,58 @@ async fn asset(uri: axum::http::Uri) -> Response {
     assets::response(uri.path().trim_start_matches('/'))
 }
 
-async fn ws(State(shared): State<Arc<Shared>>, upgrade: WebSocketUpgrade) -> Response {
+/// The upgrade (Host and Origin were checked in front): a logged-in client
+/// gets its system id now; any other takes a watcher's place, or is refused
+/// when `[hmi] max_watchers` are watching.
+async fn ws(
+    State(shared): State<Arc<Shared>>,
+    upgrade: WebSocketUpgrade,
+    req: Request,
+) -> Response {
+    let ip = guard::client_ip(req.extensions());
+    let logged_in = guard::logged_in(&shared, req.headers());
+    let lease = if logged_in {
+        shared.lease_sysid()
+    } else {
+        None
+    };
+    let watcher = if lease.is_some() {
+        None
+    } else {
+        match session::WatcherSlot::take(&shared) {
+            Some(w) => Some(w),
+            None => {
+                let first = shared
+                    .refused_watchers
+                    .lock()
+                    .is_ok_and(|mut b| b.hit(Instant::now()));
+                if first {
+                    tracing::warn!(
+                        "browser HMI refused a WebSocket session from {ip:?}: {} sessions are already watching ([hmi] max_watchers) — further refusals are counted",
+                        shared.max_watchers
+                    );
+                }
+                return (
+                    StatusCode::SERVICE_UNAVAILABLE,
+                    format!(
+                        "{} sessions are already watching this vehicle ([hmi] max_watchers): close one, or log in as the pilot\n",
+                        shared.max_watchers
+                    ),
+                )
+                    .into_response();
+            }
+        }
+    };
+    let start = session::Start {
+        ip,
+        logged_in,
+        lease,
+        watcher,
+    };
     upgrade
         .max_message_size(MAX_MESSAGE_BYTES)
         .max_frame_size(MAX_MESSAGE_BYTES)
-        .on_upgrade(move |socket| session::run(socket, shared))
+        .on_upgrade(move |socket| session::run(socket, shared, start))
 }
 
 #[derive(Serialize)]
@@ -121,7 +172,11 @@ struct StatusBody {
     vehicle_sysid: u8,
     sessions_max: u16,
     sessions_free: usize,
+    watchers: usize,
+    watchers_max: usize,
     bad_web_messages: u64,
+    /// Requests refused for a foreign Host or Origin since start.
+    refused_requests: u64,
     telemetry: Telemetry,
 }
 
@@ -132,9 +187,12 @@ async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
         vehicle_sysid: shared.vehicle_sysid,
         sessions_max: u16::from(hi) - u16::from(lo) + 1,
         sessions_free: free,
+        watchers: shared.watchers.load(std::sync::atomic::Ordering::Relaxed),
+        watchers_max: shared.max_watchers,
         bad_web_messages: shared
             .bad_messages
             .load(std::sync::atomic::Ordering::Relaxed),
+        refused_requests: shared.refused.lock().map_or(0, |b| b.total),
         telemetry: shared.status.borrow().telemetry.clone(),
     })
 }
@@ -155,7 +213,7 @@ struct ParamsBody {
 /// Asks the core for its parameter list and waits (2 s at most) for all of it.
 async fn params(State(shared): State<Arc<Shared>>) -> Response {
     let mut rx = shared.status.clone();
-    let from = shared.sender(SERVER_PEER, 0, false);
+    let from = shared.server_sender();
     let request = MavMessage::PARAM_REQUEST_LIST(PARAM_REQUEST_LIST_DATA {
         target_system: shared.vehicle_sysid,
         target_component: COMPONENT_ID,

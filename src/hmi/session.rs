@@ -1,23 +1,30 @@
 //! One browser session: a MAVLink ground station inside the process.
 //!
-//! Owns the session's system id (leased from the pool), its pilot rights,
-//! its view of the vehicle ([`Model`]) and the conversion of the browser's
-//! JSON into MAVLink. It must never invent pilot input: stick messages go
-//! out only as the browser sends them; the session itself only sends
+//! Owns the session's system id (leased from the pool only when it may
+//! pilot and needs one: at login, or at its first command when
+//! `[hmi] open_control` admits it), its pilot rights, its view of the
+//! vehicle ([`Model`]) and the conversion of the browser's JSON into
+//! MAVLink. A watcher holds no id and sends the vehicle nothing.
+//!
+//! It must never invent pilot input: stick messages go out only as the
+//! browser sends them; the session itself only sends
 //! neutral ones (stop, focus lost, input-mode change) and its heartbeat —
 //! and the heartbeat only while the browser itself shows life, so a frozen
 //! tab does not keep its owner alive.
 
+use std::net::IpAddr;
 use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
 use futures_util::{SinkExt as _, StreamExt as _};
 use tokio::sync::broadcast::error::RecvError;
 
+use super::auth::OpenControl;
 use super::model::Model;
 use super::protocol::{ClientMsg, RunMode, ServerMsg};
-use super::{Shared, SysidLease};
+use super::{Shared, SysidLease, guard};
 use crate::dialect::neptunus::*;
 use crate::vehicle::machine::{COMPONENT_ID, HmiEvent, Input};
 
@@ -31,8 +38,17 @@ const BROWSER_LIFE: Duration = Duration::from_millis(1500);
 const SEND_TIMEOUT: Duration = Duration::from_secs(2);
 /// How long a control request waits for the owner's answer.
 const REQUEST_TIMEOUT_S: f32 = 10.0;
+/// A session that sent nothing (not even a pong) for this long is closed
+/// (the page says `alive` every 0.5 s).
+const IDLE_TIMEOUT: Duration = Duration::from_secs(30);
+/// The server pings this often, so a live browser whose tab is throttled
+/// still answers (with a pong) within [`IDLE_TIMEOUT`].
+const PING_PERIOD: Duration = Duration::from_secs(10);
+/// A watcher's refused stick and thruster input is answered at most this often.
+const REFUSAL_REPLY: Duration = Duration::from_secs(2);
 
-/// Telemetry rates this HMI asks the vehicle for on its endpoint (msg id, Hz).
+/// Telemetry rates this HMI asks the vehicle for on its endpoint (msg id, Hz),
+/// once, from the server's own peer (see [`request_rates`]).
 const RATES: [(u32, f32); 8] = [
     (30, 20.0),    // ATTITUDE: heading, roll, pitch
     (74, 20.0),    // VFR_HUD: depth
@@ -44,70 +60,118 @@ const RATES: [(u32, f32); 8] = [
     (44103, 10.0), // NEPTUNUS_AUTOPILOT
 ];
 
+/// Asks the vehicle for the HMI's telemetry rates on its endpoint, once at
+/// start, from the server's own peer (a signed pilot: see
+/// [`Shared::server_sender`]). Sessions do not ask: the core refuses rate
+/// changes from stations that may not control, and a watcher may not.
+pub(crate) async fn request_rates(shared: &Shared) {
+    let from = shared.server_sender();
+    for (id, hz) in RATES {
+        let msg = command_long(
+            shared.vehicle_sysid,
+            MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+            [id as f32, 1e6 / hz],
+        );
+        let _ = shared.inputs.send(Input::Mavlink { from, msg }).await;
+    }
+}
+
 /// Why a session ends.
 enum End {
     Closed,
     SendFailed,
+    Idle,
+}
+
+/// A place among the `[hmi] max_watchers` sessions that hold no system id;
+/// given back when dropped (the session leased an id, or ended).
+pub(crate) struct WatcherSlot {
+    shared: Arc<Shared>,
+}
+
+impl WatcherSlot {
+    /// Takes a place, or `None` when `max_watchers` are watching.
+    pub fn take(shared: &Arc<Shared>) -> Option<Self> {
+        shared
+            .watchers
+            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
+                (n < shared.max_watchers).then_some(n + 1)
+            })
+            .ok()
+            .map(|_| Self {
+                shared: Arc::clone(shared),
+            })
+    }
+}
+
+impl Drop for WatcherSlot {
+    fn drop(&mut self) {
+        self.shared.watchers.fetch_sub(1, Ordering::AcqRel);
+    }
+}
+
+/// What the upgrade found out about the client before the session starts.
+pub(crate) struct Start {
+    pub ip: Option<IpAddr>,
+    /// The request carried a live login cookie.
+    pub logged_in: bool,
+    /// A logged-in session's id, leased at the upgrade.
+    pub lease: Option<SysidLease>,
+    /// Otherwise its place among the watchers.
+    pub watcher: Option<WatcherSlot>,
 }
 
 struct Session {
     shared: Arc<Shared>,
     id: u64,
+    ip: Option<IpAddr>,
     lease: Option<SysidLease>,
-    pilot: bool,
+    watcher: Option<WatcherSlot>,
+    /// Logged in with the pilot password (cookie or `login`): a pilot, and
+    /// `signed` for the core's signing rule.
+    logged_in: bool,
     model: Model,
+    /// The browser's JavaScript last said something (HEARTBEAT gate).
     last_life: Instant,
+    /// Anything at all last arrived, pongs included (idle timeout).
+    last_seen: Instant,
+    last_refusal: Option<Instant>,
     bad: u64,
 }
 
 /// Runs one WebSocket session to its end, then tells the vehicle it disconnected.
-pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>) {
+pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
     let id = shared
         .next_session
         .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let lease = shared.lease_sysid();
-    let sysid = lease.as_ref().map(|l| l.sysid);
-    let pilot = shared.pilot_password.is_none() && sysid.is_some();
     let now = Instant::now();
     let mut s = Session {
         shared: Arc::clone(&shared),
         id,
-        lease,
-        pilot,
-        model: Model::new(sysid, now),
+        ip: start.ip,
+        lease: start.lease,
+        watcher: start.watcher,
+        logged_in: start.logged_in,
+        model: Model::new(None, now),
         last_life: now,
+        last_seen: now,
+        last_refusal: None,
         bad: 0,
     };
-    match sysid {
-        Some(sysid) => tracing::info!(session = id, sysid, "HMI session connected"),
-        None => tracing::warn!(
-            session = id,
-            "HMI session connected watch-only: every system id of the HMI range is in use"
-        ),
+    if s.logged_in && s.lease.is_none() {
+        s.ensure_sysid();
     }
+    s.model.set_me(s.sysid());
+    tracing::info!(session = id, sysid = ?s.sysid(), client = ?s.ip, pilot = s.may_pilot(), logged_in = s.logged_in, "HMI session connected");
     let (mut tx, mut rx) = socket.split();
     let mut hub = shared.outlet.subscribe();
-    let welcome = ServerMsg::Welcome {
-        session: id,
-        sysid,
-        watch_only_reason: sysid.is_none().then(|| {
-            let (lo, hi) = shared.sysid_range;
-            format!(
-                "all {} HMI system ids ({lo}..{hi}) are in use by other sessions: this one may only watch",
-                u16::from(hi) - u16::from(lo) + 1
-            )
-        }),
-        password_required: shared.pilot_password.is_some(),
-        pilot,
-        vehicle_sysid: shared.vehicle_sysid,
-        camera_rotation_deg: shared.camera_rotation_deg,
-        version: env!("CARGO_PKG_VERSION"),
-    };
+    let welcome = s.welcome();
     let end = 'session: {
         if send(&mut tx, &welcome).await.is_err() {
             break 'session End::SendFailed;
         }
-        s.request_rates().await;
+        let mut ping = tokio::time::interval(PING_PERIOD);
+        ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
         let mut push = tokio::time::interval(PUSH_PERIOD);
         push.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
         let mut beat = tokio::time::interval(HEARTBEAT_PERIOD);
@@ -116,18 +180,36 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>) {
         loop {
             tokio::select! {
                 m = rx.next() => {
+                    s.last_seen = Instant::now();
+                    let rights_before = (s.sysid(), s.logged_in);
                     let reply = match m {
                         None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break 'session End::Closed,
                         Some(Ok(Message::Text(text))) => s.on_text(text.as_str()).await,
                         Some(Ok(Message::Binary(_))) => s.bad_message("binary messages are not part of the protocol — send JSON text"),
-                        Some(Ok(Message::Ping(_) | Message::Pong(_))) => {
+                        Some(Ok(Message::Ping(_))) => {
                             s.last_life = Instant::now();
                             None
                         }
+                        // The browser engine answers our pings even when the
+                        // page's script is frozen: seen, but no sign of life.
+                        Some(Ok(Message::Pong(_))) => None,
                     };
                     if let Some(reply) = reply
                         && send(&mut tx, &reply).await.is_err()
                     {
+                        break 'session End::SendFailed;
+                    }
+                    if (s.sysid(), s.logged_in) != rights_before
+                        && send(&mut tx, &s.identity()).await.is_err()
+                    {
+                        break 'session End::SendFailed;
+                    }
+                }
+                _ = ping.tick() => {
+                    if s.last_seen.elapsed() > IDLE_TIMEOUT {
+                        break 'session End::Idle;
+                    }
+                    if tx.send(Message::Ping(Default::default())).await.is_err() {
                         break 'session End::SendFailed;
                     }
                 }
@@ -158,13 +240,20 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>) {
             }
         }
     };
-    if let End::SendFailed = end {
-        tracing::info!(
+    match end {
+        End::SendFailed => tracing::info!(
             session = id,
             "HMI session dropped: the browser stopped reading"
-        );
+        ),
+        End::Idle => tracing::info!(
+            session = id,
+            "HMI session closed: nothing from the browser for {} s",
+            IDLE_TIMEOUT.as_secs()
+        ),
+        End::Closed => {}
     }
     // Whatever the browser did, the core hears that this station is gone.
+    let sysid = s.sysid();
     if let Some(sysid) = sysid {
         let _ = shared
             .inputs
@@ -176,6 +265,26 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>) {
     }
     tracing::info!(session = id, sysid = ?sysid, bad_messages = s.bad, "HMI session closed");
     drop(s.lease.take());
+    drop(s.watcher.take());
+}
+
+/// COMMAND_LONG to the vehicle with the first params given, the rest 0.
+fn command_long<const N: usize>(target: u8, command: MavCmd, params: [f32; N]) -> MavMessage {
+    let mut p = [0f32; 7];
+    p[..N].copy_from_slice(&params);
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: p[0],
+        param2: p[1],
+        param3: p[2],
+        param4: p[3],
+        param5: p[4],
+        param6: p[5],
+        param7: p[6],
+        command,
+        target_system: target,
+        target_component: COMPONENT_ID,
+        confirmation: 0,
+    })
 }
 
 async fn send(
@@ -194,6 +303,96 @@ impl Session {
         self.lease.as_ref().map(|l| l.sysid)
     }
 
+    /// May this session pilot: logged in, or admitted by `open_control`
+    /// (which never applies with MAVLink signing on).
+    fn may_pilot(&self) -> bool {
+        self.logged_in
+            || (!self.shared.signing
+                && self
+                    .ip
+                    .is_some_and(|ip| self.shared.open_control.admits(ip)))
+    }
+
+    /// Leases a system id if this session may pilot and holds none; the
+    /// watcher place is given back.
+    fn ensure_sysid(&mut self) -> Option<u8> {
+        if self.lease.is_none() && self.may_pilot() {
+            self.lease = self.shared.lease_sysid();
+            if let Some(l) = &self.lease {
+                self.watcher = None;
+                self.model.set_me(Some(l.sysid));
+                tracing::info!(
+                    session = self.id,
+                    sysid = l.sysid,
+                    "HMI session took a system id to pilot"
+                );
+            }
+        }
+        self.sysid()
+    }
+
+    /// Why this session may only watch, and what to do about it.
+    fn watch_only_reason(&self) -> Option<String> {
+        if self.sysid().is_some() {
+            return None;
+        }
+        let set = "set one on the vehicle with `neptunus hmi set-password`, then log in here";
+        Some(if self.may_pilot() {
+            let (lo, hi) = self.shared.sysid_range;
+            if self.shared.free_sysids.lock().is_ok_and(|f| f.is_empty()) {
+                format!(
+                    "all {} HMI system ids ({lo}..{hi}) are held by other pilots: this session may only watch until one is free",
+                    u16::from(hi) - u16::from(lo) + 1
+                )
+            } else {
+                return None;
+            }
+        } else if self.shared.signing {
+            if self.shared.password.is_some() {
+                "MAVLink signing is on: log in with the pilot password to pilot".to_owned()
+            } else {
+                format!("MAVLink signing is on and no pilot password is set: {set}")
+            }
+        } else if self.shared.password.is_some() {
+            "log in with the pilot password to pilot".to_owned()
+        } else {
+            let who = match self.shared.open_control {
+                OpenControl::None => {
+                    "[hmi] open_control = \"none\" lets no address pilot without one".to_owned()
+                }
+                oc => format!(
+                    "only {oc} addresses may pilot without one ([hmi] open_control = \"{oc}\")"
+                ),
+            };
+            format!("no pilot password is set, and {who}: {set}")
+        })
+    }
+
+    fn welcome(&self) -> ServerMsg {
+        ServerMsg::Welcome {
+            session: self.id,
+            sysid: self.sysid(),
+            watch_only_reason: self.watch_only_reason(),
+            password_required: self.shared.password.is_some() && !self.may_pilot(),
+            password_set: self.shared.password.is_some(),
+            pilot: self.may_pilot(),
+            logged_in: self.logged_in,
+            vehicle_sysid: self.shared.vehicle_sysid,
+            camera_rotation_deg: self.shared.camera_rotation_deg,
+            version: env!("CARGO_PKG_VERSION"),
+        }
+    }
+
+    /// The session's rights changed (logged in, leased an id).
+    fn identity(&self) -> ServerMsg {
+        ServerMsg::Identity {
+            sysid: self.sysid(),
+            pilot: self.may_pilot(),
+            logged_in: self.logged_in,
+            watch_only_reason: self.watch_only_reason(),
+        }
+    }
+
     fn bad_message(&mut self, why: &str) -> Option<ServerMsg> {
         self.bad += 1;
         self.shared.note_bad_message(self.id, why);
@@ -207,20 +406,15 @@ impl Session {
         // A watcher with no system id has none to speak with (sysid 0 would be
         // the broadcast address); it only asks for telemetry.
         let sysid = self.sysid().unwrap_or(0);
-        let from = self.shared.sender(self.id, sysid, self.pilot);
+        let from = self
+            .shared
+            .sender(self.id, sysid, self.may_pilot(), self.logged_in);
         let _ = self.shared.inputs.send(Input::Mavlink { from, msg }).await;
     }
 
     async fn hmi_event(&self, event: HmiEvent) {
         if let Some(sysid) = self.sysid() {
             let _ = self.shared.inputs.send(Input::Hmi { sysid, event }).await;
-        }
-    }
-
-    async fn request_rates(&self) {
-        for (id, hz) in RATES {
-            self.command(MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL, [id as f32, 1e6 / hz])
-                .await;
         }
     }
 
@@ -241,22 +435,8 @@ impl Session {
 
     /// COMMAND_LONG to the vehicle with the first params given, the rest 0.
     async fn command<const N: usize>(&self, command: MavCmd, params: [f32; N]) {
-        let mut p = [0f32; 7];
-        p[..N].copy_from_slice(&params);
-        self.to_vehicle(MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-            param1: p[0],
-            param2: p[1],
-            param3: p[2],
-            param4: p[3],
-            param5: p[4],
-            param6: p[5],
-            param7: p[6],
-            command,
-            target_system: self.shared.vehicle_sysid,
-            target_component: COMPONENT_ID,
-            confirmation: 0,
-        }))
-        .await;
+        self.to_vehicle(command_long(self.shared.vehicle_sysid, command, params))
+            .await;
     }
 
     fn manual_control(&self, surge: f64, sway: f64, heave_up: f64, yaw: f64) -> MavMessage {
@@ -304,22 +484,42 @@ impl Session {
             Err(why) => return self.bad_message(&why),
         };
         self.last_life = Instant::now();
-        let sysid = self.sysid();
-        let drives = !matches!(
+        // Messages that only matter from a station with an id: without one
+        // they are no-ops (a watcher's page says input_mode at start).
+        let harmless = matches!(
             msg,
             ClientMsg::Alive {}
                 | ClientMsg::Login { .. }
                 | ClientMsg::Stop {}
                 | ClientMsg::FocusLost {}
+                | ClientMsg::InputMode { .. }
+                | ClientMsg::ReleaseControl {}
         );
-        if drives && sysid.is_none() {
+        if !harmless && self.ensure_sysid().is_none() {
+            // Streamed input is answered now and then, not per message: a
+            // watcher's held key would otherwise earn 20 errors a second.
+            let streamed = matches!(
+                msg,
+                ClientMsg::Sticks { .. } | ClientMsg::Thrusters { .. } | ClientMsg::Tilt { .. }
+            );
+            if streamed
+                && self
+                    .last_refusal
+                    .is_some_and(|t| t.elapsed() < REFUSAL_REPLY)
+            {
+                return None;
+            }
+            self.last_refusal = Some(Instant::now());
+            let why = self
+                .watch_only_reason()
+                .unwrap_or_else(|| "no system id is free".into());
             return Some(ServerMsg::Error {
-                message: "this session is watch-only (no free HMI system id): it cannot command the vehicle".into(),
+                message: format!("this session may only watch: {why}"),
             });
         }
         match msg {
             ClientMsg::Alive {} => {}
-            ClientMsg::Login { password } => return Some(self.login(&password)),
+            ClientMsg::Login { password } => return Some(self.login(&password).await),
             ClientMsg::Sticks {
                 surge,
                 sway,
@@ -435,57 +635,23 @@ impl Session {
         None
     }
 
-    fn login(&mut self, password: &str) -> ServerMsg {
-        let Some(expected) = &self.shared.pilot_password else {
-            return ServerMsg::LoginResult {
-                ok: true,
-                message: "no pilot password is configured: every session may pilot".into(),
-            };
-        };
-        if self.sysid().is_none() {
-            return ServerMsg::LoginResult {
-                ok: false,
-                message: "this session is watch-only (no free HMI system id)".into(),
-            };
+    /// The WebSocket `login` message, for clients without cookies: the
+    /// same check, throttle and log as the page's form.
+    async fn login(&mut self, password: &str) -> ServerMsg {
+        let outcome =
+            guard::check_password(&self.shared, self.ip, password, "WebSocket login").await;
+        let ok = outcome == guard::Login::Ok;
+        if ok {
+            self.logged_in = true;
+            self.ensure_sysid();
         }
-        if constant_time_eq(password.as_bytes(), expected.as_bytes()) {
-            self.pilot = true;
-            tracing::info!(session = self.id, sysid = ?self.sysid(), "HMI session logged in as pilot");
-            ServerMsg::LoginResult {
-                ok: true,
-                message: "logged in: this session may arm, drive and request control".into(),
-            }
-        } else {
-            tracing::warn!(session = self.id, "HMI pilot login refused: wrong password");
-            ServerMsg::LoginResult {
-                ok: false,
-                message: "wrong pilot password".into(),
-            }
+        let mut message = outcome.message();
+        if ok && self.sysid().is_none() {
+            message.push_str(&format!(
+                " — but {}",
+                self.watch_only_reason().unwrap_or_default()
+            ));
         }
-    }
-}
-
-/// Compares without an early exit, so the time taken says nothing about
-/// how much of the password matched.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    let n = a.len().max(b.len());
-    let mut diff = u8::from(a.len() != b.len());
-    for i in 0..n {
-        diff |= a.get(i).copied().unwrap_or(0) ^ b.get(i).copied().unwrap_or(0xff);
-    }
-    diff == 0
-}
-
-#[cfg(test)]
-mod tests {
-    use super::constant_time_eq;
-
-    #[test]
-    fn password_compare() {
-        assert!(constant_time_eq(b"secret", b"secret"));
-        assert!(!constant_time_eq(b"secret", b"secreT"));
-        assert!(!constant_time_eq(b"secret", b"secret2"));
-        assert!(!constant_time_eq(b"", b"x"));
-        assert!(constant_time_eq(b"", b""));
+        ServerMsg::LoginResult { ok, message }
     }
 }

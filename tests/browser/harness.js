@@ -1,8 +1,8 @@
 // Shared by the browser tests and the screenshot script: the real
 // `neptunus --sim` binary with its HMI on a free loopback port, and Debian's
 // Chromium driven by playwright-core (never a browser a tool downloads).
-import { spawn } from 'node:child_process';
-import { mkdtempSync, readFileSync, rmSync, existsSync, openSync } from 'node:fs';
+import { spawn, spawnSync } from 'node:child_process';
+import { mkdtempSync, readFileSync, rmSync, existsSync, openSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, dirname, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -27,11 +27,22 @@ export async function until(fn, ms, what) {
   throw new Error(`timed out after ${ms} ms waiting for ${what} (last: ${JSON.stringify(last)})`);
 }
 
-/** `neptunus --sim` with its HMI on 127.0.0.1:0; resolves once the page is served. */
-export async function startVehicle(extraArgs = []) {
+/** `neptunus --sim` with its HMI on 127.0.0.1:0; resolves once the page is served.
+ * `password`: set first with `neptunus hmi set-password` (piped, as a script
+ * would); `hmiToml`: the body of an `[hmi]` section of a config file. */
+export async function startVehicle(extraArgs = [], { password, hmiToml } = {}) {
   if (!existsSync(BIN)) throw new Error(`no neptunus binary at ${BIN}: run \`cargo build\` or set NEPTUNUS_BIN`);
   const dir = mkdtempSync(join(tmpdir(), 'neptunus-browser-'));
   const data = join(dir, 'data');
+  if (password) {
+    const r = spawnSync(BIN, ['hmi', 'set-password', '--data-dir', data], { input: `${password}\n`, encoding: 'utf8' });
+    if (r.status !== 0) throw new Error(`neptunus hmi set-password failed: ${r.stderr}`);
+  }
+  if (hmiToml) {
+    const config = join(dir, 'neptunus.toml');
+    writeFileSync(config, `[hmi]\n${hmiToml}\n`);
+    extraArgs = [...extraArgs, '--config', config];
+  }
   const log = openSync(join(dir, 'stderr.txt'), 'w');
   const child = spawn(
     BIN,

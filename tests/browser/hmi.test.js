@@ -4,6 +4,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
+import { createServer } from 'node:http';
 import { startVehicle, launchBrowser, openPage, telemetry, takeControlAndArm, until } from './harness.js';
 
 let browser;
@@ -11,8 +12,8 @@ before(async () => { browser = await launchBrowser(); });
 after(async () => { await browser?.close(); });
 
 /** Runs `body` with a fresh vehicle; shows its log if the test fails. */
-async function withVehicle(body, args = []) {
-  const v = await startVehicle(args);
+async function withVehicle(body, args = [], opts = {}) {
+  const v = await startVehicle(args, opts);
   try {
     await body(v);
   } catch (e) {
@@ -29,7 +30,10 @@ test('the page loads with no console errors and shows the video', () => withVehi
   await until(() => page.isVisible('#video'), 10000, 'the video image (the synthetic camera runs with --sim)');
   assert.equal(await page.isVisible('[data-testid=no-video]'), false);
   assert.equal(await page.isVisible('[data-testid=attitude]'), true);
-  assert.match(await page.textContent('[data-testid=me]'), /GCS 200/);
+  // Loopback may pilot without a password; the id is lent at the first command.
+  assert.match(await page.textContent('[data-testid=me]'), /you may pilot/);
+  assert.equal(await page.isVisible('[data-testid=login]'), false);
+  assert.equal(await page.isVisible('[data-testid=watch-only]'), false);
   // A frame of telemetry reaches the attitude readout.
   await until(async () => (await page.textContent('#hdg')) !== '—', 10000, 'heading readout');
   assert.deepEqual(problems, []);
@@ -186,3 +190,66 @@ for (const viewport of [{ width: 1024, height: 768 }, { width: 768, height: 1024
     await context.close();
   }));
 }
+
+test('with a pilot password and open_control "none" the pilot logs in with the form, then arms', () => withVehicle(async (v) => {
+  const { page, context } = await openPage(browser, v.url);
+  // Watching: the banner says why, the form is there.
+  assert.match(await page.textContent('[data-testid=watch-only]'), /log in with the pilot password/);
+  assert.match(await page.textContent('[data-testid=me]'), /watching/);
+  assert.equal(await page.isVisible('[data-testid=login]'), true);
+  await page.fill('[data-testid=password]', 'not-the-password');
+  await page.click('[data-testid=login-submit]');
+  await until(async () => /wrong pilot password/.test(await page.textContent('[data-testid=login-note]')), 10000, 'the wrong-password message');
+  await page.fill('[data-testid=password]', 'tide-pool-42');
+  await page.click('[data-testid=login-submit]');
+  await until(async () => /logged in/.test(await page.textContent('[data-testid=me]')), 10000, 'the logged-in session');
+  assert.match(await page.textContent('[data-testid=me]'), /GCS 200/);
+  assert.equal(await page.isVisible('[data-testid=login]'), false);
+  assert.equal(await page.isVisible('[data-testid=watch-only]'), false);
+  // The cookie is HttpOnly: the page's script cannot read it.
+  assert.equal(await page.evaluate(() => document.cookie), '');
+  await takeControlAndArm(page);
+  // A reload keeps the login (the cookie goes with the new WebSocket).
+  await page.reload();
+  await until(async () => /GCS \d+ \(logged in\)/.test(await page.textContent('[data-testid=me]')), 10000, 'logged in after a reload');
+  await page.click('[data-testid=logout]');
+  await until(async () => /watching/.test(await page.textContent('[data-testid=me]')), 10000, 'watching after logging out');
+  await context.close();
+}, [], { password: 'tide-pool-42', hmiToml: 'open_control = "none"' }));
+
+test('a page from another origin can neither open the WebSocket nor POST, and the vehicle never arms', () => withVehicle(async (v) => {
+  const hmi = new URL(v.url);
+  // The attacker's page, served from another loopback port (another origin).
+  const evilPage = `<!doctype html><script>
+    window.result = { ws: 'pending', post: 'pending' };
+    const ws = new WebSocket('ws://${hmi.host}/ws');
+    ws.onopen = () => {
+      window.result.ws = 'open';
+      for (const m of [{ type: 'request_control' }, { type: 'arm', arm: true }]) ws.send(JSON.stringify(m));
+      setInterval(() => ws.send(JSON.stringify({ type: 'sticks', surge: 1, heave_up: 0, yaw: 0 })), 50);
+    };
+    ws.onerror = () => { if (window.result.ws === 'pending') window.result.ws = 'refused'; };
+    fetch('http://${hmi.host}/api/login', { method: 'POST', mode: 'no-cors', body: '{"password":"guess"}' })
+      .then(() => { window.result.post = 'sent'; }, () => { window.result.post = 'failed'; });
+  </script>`;
+  const server = createServer((req, res) => { res.writeHead(200, { 'Content-Type': 'text/html' }); res.end(evilPage); });
+  await new Promise((r) => server.listen(0, '127.0.0.1', r));
+  try {
+    const context = await browser.newContext();
+    const page = await context.newPage();
+    await page.goto(`http://127.0.0.1:${server.address().port}/`);
+    const result = await until(() => page.evaluate(() => window.result.ws !== 'pending' && window.result.post !== 'pending' && window.result), 10000, 'the attack to finish');
+    assert.equal(result.ws, 'refused', JSON.stringify(result));
+    // The HMI counted both refusals (the no-cors POST's answer is opaque to
+    // the page, so ask the HMI), and the vehicle is disarmed and unowned.
+    const status = await (await fetch(new URL('/api/status', v.url))).json();
+    assert.ok(status.refused_requests >= 2, JSON.stringify(status));
+    assert.equal(status.telemetry.armed, false);
+    assert.equal(status.telemetry.control.owner, null);
+    assert.equal(status.sessions_free, status.sessions_max);
+    assert.equal(status.watchers, 0);
+    await context.close();
+  } finally {
+    server.close();
+  }
+}));

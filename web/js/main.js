@@ -42,8 +42,14 @@ function connect() {
   state.ws = ws;
   ws.onopen = () => setPill('conn', 'connected', 'ok');
   ws.onclose = () => {
-    setPill('conn', 'disconnected — retrying', 'bad');
     state.welcome = null;
+    if (state.reconnectNow) {
+      // Logged in or out: a new session with the new cookie, at once.
+      state.reconnectNow = false;
+      connect();
+      return;
+    }
+    setPill('conn', 'disconnected — retrying', 'bad');
     setTimeout(connect, 1000);
   };
   ws.onerror = () => {};
@@ -67,9 +73,11 @@ function handle(m) {
       break;
     case 'control': onControl(m); break;
     case 'control_request': onControlRequest(m); break;
+    case 'identity':
+      if (state.welcome) { Object.assign(state.welcome, m); showRights(); }
+      break;
     case 'login_result':
       message(m.ok ? 6 : 4, m.message);
-      if (m.ok) { $('login').hidden = true; state.welcome.pilot = true; updateMe(); }
       break;
     case 'error': message(4, `server: ${m.message}`); break;
     default: break;
@@ -78,20 +86,60 @@ function handle(m) {
 
 function onWelcome(m) {
   state.welcome = m;
-  $('watch-only').hidden = !m.watch_only_reason;
-  $('watch-only').textContent = m.watch_only_reason ? `Watch only: ${m.watch_only_reason}` : '';
-  $('login').hidden = !(m.password_required && !m.pilot && m.sysid != null);
-  updateMe();
+  showRights();
   applyRotation(m.camera_rotation_deg || 0);
   // Tell the vehicle which input mode is in use (a stop, harmless at start).
   send({ type: 'input_mode', mode: input.mode });
 }
 
-function updateMe() {
+/** What this session may do: the watch-only banner, the login form, the
+ * log-out button and the bar's "you are" text. */
+function showRights() {
   const w = state.welcome;
   if (!w) return;
-  const who = w.sysid == null ? 'watching' : `you are GCS ${w.sysid}`;
-  $('me').textContent = `${who}${w.password_required && !w.pilot ? ' (not logged in)' : ''}`;
+  $('watch-only').hidden = !w.watch_only_reason;
+  $('watch-only').textContent = w.watch_only_reason ? `Watch only: ${w.watch_only_reason}` : '';
+  $('login').hidden = !(w.password_set && !w.logged_in && !w.pilot);
+  $('logout').hidden = !w.logged_in;
+  const who = w.sysid != null ? `you are GCS ${w.sysid}` : w.pilot ? 'you may pilot' : 'watching';
+  $('me').textContent = `${who}${w.logged_in ? ' (logged in)' : ''}`;
+}
+
+/** The login form: POST /api/login sets the login cookie; the WebSocket is
+ * then opened again so the new session carries it. */
+async function login(password) {
+  const note = $('login-note');
+  note.textContent = 'checking…';
+  note.classList.remove('refused');
+  let r;
+  let body = {};
+  try {
+    r = await fetch('/api/login', {
+      method: 'POST',
+      headers: { 'Content-Type': 'application/json' },
+      body: JSON.stringify({ password }),
+    });
+    body = await r.json();
+  } catch {
+    note.textContent = 'the vehicle did not answer: try again';
+    return;
+  }
+  note.textContent = body.message || `HTTP ${r.status}`;
+  note.classList.toggle('refused', !body.ok);
+  message(body.ok ? 6 : 4, `login: ${note.textContent}`);
+  if (body.ok) reconnect();
+}
+
+async function logout() {
+  try { await fetch('/api/logout', { method: 'POST' }); } catch { /* the reconnect shows the state */ }
+  $('login-note').textContent = '';
+  reconnect();
+}
+
+function reconnect() {
+  safetyStop(null);
+  state.reconnectNow = true;
+  if (state.ws) state.ws.close();
 }
 
 // ---- telemetry ------------------------------------------------------------
@@ -214,7 +262,7 @@ function inControl() {
  * pilot-input failsafe expects a steady stream), otherwise only while input is
  * held, and one neutral command on release. */
 function sendTick() {
-  if (!state.welcome || state.welcome.sysid == null) return;
+  if (!state.welcome || !state.welcome.pilot) return;
   const manual = currentMode() === MODE_MANUAL_THRUSTERS;
   const cmd = input.command(manual);
   const active = Object.values(cmd).some((v) => v !== 0);
@@ -253,9 +301,11 @@ function bindControls() {
   $('refuse').onclick = () => { send({ type: 'answer_request', accept: false }); closeRequest(); };
   $('login').onsubmit = (e) => {
     e.preventDefault();
-    send({ type: 'login', password: $('password').value });
+    const password = $('password').value;
     $('password').value = '';
+    login(password);
   };
+  $('logout').onclick = logout;
   document.querySelectorAll('input[name=input]').forEach((r) => r.addEventListener('change', () => {
     if (!r.checked) return;
     input.mode = r.value;
