@@ -4,7 +4,7 @@ use std::io::Write as _;
 
 use anyhow::Context as _;
 use clap::Parser as _;
-use neptunus::config::{self, Cli, CliCommand, ProfilesCommand, SigningCommand};
+use neptunus::config::{self, Cli, CliCommand, HmiCommand, ProfilesCommand, SigningCommand};
 use neptunus::vehicle::input::{Profile, Profiles, ZConvention};
 
 fn main() -> std::process::ExitCode {
@@ -49,6 +49,10 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
         Some(CliCommand::Signing { command }) => {
             let data_dir = config::resolve(&cli.run)?.data_dir;
             signing(&command, &data_dir)?;
+        }
+        Some(CliCommand::Hmi { command }) => {
+            let settings = config::resolve(&cli.run)?;
+            hmi(&command, &settings)?;
         }
         Some(CliCommand::EmulateBoard(args)) => {
             init_logging(None)?;
@@ -118,6 +122,30 @@ fn signing(command: &SigningCommand, data_dir: &std::path::Path) -> anyhow::Resu
             Some(_) => writeln!(out, "signing on: key in {}", path.display())?,
             None => writeln!(out, "signing off: no key in {}", path.display())?,
         },
+    }
+    Ok(())
+}
+
+/// `neptunus hmi …`.
+fn hmi(command: &HmiCommand, settings: &config::Settings) -> anyhow::Result<()> {
+    let mut out = std::io::stdout();
+    match command {
+        HmiCommand::TlsFingerprint => {
+            let tls = &settings.hmi.tls;
+            let (path, fingerprint, generated) =
+                neptunus::hmi::tls::served_fingerprint(tls, &settings.data_dir)?;
+            if generated {
+                writeln!(out, "made a self-signed certificate: {}", path.display())?;
+            }
+            writeln!(out, "SHA-256 fingerprint of {}:", path.display())?;
+            writeln!(out, "{fingerprint}")?;
+            if tls.mode == neptunus::hmi::tls::TlsMode::Off {
+                writeln!(
+                    out,
+                    "(TLS is off in this configuration: this is the certificate tls = \"self-signed\" serves)"
+                )?;
+            }
+        }
     }
     Ok(())
 }

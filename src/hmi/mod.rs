@@ -1,6 +1,8 @@
-//! The browser HMI: an HTTP server (axum) with the operator and developer
-//! interfaces (`web/`, embedded), a JSON WebSocket at `/ws` and a small REST
-//! API.
+//! The browser HMI: an HTTP server (axum routes on our own hardened accept
+//! loop, [`server`]) with the operator and developer interfaces (`web/`,
+//! embedded), a JSON WebSocket at `/ws` and a small REST API, over plain
+//! HTTP or TLS ([`tls`]), with security headers on every response
+//! ([`headers`]).
 //!
 //! Each WebSocket session is a MAVLink ground station inside the process:
 //! it gets its own system id from `[hmi] sysid_min..=sysid_max`, turns the
@@ -18,10 +20,13 @@
 //! any other station (the HMI is not a back door).
 
 pub mod assets;
+pub mod headers;
 pub mod model;
 pub mod protocol;
 pub mod rest;
+pub mod server;
 pub mod session;
+pub mod tls;
 
 use std::collections::BTreeSet;
 use std::future::Future;
@@ -59,6 +64,8 @@ pub enum HmiError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Tls(#[from] tls::TlsError),
 }
 
 /// HMI settings, resolved from `--http` and the `[hmi]` section.
@@ -76,6 +83,10 @@ pub struct HmiSettings {
     pub pilot_password: Option<String>,
     /// Rotation of the camera image in the page (0, 90, 180, 270).
     pub camera_rotation_deg: i32,
+    /// Connection caps and the header-read timeout.
+    pub limits: server::Limits,
+    /// `[hmi] tls` and its files and names.
+    pub tls: tls::TlsSettings,
 }
 
 impl Default for HmiSettings {
@@ -87,6 +98,8 @@ impl Default for HmiSettings {
             sysid_max: 209,
             pilot_password: None,
             camera_rotation_deg: 0,
+            limits: server::Limits::default(),
+            tls: tls::TlsSettings::default(),
         }
     }
 }
@@ -165,6 +178,9 @@ pub struct HmiContext {
     /// `/snapshot.jpg`, `/camera/status`). With them the page shows video;
     /// without, a "no video" placeholder.
     pub extra_routes: Option<axum::Router>,
+    /// Connection limits and TLS ([`server::Transport::default`]: the
+    /// default limits, plain HTTP).
+    pub transport: server::Transport,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -279,11 +295,22 @@ pub async fn serve(
     if let Some(extra) = ctx.extra_routes {
         app = app.merge(extra);
     }
-    let result = axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown)
-        .await;
+    // Around everything merged, fallback included: every response has them.
+    let app = app.layer(axum::middleware::from_fn(headers::security_headers));
+    let result = server::run(listener, app, ctx.transport, shutdown).await;
     watcher.abort();
     result
+}
+
+/// A pilot password crossing the network in clear text: say so at start
+/// (the loopback interface never leaves the machine).
+fn warn_plaintext(settings: &HmiSettings, local: SocketAddr) {
+    if settings.pilot_password.is_some() && !local.ip().is_loopback() {
+        tracing::warn!(
+            "browser HMI on {local} without TLS: the pilot password and the session cross the network in clear text — \
+             set [hmi] tls = \"self-signed\" (or --tls self-signed) unless the tether is a private point-to-point link"
+        );
+    }
 }
 
 /// The app's handle on a running HMI: the inputs its sessions produce.
@@ -297,7 +324,9 @@ pub struct Hmi {
 impl Hmi {
     /// Binds and starts the HMI server for endpoint index `endpoint`
     /// (or does nothing with `--http off`). The bound address is logged
-    /// and written to `DATA_DIR/http.addr`.
+    /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
+    /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
+    /// certificate or key file is an error naming it.
     pub async fn start(
         settings: &HmiSettings,
         endpoint: usize,
@@ -331,11 +360,41 @@ impl Hmi {
             Err(source) => return Err(HmiError::Bind { addr, source }),
         };
         let local = listener.local_addr().unwrap_or(addr);
-        std::fs::write(&addr_file, format!("{local}\n")).map_err(|source| HmiError::AddrFile {
-            path: addr_file.clone(),
-            source,
+        let tls = tls::load(&settings.tls, &data_dir)?;
+        let url = match &tls {
+            Some(t) => {
+                if t.generated {
+                    tracing::info!(
+                        "browser HMI: self-signed TLS certificate made in {}",
+                        t.cert_path.display()
+                    );
+                }
+                tracing::info!(
+                    "browser HMI TLS certificate {}: SHA-256 fingerprint {} — check that the browser shows the same \
+                     (also printed by `neptunus hmi tls-fingerprint`)",
+                    t.cert_path.display(),
+                    t.fingerprint
+                );
+                format!("https://{local}/")
+            }
+            None => {
+                warn_plaintext(settings, local);
+                format!("http://{local}/")
+            }
+        };
+        // Plain HTTP keeps the bare address (what scripts already read).
+        let addr_text = if tls.is_some() {
+            url.clone()
+        } else {
+            local.to_string()
+        };
+        std::fs::write(&addr_file, format!("{addr_text}\n")).map_err(|source| {
+            HmiError::AddrFile {
+                path: addr_file.clone(),
+                source,
+            }
         })?;
-        tracing::info!(addr = %local, "browser HMI listening on http://{local}/");
+        tracing::info!(addr = %local, "browser HMI listening on {url}");
         let (tx, rx) = mpsc::channel(1024);
         let ctx = HmiContext {
             outlet: outlet.clone(),
@@ -348,6 +407,10 @@ impl Hmi {
             camera_rotation_deg: settings.camera_rotation_deg,
             data_dir,
             extra_routes,
+            transport: server::Transport {
+                limits: settings.limits,
+                tls: tls.map(|t| t.config),
+            },
         };
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {
