@@ -790,3 +790,45 @@ fn self_signed_tls_serves_the_page_and_websocket_and_keeps_its_certificate() {
     let logged_again = fingerprints(&again.stderr_text());
     assert_eq!(logged_again.first(), logged.first());
 }
+
+// ---------------------------------------------------------------------------
+// 5. Shutdown
+// ---------------------------------------------------------------------------
+
+#[test]
+fn shutdown_is_not_held_up_by_open_connections() {
+    let _one = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let (mut vehicle, http) = spawn(dir.path(), "");
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    // A WebSocket session, an MJPEG stream that never ends, a half-open
+    // request and an idle connection, all open at the signal.
+    let (_ws, _) = rt
+        .block_on(tokio_tungstenite::connect_async(format!("ws://{http}/ws")))
+        .unwrap();
+    let mut video = TcpStream::connect(http).unwrap();
+    write!(video, "GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    video.set_read_timeout(Some(GENEROUS)).unwrap();
+    let mut first = [0u8; 64];
+    let n = video.read(&mut first).unwrap();
+    assert!(first[..n].starts_with(b"HTTP/1.1 200"), "no video stream");
+    let mut partial = TcpStream::connect(http).unwrap();
+    partial.write_all(b"GET / HTTP/1.1\r\nHo").unwrap();
+    let _idle = TcpStream::connect(http).unwrap();
+    vehicle.signal(nix::sys::signal::Signal::SIGTERM).unwrap();
+    let end = Instant::now() + GENEROUS;
+    let status = loop {
+        if let Some(status) = vehicle.child.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            Instant::now() < end,
+            "neptunus still running {GENEROUS:?} after SIGTERM with HMI connections open"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(status.success(), "{status}:\n{}", vehicle.stderr_tail());
+}

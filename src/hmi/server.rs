@@ -418,6 +418,36 @@ mod tests {
         assert_ne!(address_key(x), address_key(z));
     }
 
+    /// The contract with handlers: both extensions are on every request.
+    #[tokio::test]
+    async fn handlers_get_the_client_address_and_conn_info() {
+        use axum::extract::Extension;
+        use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+        let app = Router::new().route(
+            "/",
+            axum::routing::get(
+                |ConnectInfo(addr): ConnectInfo<SocketAddr>,
+                 Extension(info): Extension<ConnInfo>| async move {
+                    format!("{addr} tls={}", info.tls)
+                },
+            ),
+        );
+        let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let at = listener.local_addr().expect("addr");
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let server = tokio::spawn(run(listener, app, Transport::default(), async move {
+            let _ = stopped.await;
+        }));
+        let mut s = TcpStream::connect(at).await.expect("connect");
+        let me = s.local_addr().expect("local");
+        s.write_all(b"GET / HTTP/1.0\r\n\r\n").await.expect("write");
+        let mut reply = String::new();
+        s.read_to_string(&mut reply).await.expect("read");
+        assert!(reply.ends_with(&format!("{me} tls=false")), "{reply}");
+        let _ = stop.send(());
+        server.await.expect("join").expect("serve");
+    }
+
     #[test]
     fn refusals_report_once_per_period() {
         let mut r = Refusals::default();
