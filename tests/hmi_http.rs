@@ -736,20 +736,33 @@ fn self_signed_tls_serves_the_page_and_websocket_and_keeps_its_certificate() {
         let t = next_of(&mut ws, "telemetry").await;
         assert!(t["t_ms"].is_number(), "{t}");
 
-        // Plain HTTP to the TLS port: no page, and the server carries on.
-        let mut plain = tokio::net::TcpStream::connect(http).await.unwrap();
-        plain
-            .write_all(b"GET / HTTP/1.1\r\nHost: x\r\n\r\n")
-            .await
-            .unwrap();
+        // Plain HTTP to the TLS port: no page, a pointer to https://, and
+        // the server carries on.
+        for (host, status) in [(format!("{http}"), 301), ("x y".to_owned(), 400)] {
+            let mut plain = tokio::net::TcpStream::connect(http).await.unwrap();
+            plain
+                .write_all(format!("GET / HTTP/1.1\r\nHost: {host}\r\n\r\n").as_bytes())
+                .await
+                .unwrap();
+            let mut got = Vec::new();
+            let _ = tokio::time::timeout(GENEROUS, plain.read_to_end(&mut got))
+                .await
+                .expect("the TLS port kept a plain-HTTP connection open");
+            let r = parse_reply(&got);
+            assert_eq!(r.status, status, "{}", r.head);
+            assert!(r.body_text().contains("https://"), "{}", r.body_text());
+            if status == 301 {
+                assert_eq!(r.header("location"), Some(format!("https://{http}/")));
+            }
+        }
+        // Bytes that are neither TLS nor HTTP: closed, nothing served.
+        let mut junk = tokio::net::TcpStream::connect(http).await.unwrap();
+        junk.write_all(&[0u8; 64]).await.unwrap();
         let mut got = Vec::new();
-        let _ = tokio::time::timeout(GENEROUS, plain.read_to_end(&mut got))
+        let _ = tokio::time::timeout(GENEROUS, junk.read_to_end(&mut got))
             .await
-            .expect("the TLS port kept a plain-HTTP connection open");
-        assert!(
-            !String::from_utf8_lossy(&got).contains("200 OK"),
-            "the TLS port served plain HTTP"
-        );
+            .expect("the TLS port kept a junk connection open");
+        assert!(!String::from_utf8_lossy(&got).contains("200 OK"));
         next_of(&mut ws, "telemetry").await;
         assert_eq!(tls_get(&tls, http, "/api/status").await.status, 200);
     });

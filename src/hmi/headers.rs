@@ -38,7 +38,7 @@ pub fn content_security_policy(host: Option<&str>) -> String {
 
 /// Whether a Host header is only `name[:port]` / `[v6]:port` characters, so
 /// it cannot add a directive to the policy.
-fn plain_host(h: &str) -> bool {
+pub(crate) fn plain_host(h: &str) -> bool {
     !h.is_empty()
         && h.len() <= 255
         && h.bytes()

@@ -221,8 +221,25 @@ async fn connection(
         http(stream, peer, false, app, header_timeout, stop).await;
         return;
     };
+    // One budget for the first byte and the whole handshake.
+    let deadline = tokio::time::Instant::now() + header_timeout;
+    let mut first = [0u8; 1];
+    let peeked = tokio::select! {
+        r = tokio::time::timeout_at(deadline, stream.peek(&mut first)) => r,
+        () = stopped(&mut stop) => return,
+    };
+    match peeked {
+        // A TLS handshake starts with 0x16; an HTTP method with a capital.
+        Ok(Ok(1..)) if first[0].is_ascii_uppercase() => {
+            plain_http_on_tls_port(stream, peer, deadline).await;
+            return;
+        }
+        Ok(Ok(1..)) => {}
+        // Closed, failed or silent until the deadline.
+        _ => return,
+    }
     let handshake = tokio::select! {
-        r = tokio::time::timeout(header_timeout, acceptor.accept(stream)) => r,
+        r = tokio::time::timeout_at(deadline, acceptor.accept(stream)) => r,
         () = stopped(&mut stop) => return,
     };
     match handshake {
@@ -235,6 +252,59 @@ async fn connection(
         ),
     }
 }
+
+/// Someone typed `http://` for a TLS-only HMI: send them to `https://` on
+/// the same host (a 301 to the Host they gave, when it is a plain host
+/// name), or say what to do, and close. The request is read (at most 8 KiB,
+/// within the header deadline) so the reply is not lost to a reset.
+async fn plain_http_on_tls_port(
+    mut stream: TcpStream,
+    peer: SocketAddr,
+    deadline: tokio::time::Instant,
+) {
+    use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+    let mut head = Vec::with_capacity(1024);
+    let mut buf = [0u8; 1024];
+    while head.len() < 8192 && !head.windows(4).any(|w| w == b"\r\n\r\n") {
+        match tokio::time::timeout_at(deadline, stream.read(&mut buf)).await {
+            Ok(Ok(n @ 1..)) => head.extend_from_slice(&buf[..n]),
+            _ => return,
+        }
+    }
+    let text = String::from_utf8_lossy(&head);
+    let host = text
+        .lines()
+        .skip(1)
+        .find_map(|l| {
+            let (k, v) = l.split_once(':')?;
+            k.trim().eq_ignore_ascii_case("host").then(|| v.trim())
+        })
+        .filter(|h| super::headers::plain_host(h));
+    let reply = match host {
+        Some(h) => format!(
+            "HTTP/1.1 301 Moved Permanently\r\nLocation: https://{h}/\r\nContent-Type: text/plain; charset=utf-8\r\n\
+             X-Content-Type-Options: nosniff\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{}",
+            HTTPS_ONLY.len(),
+            HTTPS_ONLY
+        ),
+        None => format!(
+            "HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain; charset=utf-8\r\n\
+             X-Content-Type-Options: nosniff\r\nConnection: close\r\nContent-Length: {}\r\n\r\n{}",
+            HTTPS_ONLY.len(),
+            HTTPS_ONLY
+        ),
+    };
+    let _ = tokio::time::timeout_at(deadline, async {
+        let _ = stream.write_all(reply.as_bytes()).await;
+        let _ = stream.shutdown().await;
+    })
+    .await;
+    tracing::debug!("browser HMI: plain HTTP from {peer} on the TLS port, sent to https://");
+}
+
+/// The body of the answer to plain HTTP on the TLS port.
+const HTTPS_ONLY: &str =
+    "This vehicle's HMI is served over HTTPS: open https:// and the same address.\n";
 
 async fn http<S>(
     stream: S,
