@@ -845,3 +845,55 @@ fn shutdown_is_not_held_up_by_open_connections() {
     };
     assert!(status.success(), "{status}:\n{}", vehicle.stderr_tail());
 }
+
+#[test]
+fn websockets_count_against_the_caps() {
+    let _one = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let (mut vehicle, http) = spawn(
+        dir.path(),
+        "header_timeout_s = 120.0\nmax_connections = 4\nmax_connections_per_address = 3",
+    );
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    // Three WebSockets from 127.0.0.1: its share, though the HTTP
+    // connections they started on have been handed over.
+    let mut sockets = Vec::new();
+    for _ in 0..3 {
+        let (ws, _) = rt
+            .block_on(tokio_tungstenite::connect_async(format!("ws://{http}/ws")))
+            .unwrap();
+        sockets.push(ws);
+    }
+    let mut fourth = connect_from(Ipv4Addr::new(127, 0, 0, 1), http);
+    assert!(
+        closed_within(&mut fourth, GENEROUS),
+        "a 4th connection from an address with 3 open WebSockets was not closed"
+    );
+    // Closing one gives its slot back.
+    let ws = sockets.pop().unwrap();
+    drop(ws);
+    let end = Instant::now() + GENEROUS;
+    while get_status(http) != Some(200) {
+        vehicle.check_running().unwrap();
+        assert!(
+            Instant::now() < end,
+            "the closed WebSocket's slot never came back"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    drop(sockets);
+}
+
+/// `GET /api/status`'s status, or `None` when the connection was closed.
+fn get_status(addr: SocketAddr) -> Option<u16> {
+    let mut s = TcpStream::connect(addr).ok()?;
+    s.set_read_timeout(Some(GENEROUS)).ok()?;
+    write!(s, "GET /api/status HTTP/1.0\r\nHost: x\r\n\r\n").ok()?;
+    let mut bytes = Vec::new();
+    let _ = s.read_to_end(&mut bytes);
+    let r = parse_reply(&bytes);
+    (r.status != 0).then_some(r.status)
+}

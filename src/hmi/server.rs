@@ -215,10 +215,18 @@ async fn connection(
     tls: Option<tokio_rustls::TlsAcceptor>,
     header_timeout: Duration,
     mut stop: watch::Receiver<bool>,
-    _slot: Slot,
+    slot: Slot,
 ) {
     let Some(acceptor) = tls else {
-        http(stream, peer, false, app, header_timeout, stop).await;
+        http(
+            Held::new(stream, slot),
+            peer,
+            false,
+            app,
+            header_timeout,
+            stop,
+        )
+        .await;
         return;
     };
     // One budget for the first byte and the whole handshake.
@@ -239,7 +247,7 @@ async fn connection(
         _ => return,
     }
     let handshake = tokio::select! {
-        r = tokio::time::timeout_at(deadline, acceptor.accept(stream)) => r,
+        r = tokio::time::timeout_at(deadline, acceptor.accept(Held::new(stream, slot))) => r,
         () = stopped(&mut stop) => return,
     };
     match handshake {
@@ -337,6 +345,67 @@ async fn http<S>(
     };
     if let Err(e) = result {
         tracing::debug!("browser HMI: connection from {peer} ended: {e}");
+    }
+}
+
+/// A connection's socket with its slot: the slot is given back when the
+/// socket is dropped, not when the HTTP connection ends, because a WebSocket
+/// upgrade hands the socket on to the session (hyper's `Upgraded` owns this
+/// value) and a WebSocket must count against the caps like any connection.
+struct Held<S> {
+    io: S,
+    _slot: Slot,
+}
+
+impl<S> Held<S> {
+    fn new(io: S, slot: Slot) -> Self {
+        Self { io, _slot: slot }
+    }
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for Held<S> {
+    fn poll_read(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &mut tokio::io::ReadBuf<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.io).poll_read(cx, buf)
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for Held<S> {
+    fn poll_write(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        buf: &[u8],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        std::pin::Pin::new(&mut self.io).poll_write(cx, buf)
+    }
+
+    fn poll_write_vectored(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+        bufs: &[std::io::IoSlice<'_>],
+    ) -> std::task::Poll<std::io::Result<usize>> {
+        std::pin::Pin::new(&mut self.io).poll_write_vectored(cx, bufs)
+    }
+
+    fn is_write_vectored(&self) -> bool {
+        self.io.is_write_vectored()
+    }
+
+    fn poll_flush(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.io).poll_flush(cx)
+    }
+
+    fn poll_shutdown(
+        mut self: std::pin::Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<std::io::Result<()>> {
+        std::pin::Pin::new(&mut self.io).poll_shutdown(cx)
     }
 }
 
