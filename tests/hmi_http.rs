@@ -897,3 +897,69 @@ fn get_status(addr: SocketAddr) -> Option<u16> {
     let r = parse_reply(&bytes);
     (r.status != 0).then_some(r.status)
 }
+
+#[test]
+fn out_of_descriptors_the_accept_loop_backs_off_and_recovers() {
+    let _one = serial();
+    let dir = tempfile::tempdir().unwrap();
+    // Caps set above what the descriptor limit allows (a misfit
+    // configuration): accept(2) itself fails with EMFILE.
+    let cfg = config(
+        dir.path(),
+        "header_timeout_s = 1.0\nmax_connections = 1000\nmax_connections_per_address = 1000",
+    );
+    let mut vehicle = spawn_via_sh(dir.path(), "ulimit -n 64 && exec \"$0\" \"$@\"", &cfg, &[]);
+    let http = vehicle.http_addr(GENEROUS).unwrap();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let opened = Arc::new(AtomicU64::new(0));
+    let flood: Vec<_> = (0..100)
+        .map(|_| {
+            rt.spawn(half_open(
+                http,
+                Ipv4Addr::LOCALHOST,
+                stop_rx.clone(),
+                Arc::clone(&opened),
+            ))
+        })
+        .collect();
+    let end = Instant::now() + GENEROUS;
+    while !vehicle.stderr_text().contains("cannot accept") {
+        vehicle.check_running().unwrap();
+        assert!(
+            Instant::now() < end,
+            "the flood never ran the vehicle out of descriptors"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = stop_tx.send(true);
+    rt.block_on(async {
+        for f in flood {
+            let _ = f.await;
+        }
+    });
+    drop(rt);
+    let end = Instant::now() + GENEROUS;
+    while get_status(http) != Some(200) {
+        vehicle.check_running().unwrap();
+        assert!(
+            Instant::now() < end,
+            "the HMI did not come back after EMFILE"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let lines = vehicle
+        .stderr_text()
+        .lines()
+        .filter(|l| l.contains("cannot accept"))
+        .count();
+    assert!(
+        lines <= 3,
+        "{lines} accept-error lines: want at most one per 10 s\n{}",
+        vehicle.stderr_tail()
+    );
+}
