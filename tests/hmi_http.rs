@@ -963,3 +963,40 @@ fn out_of_descriptors_the_accept_loop_backs_off_and_recovers() {
         vehicle.stderr_tail()
     );
 }
+
+#[test]
+fn bad_certificate_files_stop_the_start_with_one_line_naming_the_file() {
+    let _one = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let cert = dir.path().join("rov-cert.pem");
+    std::fs::write(&cert, "this is not PEM\n").unwrap();
+    let key = dir.path().join("missing-key.pem");
+    let cfg = config(
+        dir.path(),
+        &format!(
+            "tls = \"files\"\ntls_cert = \"{}\"\ntls_key = \"{}\"",
+            cert.display(),
+            key.display()
+        ),
+    );
+    let out = std::process::Command::new(bin())
+        .args(["--sim", "--http", "127.0.0.1:0", "--config"])
+        .arg(&cfg)
+        .arg("--data-dir")
+        .arg(dir.path().join("data"))
+        .env("RUST_LOG", "warn")
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    let line = err
+        .lines()
+        .find(|l| l.starts_with("neptunus: "))
+        .unwrap_or_else(|| panic!("no error line:\n{err}"));
+    assert!(
+        line.contains("rov-cert.pem")
+            && line.contains("BEGIN CERTIFICATE")
+            && line.contains("tls_cert"),
+        "{line}"
+    );
+}
