@@ -69,6 +69,33 @@ pub struct RunArgs {
     /// free port (logged, and written to DATA_DIR/http.addr).
     #[arg(long, value_name = "ADDR|off")]
     pub http: Option<HttpAddr>,
+    /// TLS for the browser HMI: off, self-signed (made in DATA_DIR/tls/ on
+    /// first use) or files ([hmi] tls_cert and tls_key) [default: off].
+    #[arg(long, value_name = "off|self-signed|files")]
+    pub tls: Option<TlsModeName>,
+}
+
+/// `--tls` and `[hmi] tls`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TlsModeName {
+    Off,
+    SelfSigned,
+    Files,
+}
+
+impl std::str::FromStr for TlsModeName {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "off" => Ok(Self::Off),
+            "self-signed" => Ok(Self::SelfSigned),
+            "files" => Ok(Self::Files),
+            _ => Err(format!(
+                "\"{s}\" is not a TLS mode — use off, self-signed or files"
+            )),
+        }
+    }
 }
 
 /// `--http`: an address to listen on, or `off`.
@@ -106,7 +133,7 @@ pub enum CliCommand {
         #[command(subcommand)]
         command: SigningCommand,
     },
-    /// The browser HMI's pilot password (stored hashed in the data directory).
+    /// The browser HMI: pilot password (stored hashed) and TLS certificate.
     Hmi {
         #[command(subcommand)]
         command: HmiCommand,
@@ -143,6 +170,10 @@ pub enum HmiCommand {
     ClearPassword,
     /// Say whether a pilot password is set (never prints it).
     Status,
+    /// Print the SHA-256 fingerprint of the HMI's TLS certificate (the one
+    /// `[hmi] tls` serves; the self-signed one is made if it does not exist
+    /// yet), to compare with what the browser shows.
+    TlsFingerprint,
 }
 
 /// `neptunus profiles …`
@@ -222,6 +253,21 @@ pub struct HmiFileConfig {
     pub pilot_password: Option<toml::Spanned<toml::Value>>,
     /// Rotation of the camera image in the page: 0, 90, 180 or 270.
     pub camera_rotation_deg: Option<i32>,
+    /// Open HTTP connections in all (default 128).
+    pub max_connections: Option<usize>,
+    /// Open HTTP connections from one client address (default 32).
+    pub max_connections_per_address: Option<usize>,
+    /// Seconds a client has to send its request headers (and finish the TLS
+    /// handshake); idle keep-alive connections close after it (default 10).
+    pub header_timeout_s: Option<f64>,
+    /// "off" (default), "self-signed" or "files".
+    pub tls: Option<TlsModeName>,
+    /// PEM certificate (chain) for `tls = "files"`.
+    pub tls_cert: Option<PathBuf>,
+    /// PEM private key for `tls = "files"`.
+    pub tls_key: Option<PathBuf>,
+    /// Extra DNS names or IP addresses for the self-signed certificate.
+    pub tls_names: Option<Vec<String>>,
 }
 
 /// `[mavlink]` section.
@@ -452,7 +498,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         mavlink,
         profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
         simulator: file.emulator.clone(),
-        hmi: resolve_hmi(args.http, &file.hmi)?,
+        hmi: resolve_hmi(args.http, args.tls, &file.hmi)?,
         camera: match &file.camera {
             Some(c) => {
                 c.validate()
@@ -465,9 +511,10 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
     })
 }
 
-/// `--http` over `[hmi]` over the defaults.
+/// `--http` and `--tls` over `[hmi]` over the defaults.
 fn resolve_hmi(
     flag: Option<HttpAddr>,
+    tls_flag: Option<TlsModeName>,
     file: &HmiFileConfig,
 ) -> Result<crate::hmi::HmiSettings, ConfigError> {
     let mut hmi = crate::hmi::HmiSettings::default();
@@ -518,7 +565,83 @@ fn resolve_hmi(
         )));
     }
     hmi.camera_rotation_deg = rot;
+    hmi.limits = resolve_limits(file)?;
+    hmi.tls = resolve_tls(tls_flag, file)?;
     Ok(hmi)
+}
+
+/// `[hmi] max_connections`, `max_connections_per_address`, `header_timeout_s`.
+fn resolve_limits(file: &HmiFileConfig) -> Result<crate::hmi::server::Limits, ConfigError> {
+    let mut limits = crate::hmi::server::Limits::default();
+    let total = file.max_connections.unwrap_or(limits.max_connections);
+    if !(1..=65_536).contains(&total) {
+        return Err(ConfigError::Invalid(format!(
+            "hmi.max_connections = {total} — use 1..65536 (each connection is a file descriptor; 128 suits a vehicle)"
+        )));
+    }
+    let per = file
+        .max_connections_per_address
+        .unwrap_or(limits.max_connections_per_address.min(total));
+    if per == 0 || per > total {
+        return Err(ConfigError::Invalid(format!(
+            "hmi.max_connections_per_address = {per} — use 1..={total} (at most hmi.max_connections), \
+             so that one host cannot take every connection"
+        )));
+    }
+    let timeout_s = file
+        .header_timeout_s
+        .unwrap_or(limits.header_timeout.as_secs_f64());
+    if !(0.1..=300.0).contains(&timeout_s) {
+        return Err(ConfigError::Invalid(format!(
+            "hmi.header_timeout_s = {timeout_s} — use a number of seconds in 0.1..300 (10 is the default)"
+        )));
+    }
+    limits.max_connections = total;
+    limits.max_connections_per_address = per;
+    limits.header_timeout = std::time::Duration::from_secs_f64(timeout_s);
+    Ok(limits)
+}
+
+/// `--tls` over `[hmi] tls`, with its files and names checked.
+fn resolve_tls(
+    flag: Option<TlsModeName>,
+    file: &HmiFileConfig,
+) -> Result<crate::hmi::tls::TlsSettings, ConfigError> {
+    use crate::hmi::tls::{TlsMode, TlsSettings};
+    let mode = match flag.or(file.tls).unwrap_or(TlsModeName::Off) {
+        TlsModeName::Off => TlsMode::Off,
+        TlsModeName::SelfSigned => TlsMode::SelfSigned,
+        TlsModeName::Files => match (&file.tls_cert, &file.tls_key) {
+            (Some(cert), Some(key)) => TlsMode::Files {
+                cert: cert.clone(),
+                key: key.clone(),
+            },
+            _ => {
+                return Err(ConfigError::Invalid(
+                    "hmi.tls = \"files\" needs both hmi.tls_cert and hmi.tls_key (PEM files) — \
+                     set them, or use tls = \"self-signed\""
+                        .into(),
+                ));
+            }
+        },
+    };
+    if !matches!(mode, TlsMode::Files { .. }) && (file.tls_cert.is_some() || file.tls_key.is_some())
+    {
+        return Err(ConfigError::Invalid(
+            "hmi.tls_cert / hmi.tls_key are set but hmi.tls is not \"files\" — \
+             set tls = \"files\" to serve them, or remove them"
+                .into(),
+        ));
+    }
+    let names = file.tls_names.clone().unwrap_or_default();
+    for n in &names {
+        if rustls::pki_types::ServerName::try_from(n.as_str()).is_err() {
+            return Err(ConfigError::Invalid(format!(
+                "hmi.tls_names contains \"{n}\" — each must be a DNS name (rov.local) or an IP address (192.168.2.2)"
+            )));
+        }
+    }
+    Ok(TlsSettings { mode, names })
 }
 
 /// Emulator options for `emulate-board`: flags over the file's `[emulator]`.

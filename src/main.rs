@@ -51,8 +51,8 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
             signing(&command, &data_dir)?;
         }
         Some(CliCommand::Hmi { command }) => {
-            let data_dir = config::resolve(&cli.run)?.data_dir;
-            hmi(&command, &data_dir)?;
+            let settings = config::resolve(&cli.run)?;
+            hmi(&command, &settings)?;
         }
         Some(CliCommand::EmulateBoard(args)) => {
             init_logging(None)?;
@@ -126,11 +126,11 @@ fn signing(command: &SigningCommand, data_dir: &std::path::Path) -> anyhow::Resu
     Ok(())
 }
 
-/// `neptunus hmi set-password|clear-password|status`.
-fn hmi(command: &HmiCommand, data_dir: &std::path::Path) -> anyhow::Result<()> {
+/// `neptunus hmi set-password|clear-password|status|tls-fingerprint`.
+fn hmi(command: &HmiCommand, settings: &config::Settings) -> anyhow::Result<()> {
     use neptunus::hmi::auth::PasswordStore;
     use std::io::IsTerminal as _;
-    let store = PasswordStore::new(data_dir);
+    let store = PasswordStore::new(&settings.data_dir);
     let mut out = std::io::stdout();
     match command {
         HmiCommand::SetPassword => {
@@ -181,6 +181,22 @@ fn hmi(command: &HmiCommand, data_dir: &std::path::Path) -> anyhow::Result<()> {
                 store.path().display()
             )?,
         },
+        HmiCommand::TlsFingerprint => {
+            let tls = &settings.hmi.tls;
+            let (path, fingerprint, generated) =
+                neptunus::hmi::tls::served_fingerprint(tls, &settings.data_dir)?;
+            if generated {
+                writeln!(out, "made a self-signed certificate: {}", path.display())?;
+            }
+            writeln!(out, "SHA-256 fingerprint of {}:", path.display())?;
+            writeln!(out, "{fingerprint}")?;
+            if tls.mode == neptunus::hmi::tls::TlsMode::Off {
+                writeln!(
+                    out,
+                    "(TLS is off in this configuration: this is the certificate tls = \"self-signed\" serves)"
+                )?;
+            }
+        }
     }
     Ok(())
 }

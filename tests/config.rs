@@ -277,3 +277,62 @@ fn hmi_access_keys_resolve() {
     assert_eq!(s.hmi.max_watchers, 32);
     assert!(s.hmi.allowed_origins.is_empty());
 }
+
+/// `[hmi]` transport keys: the defaults, the README's values, and refusals
+/// that name the key, the value and the fix.
+#[test]
+fn hmi_transport_keys_resolve_and_bad_ones_name_the_key() {
+    use neptunus::hmi::tls::TlsMode;
+    let resolve_text = |text: &str, extra: &[&str]| {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("n.toml");
+        std::fs::write(&path, text).unwrap();
+        let mut args = vec![
+            "neptunus",
+            "--sim",
+            "--config",
+            path.to_str().unwrap(),
+            "--data-dir",
+            "/tmp/x",
+        ];
+        args.extend_from_slice(extra);
+        resolve(&Cli::parse_from(args).run).map(|s| s.hmi)
+    };
+    let d = resolve_text("", &[]).unwrap();
+    assert_eq!(d.limits.max_connections, 128);
+    assert_eq!(d.limits.max_connections_per_address, 32);
+    assert_eq!(d.limits.header_timeout, std::time::Duration::from_secs(10));
+    assert_eq!(d.tls.mode, TlsMode::Off, "TLS is off by default");
+    let s = resolve_text(
+        "[hmi]\nmax_connections = 10\nmax_connections_per_address = 4\nheader_timeout_s = 2.5\ntls = \"self-signed\"\ntls_names = [\"rov.local\", \"192.168.2.2\"]\n",
+        &[],
+    )
+    .unwrap();
+    assert_eq!(s.limits.max_connections, 10);
+    assert_eq!(s.limits.max_connections_per_address, 4);
+    assert_eq!(s.limits.header_timeout.as_millis(), 2500);
+    assert_eq!(s.tls.mode, TlsMode::SelfSigned);
+    assert_eq!(s.tls.names, ["rov.local", "192.168.2.2"]);
+    // The flag wins over the file.
+    let s = resolve_text("[hmi]\ntls = \"self-signed\"\n", &["--tls", "off"]).unwrap();
+    assert_eq!(s.tls.mode, TlsMode::Off);
+    for (text, needle) in [
+        ("[hmi]\nmax_connections = 0\n", "hmi.max_connections = 0"),
+        (
+            "[hmi]\nmax_connections = 10\nmax_connections_per_address = 11\n",
+            "hmi.max_connections_per_address = 11",
+        ),
+        (
+            "[hmi]\nheader_timeout_s = 0.0\n",
+            "hmi.header_timeout_s = 0",
+        ),
+        ("[hmi]\nheader_timeout_s = nan\n", "hmi.header_timeout_s"),
+        ("[hmi]\ntls = \"on\"\n", "tls"),
+        ("[hmi]\ntls = \"files\"\n", "tls_cert"),
+        ("[hmi]\ntls_cert = \"/x.pem\"\n", "tls = \"files\""),
+        ("[hmi]\ntls_names = [\"bad name\"]\n", "bad name"),
+    ] {
+        let err = resolve_text(text, &[]).map(|_| ()).unwrap_err().to_string();
+        assert!(err.contains(needle), "{text:?} → {err}");
+    }
+}

@@ -30,10 +30,17 @@ fn find(path: &str) -> Option<rust_embed::EmbeddedFile> {
     }
 }
 
-/// The embedded file at `path` (no leading slash), or 404.
+/// The embedded file at `path` (no leading slash), or 404. The 404 never
+/// repeats the path: a body echoing the request is a reflection an attacker
+/// can shape (content sniffing, phishing text under the vehicle's address).
 pub fn response(path: &str) -> Response {
     let Some(file) = find(path) else {
-        return (StatusCode::NOT_FOUND, format!("no such file: /{path}")).into_response();
+        return (
+            StatusCode::NOT_FOUND,
+            [(header::CONTENT_TYPE, "text/plain; charset=utf-8")],
+            "no such page on this vehicle: open / for the operator interface",
+        )
+            .into_response();
     };
     let mime = file.metadata.mimetype().to_owned();
     let mime = if mime.starts_with("text/")

@@ -21,12 +21,9 @@ use axum::response::{IntoResponse, Response};
 use super::Shared;
 use super::auth::{self, Admit, COOKIE, LOGIN_LIFETIME, ThrottleNote};
 
-/// Set on a request by the accept loop when the connection is TLS (the
-/// login cookie is then `Secure`, and the page's own origin is `https://`).
-#[derive(Debug, Clone, Copy, Default)]
-pub struct ConnInfo {
-    pub tls: bool,
-}
+// Set on every request by the accept loop: with TLS the login cookie is
+// `Secure` and the page's own origin is `https://`.
+use super::server::ConnInfo;
 
 /// Largest login request body.
 const LOGIN_BODY_BYTES: usize = 1024;

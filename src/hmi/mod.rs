@@ -1,6 +1,8 @@
-//! The browser HMI: an HTTP server (axum) with the operator and developer
-//! interfaces (`web/`, embedded), a JSON WebSocket at `/ws` and a small REST
-//! API.
+//! The browser HMI: an HTTP server (axum routes on our own hardened accept
+//! loop, [`server`]) with the operator and developer interfaces (`web/`,
+//! embedded), a JSON WebSocket at `/ws` and a small REST API, over plain
+//! HTTP or TLS ([`tls`]), with security headers on every response
+//! ([`headers`]).
 //!
 //! Each WebSocket session is a MAVLink ground station inside the process:
 //! it gets its own system id from `[hmi] sysid_min..=sysid_max`, turns the
@@ -28,10 +30,13 @@
 pub mod assets;
 pub mod auth;
 pub mod guard;
+pub mod headers;
 pub mod model;
 pub mod protocol;
 pub mod rest;
+pub mod server;
 pub mod session;
+pub mod tls;
 
 use std::collections::BTreeSet;
 use std::future::Future;
@@ -73,6 +78,8 @@ pub enum HmiError {
     },
     #[error(transparent)]
     Password(#[from] auth::PasswordError),
+    #[error(transparent)]
+    Tls(#[from] tls::TlsError),
 }
 
 /// One start-up line saying who may pilot from the browser.
@@ -109,6 +116,10 @@ pub struct HmiSettings {
     pub max_watchers: usize,
     /// Rotation of the camera image in the page (0, 90, 180, 270).
     pub camera_rotation_deg: i32,
+    /// Connection caps and the header-read timeout.
+    pub limits: server::Limits,
+    /// `[hmi] tls` and its files and names.
+    pub tls: tls::TlsSettings,
 }
 
 impl Default for HmiSettings {
@@ -122,6 +133,8 @@ impl Default for HmiSettings {
             allowed_origins: Vec::new(),
             max_watchers: DEFAULT_MAX_WATCHERS,
             camera_rotation_deg: 0,
+            limits: server::Limits::default(),
+            tls: tls::TlsSettings::default(),
         }
     }
 }
@@ -207,6 +220,9 @@ pub struct HmiContext {
     /// `/snapshot.jpg`, `/camera/status`). With them the page shows video;
     /// without, a "no video" placeholder.
     pub extra_routes: Option<axum::Router>,
+    /// Connection limits and TLS ([`server::Transport::default`]: the
+    /// default limits, plain HTTP).
+    pub transport: server::Transport,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -360,15 +376,23 @@ pub async fn serve(
         app = app.merge(extra);
     }
     let app = guard::layer(app, Arc::clone(&shared));
-    let result = axum::serve(
-        listener,
-        app.into_make_service_with_connect_info::<SocketAddr>(),
-    )
-    .with_graceful_shutdown(shutdown)
-    .await;
+    // Around everything merged, fallback included: every response has them.
+    let app = app.layer(axum::middleware::from_fn(headers::security_headers));
+    let result = server::run(listener, app, ctx.transport, shutdown).await;
     watcher.abort();
     sweeper.abort();
     result
+}
+
+/// A pilot password crossing the network in clear text: say so at start
+/// (the loopback interface never leaves the machine).
+fn warn_plaintext(password_set: bool, local: SocketAddr) {
+    if password_set && !local.ip().is_loopback() {
+        tracing::warn!(
+            "browser HMI on {local} without TLS: the pilot password and the session cross the network in clear text — \
+             set [hmi] tls = \"self-signed\" (or --tls self-signed) unless the tether is a private point-to-point link"
+        );
+    }
 }
 
 /// The app's handle on a running HMI: the inputs its sessions produce.
@@ -382,7 +406,9 @@ pub struct Hmi {
 impl Hmi {
     /// Binds and starts the HMI server for endpoint index `endpoint`
     /// (or does nothing with `--http off`). The bound address is logged
-    /// and written to `DATA_DIR/http.addr`.
+    /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
+    /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
+    /// certificate or key file is an error naming it.
     pub async fn start(
         settings: &HmiSettings,
         endpoint: usize,
@@ -416,15 +442,50 @@ impl Hmi {
             Err(source) => return Err(HmiError::Bind { addr, source }),
         };
         let local = listener.local_addr().unwrap_or(addr);
-        std::fs::write(&addr_file, format!("{local}\n")).map_err(|source| HmiError::AddrFile {
-            path: addr_file.clone(),
-            source,
-        })?;
-        tracing::info!(addr = %local, "browser HMI listening on http://{local}/");
         let password = auth::PasswordStore::new(&data_dir).load()?;
         let signing = crate::mavlink::signing::SigningStore::new(&data_dir)
             .load_key_checked()
             .is_ok_and(|(k, _)| k.is_some());
+        let tls = tls::load(&settings.tls, &data_dir)?;
+        let url = match &tls {
+            Some(t) => {
+                if t.generated {
+                    tracing::info!(
+                        "browser HMI: self-signed TLS certificate made in {}",
+                        t.cert_path.display()
+                    );
+                }
+                tracing::info!(
+                    "browser HMI TLS certificate {}: SHA-256 fingerprint {} — check that the browser shows the same \
+                     (also printed by `neptunus hmi tls-fingerprint`)",
+                    t.cert_path.display(),
+                    t.fingerprint
+                );
+                format!("https://{local}/")
+            }
+            None => {
+                warn_plaintext(password.is_some(), local);
+                format!("http://{local}/")
+            }
+        };
+        // Plain HTTP keeps the bare address (what scripts already read).
+        let addr_text = if tls.is_some() {
+            url.clone()
+        } else {
+            local.to_string()
+        };
+        // A read-only data directory must not keep the pilot from the page:
+        // the address is in the log line below too.
+        if let Err(source) = std::fs::write(&addr_file, format!("{addr_text}\n")) {
+            tracing::warn!(
+                "{}",
+                HmiError::AddrFile {
+                    path: addr_file.clone(),
+                    source,
+                }
+            );
+        }
+        tracing::info!(addr = %local, "browser HMI listening on {url}");
         log_access_policy(settings, password.is_some(), signing);
         let (tx, rx) = mpsc::channel(1024);
         let ctx = HmiContext {
@@ -442,6 +503,10 @@ impl Hmi {
             camera_rotation_deg: settings.camera_rotation_deg,
             data_dir,
             extra_routes,
+            transport: server::Transport {
+                limits: settings.limits,
+                tls: tls.map(|t| t.config),
+            },
         };
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {

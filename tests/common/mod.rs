@@ -161,13 +161,18 @@ impl Vehicle {
         })
     }
 
-    /// The browser HMI's address, from `DATA_DIR/http.addr` (waits for it).
+    /// The browser HMI's address, from `DATA_DIR/http.addr` (waits for it;
+    /// the file holds `ADDR`, or `https://ADDR/` with TLS on).
     pub fn http_addr(&mut self, within: Duration) -> anyhow::Result<std::net::SocketAddr> {
         let path = self.data_dir.join("http.addr");
         let end = Instant::now() + within;
         loop {
             if let Ok(text) = std::fs::read_to_string(&path)
-                && let Ok(addr) = text.trim().parse()
+                && let Ok(addr) = text
+                    .trim()
+                    .trim_start_matches("https://")
+                    .trim_end_matches('/')
+                    .parse()
             {
                 return Ok(addr);
             }
@@ -177,6 +182,11 @@ impl Vehicle {
             }
             thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Its data directory (`DIR/data`).
+    pub fn data_dir(&self) -> &Path {
+        &self.data_dir
     }
 
     /// The whole of its stderr.
