@@ -180,7 +180,7 @@ fn connect_from(src: Ipv4Addr, to: SocketAddr) -> TcpStream {
 /// Sends a whole request on a kept-alive connection and reads one reply
 /// (its Content-Length body).
 fn request_on(s: &mut TcpStream, path: &str) -> Reply {
-    write!(s, "GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    write!(s, "GET {path} HTTP/1.1\r\nHost: localhost\r\n\r\n").unwrap();
     s.set_read_timeout(Some(GENEROUS)).unwrap();
     let mut bytes = Vec::new();
     let mut buf = [0u8; 8192];
@@ -233,7 +233,7 @@ async fn half_open(
         if let Ok(Ok(mut s)) = connected {
             opened.fetch_add(1, Ordering::Relaxed);
             let _ = s
-                .write_all(b"GET / HTTP/1.1\r\nHost: x\r\nUser-Agent: half")
+                .write_all(b"GET / HTTP/1.1\r\nHost: localhost\r\nUser-Agent: half")
                 .await;
             let mut buf = [0u8; 512];
             tokio::select! {
@@ -509,7 +509,7 @@ fn connection_caps_close_extra_connections_at_once() {
     let end = Instant::now() + GENEROUS;
     loop {
         let mut s = connect_from(c, http);
-        write!(s, "GET /api/status HTTP/1.0\r\nHost: x\r\n\r\n").unwrap();
+        write!(s, "GET /api/status HTTP/1.0\r\nHost: localhost\r\n\r\n").unwrap();
         s.set_read_timeout(Some(GENEROUS)).unwrap();
         let mut bytes = Vec::new();
         let _ = s.read_to_end(&mut bytes);
@@ -823,7 +823,7 @@ fn shutdown_is_not_held_up_by_open_connections() {
         .block_on(tokio_tungstenite::connect_async(format!("ws://{http}/ws")))
         .unwrap();
     let mut video = TcpStream::connect(http).unwrap();
-    write!(video, "GET /video.mjpg HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    write!(video, "GET /video.mjpg HTTP/1.1\r\nHost: localhost\r\n\r\n").unwrap();
     video.set_read_timeout(Some(GENEROUS)).unwrap();
     let mut first = [0u8; 64];
     let n = video.read(&mut first).unwrap();
@@ -891,7 +891,7 @@ fn websockets_count_against_the_caps() {
 fn get_status(addr: SocketAddr) -> Option<u16> {
     let mut s = TcpStream::connect(addr).ok()?;
     s.set_read_timeout(Some(GENEROUS)).ok()?;
-    write!(s, "GET /api/status HTTP/1.0\r\nHost: x\r\n\r\n").ok()?;
+    write!(s, "GET /api/status HTTP/1.0\r\nHost: localhost\r\n\r\n").ok()?;
     let mut bytes = Vec::new();
     let _ = s.read_to_end(&mut bytes);
     let r = parse_reply(&bytes);
