@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use common::{Gcs, Traffic, Vehicle};
-use futures_util::StreamExt as _;
+use futures_util::{SinkExt as _, StreamExt as _};
 use neptunus::dialect::neptunus::*;
 use neptunus::mavlink::frame::FrameDecoder;
 use serde_json::Value;
@@ -658,13 +658,23 @@ async fn tls_get(tls: &tokio_rustls::TlsConnector, addr: SocketAddr, path: &str)
 
 type Wss = tokio_tungstenite::WebSocketStream<TlsStream>;
 
-/// Opens a browser session over `stream`: the WebSocket, then what the
-/// session needs before it is one (today: the welcome; a login step goes
-/// here when the protocol has one). Returns the welcome.
+/// The pilot password the TLS test sets with the CLI before the start.
+const PASSWORD: &str = "tide-pool-42";
+
+/// Opens a browser session over `stream`: the WebSocket, the welcome, then
+/// the pilot login with `PASSWORD` — the password crosses only the TLS
+/// stream. Returns the welcome.
 async fn open_session(stream: TlsStream, addr: SocketAddr) -> (Wss, Value) {
     let url = format!("wss://localhost:{}/ws", addr.port());
     let (mut ws, _) = tokio_tungstenite::client_async(url, stream).await.unwrap();
     let welcome = next_of(&mut ws, "welcome").await;
+    assert_eq!(welcome["password_required"], true, "{welcome}");
+    let login = serde_json::json!({"type": "login", "password": PASSWORD}).to_string();
+    ws.send(tokio_tungstenite::tungstenite::Message::Text(login.into()))
+        .await
+        .unwrap();
+    let r = next_of(&mut ws, "login_result").await;
+    assert_eq!(r["ok"], true, "the pilot login over TLS failed: {r}");
     (ws, welcome)
 }
 
@@ -685,6 +695,27 @@ async fn next_of(ws: &mut Wss, kind: &str) -> Value {
     }
 }
 
+/// `neptunus hmi set-password` with `PASSWORD` piped in.
+fn set_password(data: &Path) {
+    let mut child = std::process::Command::new(bin())
+        .args(["hmi", "set-password", "--data-dir"])
+        .arg(data)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    writeln!(stdin, "{PASSWORD}").unwrap();
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "hmi set-password: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The colon-hex SHA-256 fingerprints in `text`.
 fn fingerprints(text: &str) -> Vec<String> {
     text.split(|c: char| c.is_whitespace() || c == ',' || c == '"')
@@ -697,10 +728,12 @@ fn fingerprints(text: &str) -> Vec<String> {
 fn self_signed_tls_serves_the_page_and_websocket_and_keeps_its_certificate() {
     let _one = serial();
     let dir = tempfile::tempdir().unwrap();
+    // A remote pilot: nobody may pilot without the password.
     let cfg = config(
         dir.path(),
-        "tls = \"self-signed\"\ntls_names = [\"rov.test\"]\nheader_timeout_s = 2.0",
+        "tls = \"self-signed\"\ntls_names = [\"rov.test\"]\nheader_timeout_s = 2.0\nopen_control = \"none\"",
     );
+    set_password(&dir.path().join("data"));
     let script = "export RUST_LOG=info && exec \"$0\" \"$@\"";
     let mut vehicle = spawn_via_sh(dir.path(), script, &cfg, &[]);
     let http = vehicle.http_addr(GENEROUS).unwrap();
@@ -764,7 +797,8 @@ fn self_signed_tls_serves_the_page_and_websocket_and_keeps_its_certificate() {
             .expect("the TLS port kept a junk connection open");
         assert!(!String::from_utf8_lossy(&got).contains("200 OK"));
         next_of(&mut ws, "telemetry").await;
-        assert_eq!(tls_get(&tls, http, "/api/status").await.status, 200);
+        // With a password the REST API needs the login cookie, over TLS too.
+        assert_eq!(tls_get(&tls, http, "/api/status").await.status, 401);
     });
 
     // The log and the CLI give the same fingerprint.
