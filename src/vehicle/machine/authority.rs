@@ -9,6 +9,7 @@
 
 use std::time::Duration;
 
+use super::texts::ReplyKind;
 use super::{Now, Output, Sender, To, Vehicle, given};
 use crate::dialect::neptunus::*;
 use crate::eventlog::LogEvent;
@@ -215,7 +216,9 @@ impl Vehicle {
         }
     }
 
-    /// A refused command: the ACK result, and a rate-limited report.
+    /// A refused command: the ACK result, and a report to the sender alone,
+    /// rate-limited per sender (the refused must not make the vehicle talk
+    /// to the other stations).
     pub(super) fn refuse_command(
         &mut self,
         from: Sender,
@@ -224,13 +227,17 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) -> MavResult {
-        if self
-            .auth
-            .command_refusals
-            .hit(now.mono, COMMAND_REFUSAL_REPORT)
-        {
-            let text = format!("Refused {what} from sysid {}: {}", from.sysid, why.reason());
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+        self.auth.command_refusals.count += 1;
+        let text = format!("Refused {what} from sysid {}: {}", from.sysid, why.reason());
+        if self.reply_text_every(
+            from,
+            ReplyKind::Refused,
+            COMMAND_REFUSAL_REPORT,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &text,
+            now,
+            out,
+        ) {
             self.log("command_rejected", Some(from.sysid), text, out);
         }
         why.result()
@@ -245,14 +252,22 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if self.auth.input_refusals.hit(now.mono, INPUT_REPORT) {
-            let n = self.auth.input_refusals.count;
-            let text = format!(
-                "Ignoring {what} from sysid {}: {} ({n} refused)",
-                from.sysid,
-                why.reason()
-            );
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+        self.auth.input_refusals.count += 1;
+        let n = self.auth.input_refusals.count;
+        let text = format!(
+            "Ignoring {what} from sysid {}: {} ({n} refused)",
+            from.sysid,
+            why.reason()
+        );
+        if self.reply_text_every(
+            from,
+            ReplyKind::Input,
+            INPUT_REPORT,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &text,
+            now,
+            out,
+        ) {
             self.log("input_rejected", Some(from.sysid), text, out);
         }
     }
@@ -397,12 +412,15 @@ impl Vehicle {
             && id != 0.0
             && (id.round() - f32::from(from.sysid)).abs() > 0.5
         {
-            self.statustext(
+            self.reply_text(
+                from,
+                ReplyKind::Control,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!(
                     "Control request from sysid {} names sysid {id}: a station requests for itself",
                     from.sysid
                 ),
+                now,
                 out,
             );
             return MavResult::MAV_RESULT_DENIED;
@@ -438,8 +456,16 @@ impl Vehicle {
                         from.sysid,
                         Refusal::NotAllowed.reason()
                     );
-                    self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
-                    self.log("control_refused", Some(from.sysid), text, out);
+                    if self.reply_text(
+                        from,
+                        ReplyKind::Control,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &text,
+                        now,
+                        out,
+                    ) {
+                        self.log("control_refused", Some(from.sysid), text, out);
+                    }
                     return MavResult::MAV_RESULT_DENIED;
                 }
                 self.log(
