@@ -550,11 +550,14 @@ impl Io {
 struct ParamSaver {
     tx: Option<std::sync::mpsc::Sender<crate::vehicle::params::ParamStore>>,
     thread: Option<std::thread::JoinHandle<ParamFile>>,
+    /// Where results go; also used to answer at once when there is no thread.
+    results: Option<mpsc::UnboundedSender<Result<(), String>>>,
 }
 
 impl ParamSaver {
     fn spawn(file: ParamFile, results: mpsc::UnboundedSender<Result<(), String>>) -> Self {
         let (tx, rx) = std::sync::mpsc::channel::<crate::vehicle::params::ParamStore>();
+        let thread_results = results.clone();
         let thread = std::thread::Builder::new()
             .name("neptunus-params".into())
             .spawn(move || {
@@ -566,7 +569,7 @@ impl ParamSaver {
                     if result.is_ok() {
                         tracing::debug!(path = %file.path().display(), "parameters saved");
                     }
-                    let _ = results.send(result);
+                    let _ = thread_results.send(result);
                 }
                 file
             });
@@ -574,12 +577,16 @@ impl ParamSaver {
             Ok(thread) => Self {
                 tx: Some(tx),
                 thread: Some(thread),
+                results: Some(results),
             },
             Err(e) => {
                 tracing::error!(
                     "cannot start the parameter saver thread: {e}; parameters will not be saved"
                 );
-                Self::stopped()
+                Self {
+                    results: Some(results),
+                    ..Self::stopped()
+                }
             }
         }
     }
@@ -588,12 +595,16 @@ impl ParamSaver {
         Self {
             tx: None,
             thread: None,
+            results: None,
         }
     }
 
+    /// Queues a save; without a saver thread the core hears at once that
+    /// it failed (and tells the stations).
     fn save(&self, store: crate::vehicle::params::ParamStore) {
-        if let Some(tx) = &self.tx {
-            let _ = tx.send(store);
+        let sent = self.tx.as_ref().is_some_and(|tx| tx.send(store).is_ok());
+        if !sent && let Some(results) = &self.results {
+            let _ = results.send(Err("the parameter saver thread is not running".into()));
         }
     }
 

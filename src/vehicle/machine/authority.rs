@@ -227,9 +227,14 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) -> MavResult {
-        self.auth.command_refusals.count += 1;
+        // The log is bounded for all senders together (many spoofed ids
+        // must not flood it); the replies per sender.
+        let log_due = self
+            .auth
+            .command_refusals
+            .hit(now.mono, COMMAND_REFUSAL_REPORT);
         let text = format!("Refused {what} from sysid {}: {}", from.sysid, why.reason());
-        if self.reply_text_every(
+        let replied = self.reply_text_every(
             from,
             ReplyKind::Refused,
             COMMAND_REFUSAL_REPORT,
@@ -237,7 +242,8 @@ impl Vehicle {
             &text,
             now,
             out,
-        ) {
+        );
+        if replied && log_due {
             self.log("command_rejected", Some(from.sysid), text, out);
         }
         why.result()
@@ -252,14 +258,14 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        self.auth.input_refusals.count += 1;
+        let log_due = self.auth.input_refusals.hit(now.mono, INPUT_REPORT);
         let n = self.auth.input_refusals.count;
         let text = format!(
             "Ignoring {what} from sysid {}: {} ({n} refused)",
             from.sysid,
             why.reason()
         );
-        if self.reply_text_every(
+        let replied = self.reply_text_every(
             from,
             ReplyKind::Input,
             INPUT_REPORT,
@@ -267,7 +273,8 @@ impl Vehicle {
             &text,
             now,
             out,
-        ) {
+        );
+        if replied && log_due {
             self.log("input_rejected", Some(from.sysid), text, out);
         }
     }

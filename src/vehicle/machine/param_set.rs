@@ -109,6 +109,10 @@ impl Vehicle {
                 if before != Some(v) {
                     self.on_param_changed(name);
                     self.param_changed(name, now);
+                }
+                // Logged once per second per parameter: a dragged slider is
+                // not fifty lines.
+                if before != Some(v) && self.persist.log_change_due(name, now.mono) {
                     self.log(
                         "param_set",
                         Some(from.sysid),

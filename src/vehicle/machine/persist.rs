@@ -39,9 +39,23 @@ pub(super) struct Persist {
     retry_at: Option<Duration>,
     /// Saves asked for, for tests and statistics.
     pub requested: u64,
+    /// When each parameter's change was last logged.
+    logged: std::collections::HashMap<&'static str, Duration>,
 }
 
 impl Persist {
+    /// Whether a change of `name` goes to the event log now (one per second
+    /// per parameter; there are only so many parameters).
+    pub fn log_change_due(&mut self, name: &'static str, now: Duration) -> bool {
+        match self.logged.get(name) {
+            Some(t) if now.saturating_sub(*t) < Duration::from_secs(1) => false,
+            _ => {
+                self.logged.insert(name, now);
+                true
+            }
+        }
+    }
+
     fn backoff(failures: u32) -> Duration {
         let shift = failures.saturating_sub(1).min(5);
         (RETRY_FIRST * (1 << shift)).min(RETRY_MAX)
