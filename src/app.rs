@@ -67,10 +67,20 @@ pub async fn run(
     mut settings: Settings,
     shutdown: impl Future<Output = ()>,
 ) -> Result<(), AppError> {
-    std::fs::create_dir_all(&settings.data_dir).map_err(|source| AppError::DataDir {
-        path: settings.data_dir.clone(),
-        source,
-    })?;
+    // A broken data directory (read-only, full, a file in the way) must not
+    // keep the vehicle from running: parameters then live in memory, logs
+    // are lost, and every such problem is loud and shown in SYS_STATUS.
+    let mut storage_problems: Vec<String> = Vec::new();
+    if let Err(source) = std::fs::create_dir_all(&settings.data_dir) {
+        let e = AppError::DataDir {
+            path: settings.data_dir.clone(),
+            source,
+        };
+        tracing::error!(
+            "{e} — running without storage: parameters changes are kept in memory only, logs are lost (fix the directory, or pass another --data-dir)"
+        );
+        storage_problems.push(e.to_string());
+    }
     let board = match &settings.board {
         BoardSource::Simulated(opts) => {
             let board = PtyBoard::spawn(opts.clone(), None)?;
@@ -86,6 +96,29 @@ pub async fn run(
 
     // Parameters: a corrupt file is set aside and defaults apply, loudly.
     let param_file = ParamFile::new(&settings.data_dir);
+    match param_file.remove_stale_tmp() {
+        Ok(true) => tracing::warn!(
+            "removed {} left by an interrupted save (params.toml is intact)",
+            param_file.tmp_path().display()
+        ),
+        Ok(false) => {}
+        Err(e) if storage_problems.is_empty() => {
+            tracing::warn!("cannot remove {}: {e}", param_file.tmp_path().display())
+        }
+        Err(_) => {}
+    }
+    if storage_problems.is_empty()
+        && let Err(e) = probe_writable(&settings.data_dir)
+    {
+        tracing::error!(
+            "data directory {} is not writable ({e}): parameter changes will be kept in memory only and reported as not saved until it is",
+            settings.data_dir.display()
+        );
+        storage_problems.push(format!(
+            "data directory {} not writable: {e}",
+            settings.data_dir.display()
+        ));
+    }
     let (mut store, warnings) = param_file.load();
     for w in &warnings {
         tracing::warn!("parameters: {w}");
@@ -116,7 +149,27 @@ pub async fn run(
         .iter()
         .map(|u| u.trusted)
         .collect();
-    let router = Router::start(specs, router_cfg, in_tx).await?;
+    let router = match Router::start(specs, router_cfg.clone(), in_tx.clone()).await {
+        Err(EndpointError::Tlog { dir, source }) => {
+            tracing::error!(
+                "telemetry log off: cannot write {}: {source} — the vehicle runs without a tlog",
+                dir.display()
+            );
+            storage_problems.push(format!("telemetry log {}: {source}", dir.display()));
+            let cfg = RouterConfig {
+                tlog: None,
+                ..router_cfg
+            };
+            let specs = settings
+                .mavlink
+                .endpoints
+                .iter()
+                .map(|u| u.spec.clone())
+                .collect();
+            Router::start(specs, cfg, in_tx).await?
+        }
+        other => other?,
+    };
     for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
         tracing::info!(endpoint = %spec, local = ?router.local_addr(i), "MAVLink endpoint");
     }
@@ -130,13 +183,51 @@ pub async fn run(
     // HMI: one more endpoint after the MAVLink ones, for the browser sessions.
     let hmi_ep = settings.mavlink.endpoints.len();
     let hmi_profiles = profiles.clone();
-    let mut vehicle =
-        Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1).with_profiles(profiles);
-    let event_log = EventLog::start(EventLogConfig::new(settings.data_dir.join("events")))?;
-    let signing = LinkSigning::load(SigningStore::new(&settings.data_dir))?;
-    vehicle.set_signing_active(signing.active());
+    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
+        .with_profiles(profiles)
+        .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max);
+    let (event_log, log_problem) =
+        EventLog::start_or_degraded(EventLogConfig::new(settings.data_dir.join("events")));
+    if let Some(e) = log_problem {
+        tracing::error!(
+            "event log: {e} — events are lost until it can be written (retried at every event)"
+        );
+        storage_problems.push(format!("event log: {e}"));
+    }
+    let (signing, fail_closed) = match LinkSigning::load(SigningStore::new(&settings.data_dir)) {
+        Ok(s) => (s, false),
+        Err(e) => {
+            // A data directory that cannot hold a file holds no key either.
+            let no_key = matches!(&e, AppError::Signing(SigningError::Read { source, .. })
+                if matches!(source.kind(), std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory));
+            if no_key {
+                tracing::warn!("message signing off: {e}");
+            } else {
+                // A key may exist that we cannot read: never run open. Only
+                // signed traffic may control, and nothing can be signed, so
+                // MAVLink stations watch; the browser HMI still controls.
+                tracing::error!(
+                    "message signing key unusable: {e} — MAVLink ground stations may only watch until it is fixed; the browser HMI can still control"
+                );
+            }
+            (
+                LinkSigning {
+                    store: SigningStore::new(&settings.data_dir),
+                    keyed: None,
+                    last_timestamp: 0,
+                    rejected: 0,
+                    last_report: None,
+                },
+                !no_key,
+            )
+        }
+    };
+    vehicle.set_signing_active(signing.active() || fail_closed);
     if signing.active() {
         tracing::info!("message signing on: unsigned ground stations may watch but not control");
+    }
+    if !storage_problems.is_empty() {
+        vehicle.set_storage_problem(Some(storage_problems.join("; ")));
     }
     let t0 = Instant::now();
     let clock = move || Now {
@@ -160,11 +251,13 @@ pub async fn run(
         Some(camera.routes()),
     )
     .await?;
+    let (saved_tx, mut saved_rx) = mpsc::unbounded_channel();
+    let saver = ParamSaver::spawn(param_file, saved_tx);
     let mut io = Io {
         hmi: hmi.outlet(),
         router: router.clone(),
         link: link.clone(),
-        params: param_file,
+        params: saver,
         seq: 0,
         last_healthy: None,
         events: event_log.clone(),
@@ -208,6 +301,9 @@ pub async fn run(
                 }
             }
             input = hmi.recv() => vehicle.handle(input, clock(), &mut outputs),
+            Some(result) = saved_rx.recv() => {
+                vehicle.handle(Input::ParamsSaved(result), clock(), &mut outputs);
+            }
             ev = events.recv() => match ev {
                 None => break,
                 Some(LinkEvent::State { state, reason }) => vehicle.handle(Input::Link { state, reason }, clock(), &mut outputs),
@@ -280,6 +376,11 @@ pub async fn run(
     }
     tracing::info!("shutting down: thrusters to neutral");
     link.send(NEUTRAL);
+    // Changes acknowledged but not yet on disk (the debounce, a save in
+    // flight, a failing disk) get one last try.
+    let unsaved = vehicle.params_unsaved().then(|| vehicle.params().clone());
+    let saver = std::mem::replace(&mut io.params, ParamSaver::stopped());
+    let _ = tokio::task::spawn_blocking(move || saver.finish(unsaved)).await;
     // Give the link a moment to put the neutral command on the wire.
     tokio::time::sleep(Duration::from_millis(50)).await;
     drop(link);
@@ -338,7 +439,7 @@ struct Io {
     hmi: crate::hmi::Outlet,
     router: RouterHandle,
     link: link::LinkHandle,
-    params: ParamFile,
+    params: ParamSaver,
     seq: u8,
     last_healthy: Option<Duration>,
     events: EventLog,
@@ -424,11 +525,7 @@ impl Io {
                         tracing::error!("signing key not saved: {e}");
                     }
                 }
-                Output::SaveParams => {
-                    if let Err(e) = self.params.save(vehicle.params()) {
-                        tracing::error!("parameters not saved: {e}");
-                    }
-                }
+                Output::SaveParams => self.params.save(vehicle.params().clone()),
                 Output::Healthy => {
                     // The link only needs to hear this every few hundred ms.
                     if self
@@ -445,6 +542,91 @@ impl Io {
             }
         }
     }
+}
+
+/// Writes `params.toml` on its own thread, so a slow or failing disk never
+/// stalls the vehicle task; each result goes back to the core. The core asks
+/// for one save at a time, so the queue never holds more than one.
+struct ParamSaver {
+    tx: Option<std::sync::mpsc::Sender<crate::vehicle::params::ParamStore>>,
+    thread: Option<std::thread::JoinHandle<ParamFile>>,
+    /// Where results go; also used to answer at once when there is no thread.
+    results: Option<mpsc::UnboundedSender<Result<(), String>>>,
+}
+
+impl ParamSaver {
+    fn spawn(file: ParamFile, results: mpsc::UnboundedSender<Result<(), String>>) -> Self {
+        let (tx, rx) = std::sync::mpsc::channel::<crate::vehicle::params::ParamStore>();
+        let thread_results = results.clone();
+        let thread = std::thread::Builder::new()
+            .name("neptunus-params".into())
+            .spawn(move || {
+                for store in rx {
+                    let result = file.save(&store).map_err(|e| {
+                        tracing::error!("parameters not saved: {e}");
+                        e.to_string()
+                    });
+                    if result.is_ok() {
+                        tracing::debug!(path = %file.path().display(), "parameters saved");
+                    }
+                    let _ = thread_results.send(result);
+                }
+                file
+            });
+        match thread {
+            Ok(thread) => Self {
+                tx: Some(tx),
+                thread: Some(thread),
+                results: Some(results),
+            },
+            Err(e) => {
+                tracing::error!(
+                    "cannot start the parameter saver thread: {e}; parameters will not be saved"
+                );
+                Self {
+                    results: Some(results),
+                    ..Self::stopped()
+                }
+            }
+        }
+    }
+
+    fn stopped() -> Self {
+        Self {
+            tx: None,
+            thread: None,
+            results: None,
+        }
+    }
+
+    /// Queues a save; without a saver thread the core hears at once that
+    /// it failed (and tells the stations).
+    fn save(&self, store: crate::vehicle::params::ParamStore) {
+        let sent = self.tx.as_ref().is_some_and(|tx| tx.send(store).is_ok());
+        if !sent && let Some(results) = &self.results {
+            let _ = results.send(Err("the parameter saver thread is not running".into()));
+        }
+    }
+
+    /// Blocking: waits for the save in flight, then writes `last` if given.
+    fn finish(mut self, last: Option<crate::vehicle::params::ParamStore>) {
+        self.tx = None;
+        let file = self.thread.take().and_then(|t| t.join().ok());
+        if let (Some(file), Some(store)) = (file, last) {
+            match file.save(&store) {
+                Ok(()) => tracing::info!("unsaved parameter changes saved at shutdown"),
+                Err(e) => tracing::error!("parameter changes lost at shutdown: {e}"),
+            }
+        }
+    }
+}
+
+/// Creates and removes a file in `dir`: true writability (permission bits
+/// say nothing for root, nor for a read-only mount).
+fn probe_writable(dir: &std::path::Path) -> std::io::Result<()> {
+    let probe = dir.join(".neptunus-write-probe");
+    std::fs::write(&probe, b"")?;
+    std::fs::remove_file(&probe)
 }
 
 fn merge_nav(old: NavSample, new: NavSample) -> NavSample {

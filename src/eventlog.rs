@@ -175,6 +175,42 @@ impl EventLog {
     pub fn with_capacity(cfg: EventLogConfig, queue_len: usize) -> Result<Self, EventLogError> {
         let file = EventFile::open(&cfg)?;
         tracing::info!(path = %file.path().display(), "event log started");
+        Self::spawn(file, queue_len)
+    }
+
+    /// Like [`start`](Self::start), but a folder or file that cannot be
+    /// opened (read-only or full data directory, a file in the way) does not
+    /// stop the vehicle: the log starts closed, returns why, and the writer
+    /// tries again at every event, so it recovers when the disk does. Events
+    /// until then are lost and counted (`write_errors`).
+    pub fn start_or_degraded(cfg: EventLogConfig) -> (Self, Option<EventLogError>) {
+        let (file, problem) = match EventFile::open(&cfg) {
+            Ok(file) => (file, None),
+            Err(e) => (EventFile::closed(&cfg), Some(e)),
+        };
+        match Self::spawn(file, DEFAULT_QUEUE_LEN) {
+            Ok(log) => {
+                if problem.is_none() {
+                    tracing::info!(dir = %cfg.dir.display(), "event log started");
+                }
+                (log, problem)
+            }
+            // No thread: a log whose writer is gone drops and counts every event.
+            Err(e) => {
+                let (tx, _) = std::sync::mpsc::sync_channel(0);
+                let log = Self {
+                    inner: Arc::new(Inner {
+                        tx,
+                        counters: Arc::new(Counters::default()),
+                        thread: Mutex::new(None),
+                    }),
+                };
+                (log, Some(problem.unwrap_or(e)))
+            }
+        }
+    }
+
+    fn spawn(file: EventFile, queue_len: usize) -> Result<Self, EventLogError> {
         let counters = Arc::new(Counters::default());
         let (tx, rx) = std::sync::mpsc::sync_channel(queue_len);
         let thread_counters = Arc::clone(&counters);
@@ -481,6 +517,19 @@ impl EventFile {
             source,
         })?;
         Ok(file)
+    }
+
+    /// Not open yet: the first event opens it (creating the folder).
+    fn closed(cfg: &EventLogConfig) -> Self {
+        Self {
+            dir: cfg.dir.clone(),
+            path: cfg.dir.join(FILE_NAME),
+            max_bytes: cfg.max_bytes,
+            keep: cfg.keep,
+            file: None,
+            size: 0,
+            torn: false,
+        }
     }
 
     fn path(&self) -> &Path {

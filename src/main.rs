@@ -70,13 +70,13 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
         }
         None => {
             let settings = config::resolve(&cli.run)?;
-            std::fs::create_dir_all(&settings.data_dir).with_context(|| {
-                format!(
-                    "cannot create data directory {}",
-                    settings.data_dir.display()
-                )
-            })?;
-            init_logging(Some(&settings.data_dir))?;
+            // A broken data directory degrades (app::run says how, loudly);
+            // it never keeps the vehicle from starting.
+            let _ = std::fs::create_dir_all(&settings.data_dir);
+            if let Err(e) = init_logging(Some(&settings.data_dir)) {
+                init_logging(None)?;
+                tracing::error!("{e:#} — logging to stderr only");
+            }
             tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
             runtime()?.block_on(neptunus::app::run(settings, shutdown_signal()))?;
         }

@@ -501,3 +501,34 @@ fn a_flood_into_a_tiny_queue_drops_and_counts_without_blocking() {
         assert_eq!(last_us.is_some(), stats.written > 0);
     }
 }
+
+/// A data directory that cannot hold the log (here a file in the way; root
+/// ignores permission bits) does not stop the vehicle: the log starts
+/// closed, says why, loses and counts events, and writes again once the
+/// folder can be made.
+#[test]
+fn a_log_that_cannot_open_degrades_and_recovers_when_the_disk_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let data_dir = tmp.path().join("data");
+    std::fs::write(&data_dir, "i am a file").unwrap();
+    let dir = data_dir.join("events");
+    let (log, problem) = EventLog::start_or_degraded(cfg(&dir, 1 << 20, 5));
+    assert!(
+        matches!(&problem, Some(EventLogError::NotAFolder { .. })),
+        "{problem:?}"
+    );
+    log.record(1, Duration::ZERO, &LogEvent::new("lost", None, "no disk"));
+    // The writer has tried (a condition, not a sleep).
+    let end = std::time::Instant::now() + Duration::from_secs(10);
+    while log.stats().write_errors == 0 && std::time::Instant::now() < end {
+        std::thread::yield_now();
+    }
+    // The disk is back.
+    std::fs::remove_file(&data_dir).unwrap();
+    log.record(2, Duration::ZERO, &LogEvent::new("kept", None, "disk back"));
+    let stats = log.shutdown();
+    assert_eq!((stats.written, stats.write_errors), (1, 1), "{stats:?}");
+    let lines = read_lines(&dir.join(FILE_NAME));
+    assert_eq!(lines.len(), 1);
+    assert!(lines[0].contains("\"event\":\"kept\""), "{}", lines[0]);
+}

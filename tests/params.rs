@@ -856,3 +856,56 @@ mod arbitrary_writes {
         }
     }
 }
+
+/// A kill between writing `params.toml.tmp` and renaming it leaves the tmp
+/// file; the next start removes it (params.toml, the last complete save,
+/// is what counts).
+#[test]
+fn a_stale_tmp_file_is_removed_and_params_toml_kept() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = ParamFile::new(dir.path());
+    assert!(!file.remove_stale_tmp().expect("nothing to remove"));
+    let mut s = ParamStore::defaults();
+    s.set("JS_GAIN_DEFAULT", 0.6).expect("valid");
+    file.save(&s).expect("save");
+    fs::write(file.tmp_path(), "JS_GAIN_DEFAULT = 0.9\n").expect("write");
+    assert_eq!(file.tmp_path(), dir.path().join("params.toml.tmp"));
+    assert!(file.remove_stale_tmp().expect("removed"));
+    assert!(!file.tmp_path().exists());
+    assert_eq!(file.load().0, s);
+}
+
+/// Saving into a directory that cannot exist (a file in the way: fails for
+/// root too) is an error naming the path, and leaves nothing behind.
+#[test]
+fn a_save_that_cannot_write_is_an_error_naming_the_place() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let blocker = dir.path().join("data");
+    fs::write(&blocker, "a file").expect("write");
+    let file = ParamFile::new(&blocker);
+    let err = file.save(&ParamStore::defaults()).expect_err("cannot save");
+    assert!(
+        err.to_string().contains(&blocker.display().to_string()),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_vehicle_never_shares_a_ground_stations_system_id() {
+    let mut s = ParamStore::defaults();
+    for id in [255.0, 245.0] {
+        assert!(
+            matches!(s.set("SYSID_THISMAV", id), Err(ParamError::Invalid { .. })),
+            "{id}"
+        );
+    }
+    assert!(s.set("SYSID_MYGCS", 1.0).is_err(), "the vehicle's own id");
+    assert!(s.set("NEPT_GCS_ALLOW2", 1.0).is_err());
+    assert_eq!(s.set("SYSID_THISMAV", 2.0), Ok(2.0));
+    assert_eq!(s.set("SYSID_MYGCS", 1.0), Ok(1.0), "1 is free now");
+    // INT32 extremes: the float nearest i32::MAX means i32::MAX.
+    assert_eq!(
+        s.set("ARMING_CHECK", f64::from(i32::MAX as f32)),
+        Ok(f64::from(i32::MAX))
+    );
+}

@@ -620,7 +620,12 @@ fn parameter_list_read_and_set() {
         param_id: "JS_GAIN_DEFAULT".into(),
         param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
     }));
-    assert!(out.contains(&Output::SaveParams));
+    // Saved off the vehicle task, once the changes settle (0.5 s).
+    assert!(!out.contains(&Output::SaveParams));
+    assert!(
+        r.run(Duration::from_millis(600), false)
+            .contains(&Output::SaveParams)
+    );
     let echo = sent(&out)
         .into_iter()
         .find(|(_, m)| matches!(m, MavMessage::PARAM_VALUE(_)))

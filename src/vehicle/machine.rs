@@ -22,8 +22,14 @@ mod authority;
 mod driving;
 mod failsafe;
 mod holds;
+mod param_set;
+mod persist;
+mod texts;
 
 pub use holds::{MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE, RunMode};
+pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
+use texts::ReplyKind;
+pub use texts::ascii_text;
 
 use super::input::Profiles;
 use super::params::ParamStore;
@@ -121,6 +127,19 @@ pub enum Input {
         sysid: u8,
         event: HmiEvent,
     },
+    /// The answer to [`Output::SaveParams`]: the parameters reached the disk,
+    /// or why not.
+    ParamsSaved(Result<(), String>),
+    /// A PARAM_SET whose `param_type` is not a MAV_PARAM_TYPE value (the
+    /// frame decoder cannot represent it as a message): answered with the
+    /// parameter's current value.
+    BadParamSet {
+        from: Sender,
+        target_system: u8,
+        target_component: u8,
+        param_id: [u8; 16],
+        param_type: u8,
+    },
     /// A COMMAND_LONG/COMMAND_INT whose number our dialect does not define.
     UnknownCommand {
         from: Sender,
@@ -177,7 +196,9 @@ pub enum Output {
         start_depth_m: f64,
         start_heading_deg: f64,
     },
-    /// Parameters changed: persist them.
+    /// Parameters changed: write `Vehicle::params()` to disk off the
+    /// vehicle task, and answer with [`Input::ParamsSaved`]. Never asked
+    /// again before that answer.
     SaveParams,
     /// The board's dead-man switch may be fed now: the core is alive and
     /// the owner showed life recently (or the vehicle is disarmed, or a
@@ -311,6 +332,17 @@ pub struct Vehicle {
     schedules: Vec<Schedule>,
     param_queue: Vec<(To, usize)>,
     statustext_id: u16,
+    /// The system id in use; SYSID_THISMAV changes apply at the next start.
+    sysid: u8,
+    /// System ids the browser HMI lends to its sessions (ground stations).
+    hmi_sysids: (u8, u8),
+    replies: texts::Replies,
+    persist: persist::Persist,
+    storage_problem: Option<String>,
+    /// Telemetry-rate requests refused (stations that may not control).
+    refused_rate_requests: u64,
+    /// PARAM_SETs whose param_type was not acceptable.
+    bad_param_types: u64,
     booted: Duration,
     started: bool,
     pilot: driving::Pilot,
@@ -348,6 +380,7 @@ fn given(v: f32) -> Option<f32> {
 impl Vehicle {
     pub fn new(identity: Identity, params: ParamStore, endpoints: usize) -> Self {
         let gain = params.get("JS_GAIN_DEFAULT").unwrap_or(0.5);
+        let sysid = params.sysid_thismav();
         Self {
             identity,
             params,
@@ -373,6 +406,13 @@ impl Vehicle {
             schedules: vec![Schedule::default(); endpoints.max(1)],
             param_queue: Vec::new(),
             statustext_id: 0,
+            sysid,
+            hmi_sysids: (200, 209),
+            replies: texts::Replies::default(),
+            persist: persist::Persist::default(),
+            storage_problem: None,
+            refused_rate_requests: 0,
+            bad_param_types: 0,
             booted: Duration::ZERO,
             started: false,
             pilot: driving::Pilot::default(),
@@ -397,6 +437,23 @@ impl Vehicle {
         self
     }
 
+    /// The system ids the browser HMI lends its sessions (default 200..=209):
+    /// SYSID_THISMAV may not take one of them.
+    pub fn with_hmi_sysids(mut self, lo: u8, hi: u8) -> Self {
+        self.hmi_sysids = (lo.min(hi), hi.max(lo));
+        self
+    }
+
+    /// Telemetry-rate requests refused because the sender may not control.
+    pub fn refused_rate_requests(&self) -> u64 {
+        self.refused_rate_requests
+    }
+
+    /// PARAM_SETs answered with the current value because of their param_type.
+    pub fn bad_param_types(&self) -> u64 {
+        self.bad_param_types
+    }
+
     /// Pilot input refused because it came from a station not in control.
     pub fn refused_inputs(&self) -> u64 {
         self.auth.input_refusals.count
@@ -419,8 +476,9 @@ impl Vehicle {
     pub fn mode(&self) -> u32 {
         self.mode
     }
+    /// The system id in use (SYSID_THISMAV as it was at start).
     pub fn sysid(&self) -> u8 {
-        self.param_u8("SYSID_THISMAV", 1)
+        self.sysid
     }
     pub fn motors_us(&self) -> [u16; 3] {
         self.motors_us
@@ -434,9 +492,6 @@ impl Vehicle {
 
     fn param(&self, name: &str, default: f64) -> f64 {
         self.params.get(name).unwrap_or(default)
-    }
-    fn param_u8(&self, name: &str, default: u8) -> u8 {
-        self.param(name, f64::from(default)).clamp(0.0, 255.0) as u8
     }
 
     /// Reacts to one input at `now`, appending what must happen to `out`.
@@ -463,6 +518,19 @@ impl Vehicle {
             Input::SimBoard(ev) => {
                 if self.holds.run_mode == RunMode::Simulator {
                     self.on_board(ev, now, out);
+                }
+            }
+            Input::ParamsSaved(result) => self.on_params_saved(result, now, out),
+            Input::BadParamSet {
+                from,
+                target_system,
+                target_component,
+                param_id,
+                param_type,
+            } => {
+                if self.for_us(target_system, target_component) {
+                    let name = char_str(&CharArray::<16>::from(param_id));
+                    self.bad_param_type(from, &name, param_type, now, out);
                 }
             }
             Input::UnknownCommand {
@@ -493,38 +561,6 @@ impl Vehicle {
 
     fn boot_ms(&self, now: Now) -> u32 {
         (now.mono.saturating_sub(self.booted)).as_millis() as u32
-    }
-
-    fn statustext(&mut self, severity: MavSeverity, text: &str, out: &mut Vec<Output>) {
-        tracing::info!(severity = ?severity, "{text}");
-        // Long texts go in 50-byte chunks sharing an id, as MAVLink 2 allows.
-        let bytes = text.as_bytes();
-        if bytes.len() <= 50 {
-            out.push(Output::Send {
-                to: To::All,
-                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
-                    severity,
-                    text: chars(text),
-                    id: 0,
-                    chunk_seq: 0,
-                }),
-            });
-            return;
-        }
-        self.statustext_id = self.statustext_id.wrapping_add(1).max(1);
-        for (i, chunk) in bytes.chunks(50).enumerate() {
-            let mut arr = [0u8; 50];
-            arr[..chunk.len()].copy_from_slice(chunk);
-            out.push(Output::Send {
-                to: To::All,
-                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
-                    severity,
-                    text: CharArray::from(arr),
-                    id: self.statustext_id,
-                    chunk_seq: i as u8,
-                }),
-            });
-        }
     }
 
     fn send_neutral(&mut self, out: &mut Vec<Output>) {
@@ -701,6 +737,7 @@ impl Vehicle {
         // request is granted only after the GCS failsafe has acted.
         self.failsafe_tick(now, out);
         self.authority_tick(now, out);
+        self.persist_tick(now, out);
         // The board's dead-man is fed by the owner's life, not by ours alone:
         // a dead owner link reaches the board even if this loop runs on.
         if !self.armed
@@ -744,7 +781,10 @@ impl Vehicle {
         let battery = S::MAV_SYS_STATUS_SENSOR_BATTERY;
         let rc = S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER;
         let prearm = S::MAV_SYS_STATUS_PREARM_CHECK;
-        let present = imu | depth | motors | battery | rc | prearm;
+        // Storage (parameters, logs): unhealthy while the data directory is
+        // unusable or parameters fail to save.
+        let logging = S::MAV_SYS_STATUS_LOGGING;
+        let present = imu | depth | motors | battery | rc | prearm | logging;
         let enabled = present;
         // GEOFENCE is healthy though absent, as ArduPilot reports it: MAVProxy's
         // fence module announces "fence breach" when this bit is clear.
@@ -769,6 +809,9 @@ impl Vehicle {
         }
         if self.prearm_failure(now).is_none() {
             health |= prearm;
+        }
+        if self.storage_healthy() {
+            health |= logging;
         }
         (present, enabled, health)
     }
@@ -1130,7 +1173,7 @@ impl Vehicle {
                 self.on_gcs_ack(from, &a, out);
             }
             MavMessage::SETUP_SIGNING(k) if self.for_us(k.target_system, k.target_component) => {
-                self.setup_signing(from, &k, out);
+                self.setup_signing(from, &k, now, out);
             }
             MavMessage::SET_MODE(m) => {
                 if m.target_system != self.sysid() && m.target_system != 0 {
@@ -1175,38 +1218,16 @@ impl Vehicle {
                 if !self.for_us(p.target_system, p.target_component) {
                     return;
                 }
-                let name = char_str(&p.param_id);
-                let Some(index) = super::params::index_of(&name) else {
-                    self.statustext(
-                        MavSeverity::MAV_SEVERITY_WARNING,
-                        &format!("Param {name}: no such parameter"),
-                        out,
-                    );
-                    return;
-                };
-                match self.check_control(from, authority::Control::Command, now, out) {
-                    Err(why) => {
-                        self.refuse_command(from, &format!("PARAM_SET {name}"), why, now, out);
-                    }
-                    Ok(()) => match self.params.set(&name, f64::from(p.param_value)) {
-                        Ok(_) => {
-                            self.on_param_changed(&name);
-                            out.push(Output::SaveParams);
-                        }
-                        Err(e) => self.statustext(
-                            MavSeverity::MAV_SEVERITY_WARNING,
-                            &format!("Param refused: {e}"),
-                            out,
-                        ),
-                    },
-                }
-                // Echo the value now in force (the old one if refused) to everyone.
-                if let Some(msg) = self.param_value(index) {
-                    out.push(Output::Send { to: To::All, msg });
-                }
+                self.param_set(from, &p, now, out);
             }
             MavMessage::REQUEST_DATA_STREAM(r) => {
                 if !self.for_us(r.target_system, r.target_component) {
+                    return;
+                }
+                if !self.may_control(from) {
+                    // No ack exists for this message: ignored, counted, and
+                    // the asker told (rate-limited) why its rates stay.
+                    self.refuse_rates(from, now, out);
                     return;
                 }
                 let id = r.req_stream_id as u8;
@@ -1419,6 +1440,20 @@ impl Vehicle {
                 let interval_us = given(p[1]).unwrap_or(0.0);
                 let result = if !telemetry::is_streamable(id) {
                     R::MAV_RESULT_UNSUPPORTED
+                } else if !self.may_control(from) {
+                    // The schedule is shared by every station on the endpoint.
+                    self.refuse_rates(from, now, out);
+                    R::MAV_RESULT_DENIED
+                } else if interval_us < 0.0 && !telemetry::may_disable(id) {
+                    self.reply_text(
+                        from,
+                        ReplyKind::Rates,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &format!("Message {id} cannot be turned off: ground stations detect link loss by it"),
+                        now,
+                        out,
+                    );
+                    R::MAV_RESULT_DENIED
                 } else {
                     let iv = if interval_us < 0.0 {
                         None
@@ -1750,7 +1785,13 @@ fn ftp_reply(req: &[u8; 251], from: Sender) -> MavMessage {
 impl Vehicle {
     /// SETUP_SIGNING: only over a trusted endpoint, and once signing is on
     /// only signed with the current key. The key itself is never logged.
-    fn setup_signing(&mut self, from: Sender, k: &SETUP_SIGNING_DATA, out: &mut Vec<Output>) {
+    fn setup_signing(
+        &mut self,
+        from: Sender,
+        k: &SETUP_SIGNING_DATA,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) {
         let refusal = if !from.trusted {
             Some(format!("endpoint {} is not trusted", from.endpoint))
         } else if self.signing_active && !from.signed {
@@ -1760,8 +1801,16 @@ impl Vehicle {
         };
         if let Some(why) = refusal {
             let text = format!("SETUP_SIGNING from sysid {} ignored: {why}", from.sysid);
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
-            self.log("signing_refused", Some(from.sysid), text, out);
+            if self.reply_text(
+                from,
+                ReplyKind::Signing,
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &text,
+                now,
+                out,
+            ) {
+                self.log("signing_refused", Some(from.sysid), text, out);
+            }
             return;
         }
         let off = k.secret_key.iter().all(|b| *b == 0);

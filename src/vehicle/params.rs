@@ -262,7 +262,7 @@ const I32_MAX: f64 = i32::MAX as f64;
 #[rustfmt::skip]
 const HEAD: &[ParamDef] = &[
     def("SYSID_THISMAV", Int16, 1.0, 1.0, 255.0, "", Neptunus,
-        "MAVLink system id of the vehicle. Takes effect at the next start."),
+        "MAVLink system id of the vehicle. Takes effect at the next start (the running vehicle keeps its id). Never a ground station's id: not 255, SYSID_MYGCS, a NEPT_GCS_ALLOWn id or one lent to browser HMI sessions (200..209 by default)."),
     def("SYSID_MYGCS", Int16, 255.0, 1.0, 255.0, "", Neptunus,
         "System id of the primary ground station (QGroundControl and MAVProxy use 255). It may control the vehicle like the NEPT_GCS_ALLOWn ids, and may take control from another station without asking (the owner gets a warning first)."),
     def("NEPT_CTRL_CLAIM", Int8, 0.0, 0.0, 1.0, "", Neptunus,
@@ -692,7 +692,17 @@ impl ParamStore {
         if !value.is_finite() {
             return Err(invalid("not a finite number"));
         }
-        let v = wire_value(d.ty, value);
+        let mut v = wire_value(d.ty, value);
+        if d.ty.is_integer() {
+            // A float cannot tell 2147483647 from 2147483648: a station that
+            // sends INT32's maximum (or any bound past 2^24) as a float
+            // means the bound, so it is taken exactly.
+            if v > d.max && (v as f32) == (d.max as f32) {
+                v = d.max;
+            } else if v < d.min && (v as f32) == (d.min as f32) {
+                v = d.min;
+            }
+        }
         let outside = match d.ty {
             // Compare in f32 so a bound such as 0.7 accepts 0.7 sent as REAL32.
             ParamType::Real32 => {
@@ -727,6 +737,21 @@ impl ParamStore {
             return Err(invalid(
                 "must be above the 1500 µs neutral, or forward demand would drive reverse",
             ));
+        } else if d.name == "SYSID_THISMAV" && v == 255.0 {
+            return Err(invalid(
+                "255 is the ground stations' id (QGroundControl, MAVProxy, pymavlink)",
+            ));
+        } else if d.name == "SYSID_THISMAV"
+            && (v == self.num("SYSID_MYGCS") || self.gcs_allowed_extra().contains(&(v as u8)))
+        {
+            return Err(invalid(
+                "that is a ground station's id (SYSID_MYGCS or NEPT_GCS_ALLOWn)",
+            ));
+        } else if (d.name == "SYSID_MYGCS" || d.name.starts_with("NEPT_GCS_ALLOW"))
+            && v != 0.0
+            && v == self.num("SYSID_THISMAV")
+        {
+            return Err(invalid("that is the vehicle's own id (SYSID_THISMAV)"));
         } else if d.name == "NEPT_TILT_MIN_US" && v >= self.num("NEPT_TILT_MAX_US") {
             return Err(invalid("must be below NEPT_TILT_MAX_US"));
         } else if d.name == "NEPT_TILT_MAX_US" && v <= self.num("NEPT_TILT_MIN_US") {
@@ -1212,6 +1237,23 @@ impl ParamFile {
         ))
     }
 
+    /// `params.toml.tmp` beside the file.
+    pub fn tmp_path(&self) -> PathBuf {
+        let mut name = self.path.clone().into_os_string();
+        name.push(".tmp");
+        PathBuf::from(name)
+    }
+
+    /// Removes a `params.toml.tmp` left by a save that was interrupted (a
+    /// kill or power cut between write and rename). True when one was there.
+    pub fn remove_stale_tmp(&self) -> io::Result<bool> {
+        match fs::remove_file(self.tmp_path()) {
+            Ok(()) => Ok(true),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(false),
+            Err(e) => Err(e),
+        }
+    }
+
     /// Writes atomically: `params.toml.tmp`, fsync, rename over
     /// `params.toml`, fsync the directory. A crash leaves either the old or
     /// the new file, never a torn one.
@@ -1229,14 +1271,18 @@ impl ParamFile {
             _ => PathBuf::from("."),
         };
         fs::create_dir_all(&dir).map_err(io_err("create directory", &dir))?;
-        let mut tmp_name = self.path.clone().into_os_string();
-        tmp_name.push(".tmp");
-        let tmp = PathBuf::from(tmp_name);
+        let tmp = self.tmp_path();
         let mut file = File::create(&tmp).map_err(io_err("create", &tmp))?;
-        file.write_all(store.to_toml().as_bytes())
-            .map_err(io_err("write", &tmp))?;
-        file.sync_all().map_err(io_err("fsync", &tmp))?;
+        let written = file
+            .write_all(store.to_toml().as_bytes())
+            .map_err(io_err("write", &tmp))
+            .and_then(|()| file.sync_all().map_err(io_err("fsync", &tmp)));
         drop(file);
+        if let Err(e) = written {
+            // A half-written file (disk full) must not linger.
+            let _ = fs::remove_file(&tmp);
+            return Err(e);
+        }
         fs::rename(&tmp, &self.path).map_err(io_err("rename over", &self.path))?;
         File::open(&dir)
             .and_then(|d| d.sync_all())

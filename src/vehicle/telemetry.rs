@@ -69,8 +69,24 @@ pub struct Schedule {
     slots: BTreeMap<u32, Slot>,
 }
 
-/// Messages faster than this are not honoured (the vehicle ticks at 100 Hz).
-pub const MIN_INTERVAL: Duration = Duration::from_millis(10);
+/// No message is streamed faster than 50 Hz, whoever asks: the board
+/// reports navigation at 10 Hz, so faster only repeats values, and 50 Hz is
+/// the top of ArduPilot's own SRn_* stream-rate range. It bounds what one
+/// request can cost an endpoint (15 messages at 50 Hz is about 30 kB/s).
+pub const MIN_INTERVAL: Duration = Duration::from_millis(20);
+
+/// The slowest a message may be made, if it must be sent at all: HEARTBEAT
+/// stays at 1 Hz or faster, because ground stations detect link loss from
+/// it (QGC after a few seconds, MAVProxy's "link down", our own GCS
+/// failsafe on their side).
+pub fn max_interval(msg_id: u32) -> Option<Duration> {
+    (msg_id == 0).then_some(Duration::from_secs(1))
+}
+
+/// Whether a message may be turned off (HEARTBEAT may not).
+pub fn may_disable(msg_id: u32) -> bool {
+    max_interval(msg_id).is_none()
+}
 
 impl Schedule {
     /// ArduSub's default streams, starting at `now`.
@@ -90,8 +106,15 @@ impl Schedule {
         s
     }
 
-    /// Sets an interval; `None` stops the message.
+    /// Sets an interval, kept within [`MIN_INTERVAL`] and the message's
+    /// [`max_interval`]; `None` stops the message (unless it may not be
+    /// stopped: then it runs at its slowest allowed interval).
     pub fn set(&mut self, msg_id: u32, interval: Option<Duration>, now: Duration) {
+        let interval = match (interval, max_interval(msg_id)) {
+            (None, Some(slowest)) => Some(slowest),
+            (Some(iv), Some(slowest)) => Some(iv.min(slowest)),
+            (iv, None) => iv,
+        };
         match interval {
             None => {
                 self.slots.remove(&msg_id);

@@ -9,6 +9,7 @@
 
 use std::time::Duration;
 
+use super::texts::ReplyKind;
 use super::{Now, Output, Sender, To, Vehicle, given};
 use crate::dialect::neptunus::*;
 use crate::eventlog::LogEvent;
@@ -215,7 +216,9 @@ impl Vehicle {
         }
     }
 
-    /// A refused command: the ACK result, and a rate-limited report.
+    /// A refused command: the ACK result, and a report to the sender alone,
+    /// rate-limited per sender (the refused must not make the vehicle talk
+    /// to the other stations).
     pub(super) fn refuse_command(
         &mut self,
         from: Sender,
@@ -224,13 +227,23 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) -> MavResult {
-        if self
+        // The log is bounded for all senders together (many spoofed ids
+        // must not flood it); the replies per sender.
+        let log_due = self
             .auth
             .command_refusals
-            .hit(now.mono, COMMAND_REFUSAL_REPORT)
-        {
-            let text = format!("Refused {what} from sysid {}: {}", from.sysid, why.reason());
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            .hit(now.mono, COMMAND_REFUSAL_REPORT);
+        let text = format!("Refused {what} from sysid {}: {}", from.sysid, why.reason());
+        let replied = self.reply_text_every(
+            from,
+            ReplyKind::Refused,
+            COMMAND_REFUSAL_REPORT,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &text,
+            now,
+            out,
+        );
+        if replied && log_due {
             self.log("command_rejected", Some(from.sysid), text, out);
         }
         why.result()
@@ -245,14 +258,23 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if self.auth.input_refusals.hit(now.mono, INPUT_REPORT) {
-            let n = self.auth.input_refusals.count;
-            let text = format!(
-                "Ignoring {what} from sysid {}: {} ({n} refused)",
-                from.sysid,
-                why.reason()
-            );
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+        let log_due = self.auth.input_refusals.hit(now.mono, INPUT_REPORT);
+        let n = self.auth.input_refusals.count;
+        let text = format!(
+            "Ignoring {what} from sysid {}: {} ({n} refused)",
+            from.sysid,
+            why.reason()
+        );
+        let replied = self.reply_text_every(
+            from,
+            ReplyKind::Input,
+            INPUT_REPORT,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &text,
+            now,
+            out,
+        );
+        if replied && log_due {
             self.log("input_rejected", Some(from.sysid), text, out);
         }
     }
@@ -397,12 +419,15 @@ impl Vehicle {
             && id != 0.0
             && (id.round() - f32::from(from.sysid)).abs() > 0.5
         {
-            self.statustext(
+            self.reply_text(
+                from,
+                ReplyKind::Control,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!(
                     "Control request from sysid {} names sysid {id}: a station requests for itself",
                     from.sysid
                 ),
+                now,
                 out,
             );
             return MavResult::MAV_RESULT_DENIED;
@@ -438,8 +463,16 @@ impl Vehicle {
                         from.sysid,
                         Refusal::NotAllowed.reason()
                     );
-                    self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
-                    self.log("control_refused", Some(from.sysid), text, out);
+                    if self.reply_text(
+                        from,
+                        ReplyKind::Control,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        &text,
+                        now,
+                        out,
+                    ) {
+                        self.log("control_refused", Some(from.sysid), text, out);
+                    }
                     return MavResult::MAV_RESULT_DENIED;
                 }
                 self.log(
