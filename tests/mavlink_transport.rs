@@ -1010,6 +1010,7 @@ fn tlog_rotates_by_size_and_never_overwrites() {
     let cfg = TlogConfig {
         dir: dir.path().join("logs"),
         max_bytes: 100,
+        total_bytes: u64::MAX,
     };
     let frame = encode_v2(1, 1, 0, &heartbeat(0)); // 21 bytes: 29 per record
     assert_eq!(frame.len(), 21);
