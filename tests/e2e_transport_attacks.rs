@@ -739,3 +739,89 @@ fn starts_without_a_writable_log_file_or_tlog_folder_and_says_so() {
     assert!(log.contains("CANNOT OPEN THE LOG FILE"), "{log}");
     assert!(log.contains("RUNNING WITHOUT A TELEMETRY LOG"), "{log}");
 }
+
+// ---------------------------------------------------------------------------
+// H5: out of file descriptors
+// ---------------------------------------------------------------------------
+
+#[test]
+fn out_of_descriptors_the_connected_station_keeps_fresh_telemetry() {
+    let Ok(prlimit) = which_prlimit() else {
+        // util-linux's prlimit sets the child's limit without unsafe code here.
+        eprintln!("SKIPPED: no prlimit on this machine");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_tcp_port();
+    let endpoint = format!("tcpin:127.0.0.1:{port}");
+    let bin = bin().to_string_lossy().into_owned();
+    // About 20 descriptors at rest: 40 runs out well before the peer table.
+    let mut vehicle = Vehicle::spawn(
+        &prlimit,
+        &[
+            "--nofile=40:40",
+            "--",
+            &bin,
+            "--sim",
+            "--mavlink",
+            &endpoint,
+        ],
+        dir.path(),
+        "",
+    )
+    .unwrap();
+    let mut station = TcpGcs::connect(port, &mut vehicle);
+    assert!(station.until(&mut vehicle, GENEROUS, |m| m.iter().any(prearm_ok)));
+    // The attacker takes every descriptor left, and keeps knocking.
+    let mut held = Vec::new();
+    for _ in 0..60 {
+        match TcpStream::connect(("127.0.0.1", port)) {
+            Ok(s) => held.push(s),
+            Err(_) => break,
+        }
+    }
+    let end = Instant::now() + GENEROUS;
+    while !vehicle.stderr_text().contains("cannot accept TCP clients") {
+        assert!(
+            Instant::now() < end,
+            "descriptors never ran out:\n{}",
+            vehicle.stderr_tail()
+        );
+        station.until(&mut vehicle, Duration::from_millis(50), |_| false);
+    }
+    // A round trip still works: the station's telemetry queue is served
+    // while accepting is impossible (it used to stall behind the accept loop).
+    for _ in 0..3 {
+        station.send(&MavMessage::PARAM_REQUEST_READ(PARAM_REQUEST_READ_DATA {
+            param_index: -1,
+            target_system: 1,
+            target_component: 1,
+            param_id: "SYSID_MYGCS".into(),
+        }));
+        assert!(
+            station.until(&mut vehicle, Duration::from_secs(5), |m| m
+                .iter()
+                .any(|m| matches!(m, MavMessage::PARAM_VALUE(_)))),
+            "no answer while out of descriptors:\n{}",
+            vehicle.stderr_tail()
+        );
+    }
+    // The idle connections go; new clients get in again.
+    drop(held);
+    let mut late = TcpGcs::connect(port, &mut vehicle);
+    assert!(
+        late.until(&mut vehicle, GENEROUS, |m| m
+            .iter()
+            .any(|m| heartbeat_armed(m).is_some())),
+        "a new client never got in after the descriptors came back:\n{}",
+        vehicle.stderr_tail()
+    );
+}
+
+fn which_prlimit() -> Result<PathBuf, ()> {
+    ["/usr/bin/prlimit", "/bin/prlimit"]
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.is_file())
+        .ok_or(())
+}

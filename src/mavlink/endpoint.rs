@@ -958,7 +958,8 @@ fn admit_udp(
         known.last_seen = now;
         return Some((known.id, known.standing.clone()));
     }
-    if peers.len() >= MAX_PEERS {
+    let full = peers.len() >= MAX_PEERS;
+    if full {
         let victim = peers
             .iter()
             .filter(|(_, p)| !p.standing.may_control())
@@ -970,7 +971,12 @@ fn admit_udp(
         ctx.evicted(&victim.to_string(), &from.to_string());
     }
     let id = ctx.new_peer();
-    tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+    if full {
+        // A churning flood of source ports: the eviction report sums it up.
+        tracing::debug!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+    } else {
+        tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+    }
     let standing = PeerStanding::default();
     peers.insert(
         from,
