@@ -521,11 +521,9 @@ impl LinkSigning {
     fn load(store: SigningStore) -> Result<Self, AppError> {
         let key = store.load_key()?;
         let reservation = store.load_reservation();
-        let replay = if key.is_some() {
-            load_replay(&store)
-        } else {
-            ReplayState::default()
-        };
+        // Loaded without a key too: a key set later by SETUP_SIGNING may be
+        // the one frames were recorded under.
+        let replay = load_replay(&store, key.is_some());
         let mut s = Self {
             store,
             keyed: None,
@@ -663,8 +661,10 @@ impl LinkSigning {
 
 /// The incoming replay state persisted by the last run. Missing or corrupt:
 /// start with the one-minute stale rule only, loudly, never refuse to start.
-fn load_replay(store: &SigningStore) -> ReplayState {
+fn load_replay(store: &SigningStore, keyed: bool) -> ReplayState {
     match store.load_replay() {
+        Ok(state) if !keyed => state.unwrap_or_default(),
+        Err(_) if !keyed => ReplayState::default(),
         Ok(Some(state)) => {
             tracing::info!(
                 path = %store.replay_path().display(),
