@@ -402,6 +402,35 @@ fn signed_frames_recorded_before_a_crash_do_not_replay_after_it() {
     replay_after_restart(Signal::SIGKILL);
 }
 
+#[test]
+fn a_corrupt_replay_file_is_said_loudly_and_does_not_stop_the_vehicle() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let status = std::process::Command::new(bin())
+        .args(["signing", "set-passphrase", PASSPHRASE, "--data-dir"])
+        .arg(&data)
+        .stdout(std::process::Stdio::null())
+        .status()
+        .unwrap();
+    assert!(status.success());
+    std::fs::write(data.join("signing.replay"), "garbage\n").unwrap();
+    let port = free_udp_port().unwrap();
+    let endpoint = format!("udpin:127.0.0.1:{port}");
+    let mut vehicle =
+        Vehicle::spawn(bin(), &["--sim", "--mavlink", &endpoint], dir.path(), "").unwrap();
+    // An unsigned station may still watch: the vehicle runs.
+    Gcs::connect(port)
+        .unwrap()
+        .wait_ready(&mut vehicle)
+        .unwrap();
+    let log = vehicle.stderr_text();
+    assert!(
+        log.contains("signing.replay")
+            && log.contains("REPLAY PROTECTION ACROSS THE RESTART IS LOST"),
+        "{log}"
+    );
+}
+
 // ---------------------------------------------------------------------------
 // H3: full peer tables
 // ---------------------------------------------------------------------------
