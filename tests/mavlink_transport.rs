@@ -1354,3 +1354,55 @@ fn tlog_total_cap_deletes_the_oldest_of_our_files_first_and_nothing_else() {
     assert!(!tlogs.join("neptunus-20260102-000000.tlog").exists());
     assert!(tlogs.join("notes.txt").exists() && tlogs.join("other.tlog").exists());
 }
+
+#[tokio::test]
+async fn tlog_takes_replies_to_strangers_through_the_rate_limit_and_all_replies_to_the_pilot() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = RouterConfig {
+        tlog: Some(TlogConfig::new(dir.path())),
+        ..RouterConfig::default()
+    };
+    let (router, mut inbound) = start(&["udpin:127.0.0.1:0"], cfg).await;
+    let addr = router.local_addr(0).unwrap();
+    let pilot = udp_client().await;
+    let pilot_in = udp_hello(&pilot, addr, 255, &mut inbound).await;
+    pilot_in.standing.set_may_control(true);
+    let stranger = udp_client().await;
+    let stranger_in = udp_hello(&stranger, addr, 66, &mut inbound).await;
+    let started = std::time::Instant::now();
+    for i in 0..500u32 {
+        let to_pilot = encode_v2(1, 1, 0, &heartbeat(10_000 + i));
+        router.send(out_to(Route::Peer(0, pilot_in.peer), to_pilot));
+        let to_stranger = encode_v2(1, 1, 0, &heartbeat(20_000 + i));
+        router.send(out_to(Route::Peer(0, stranger_in.peer), to_stranger));
+    }
+    // Queue order: once the last frame reached the pilot, all were dispatched.
+    let mut last = 0;
+    while last != 10_499 {
+        if let MavMessage::HEARTBEAT(h) = udp_next_frame(&pilot).await.0.msg {
+            last = h.custom_mode;
+        }
+    }
+    router.shutdown().await;
+    let elapsed = started.elapsed().as_secs_f64();
+    let modes: Vec<u32> = tlog_files(dir.path())
+        .iter()
+        .flat_map(|p| read_tlog(p))
+        .filter_map(|(_, raw)| match decode_all(&raw).0.pop()?.msg {
+            MavMessage::HEARTBEAT(h) if raw[5] == 1 => Some(h.custom_mode),
+            _ => None,
+        })
+        .collect();
+    let to_pilot = modes
+        .iter()
+        .filter(|m| (10_000..20_000).contains(*m))
+        .count();
+    let to_stranger = modes.iter().filter(|m| **m >= 20_000).count();
+    assert_eq!(to_pilot, 500, "every reply to the pilot is logged");
+    // The burst (40, less the stranger's own hello) and the refill.
+    let bound = 40.0 + neptunus::mavlink::endpoint::TLOG_STRANGER_RATE_HZ * elapsed;
+    assert!(
+        (to_stranger as f64) <= bound,
+        "{to_stranger} replies to the stranger logged in {elapsed:.2} s"
+    );
+}

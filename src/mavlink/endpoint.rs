@@ -299,8 +299,8 @@ pub struct EndpointStats {
     pub inbound_dropped: u64,
     /// Peers that may not control evicted to make room for a newcomer.
     pub peers_evicted: u64,
-    /// Frames from peers that may not control left out of the telemetry log
-    /// by its rate limit.
+    /// Frames from (and replies to) peers that may not control left out of
+    /// the telemetry log by its rate limit.
     pub tlog_dropped: u64,
 }
 
@@ -489,9 +489,15 @@ struct EndpointSlot {
 impl RouterHandle {
     /// Queues bytes for their route. Never blocks: when an endpoint's queue
     /// is full the frame is dropped for that endpoint and counted.
+    ///
+    /// Logged once per send, however many peers get it; a frame for one peer
+    /// is logged by its endpoint, which knows whether that peer may control
+    /// (replies to the others share their rate limit: a stranger's requests
+    /// cannot fill the log with our answers).
     pub fn send(&self, out: Outbound) {
-        if let Some(tlog) = &self.inner.tlog {
-            // Once per send, however many peers get it.
+        if let Some(tlog) = &self.inner.tlog
+            && !matches!(out.route, Route::Peer(..))
+        {
             tlog.sender.record(unix_time_us(), Arc::clone(&out.bytes));
         }
         let (slots, target) = match out.route {
@@ -720,6 +726,32 @@ impl EndpointCtx {
         }
     }
 
+    /// Logs a frame addressed to one peer: always for a peer that may
+    /// control, through the shared rate limit for the others.
+    fn log_reply(&self, standing: &PeerStanding, bytes: &Arc<[u8]>) {
+        let Some(tlog) = &self.tlog else { return };
+        if standing.may_control() || self.tlog_allows_stranger(Instant::now()) {
+            tlog.record(unix_time_us(), Arc::clone(bytes));
+        }
+    }
+
+    /// One frame of a peer that may not control into the log, if the rate
+    /// limit allows; counted (and said once) when it does not.
+    fn tlog_allows_stranger(&self, now: Instant) -> bool {
+        let allowed = self
+            .tlog_bucket
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take(now);
+        if !allowed {
+            self.counters.tlog_dropped.fetch_add(1, Ordering::Relaxed);
+            if self.first_time(WARN_TLOG_RATE) {
+                tracing::warn!(endpoint = %self.url, "frames to and from stations that may not control reach the telemetry log at most {TLOG_STRANGER_RATE_HZ}/s per endpoint: dropping the rest from the log (logged once; see tlog_dropped)");
+            }
+        }
+        allowed
+    }
+
     fn sent(&self, bytes: usize) {
         self.counters.frames_out.fetch_add(1, Ordering::Relaxed);
         self.counters
@@ -777,21 +809,10 @@ impl EndpointCtx {
         let now = Instant::now();
         standing.heard(self.epoch);
         for frame in frames.drain(..) {
-            if let Some(tlog) = &self.tlog {
-                if may_control
-                    || self
-                        .tlog_bucket
-                        .lock()
-                        .unwrap_or_else(PoisonError::into_inner)
-                        .take(now)
-                {
-                    tlog.record(now_us, Arc::from(frame.raw.as_slice()));
-                } else {
-                    c.tlog_dropped.fetch_add(1, Ordering::Relaxed);
-                    if self.first_time(WARN_TLOG_RATE) {
-                        tracing::warn!(endpoint = %self.url, peer, "frames from stations that may not control reach the telemetry log at most {TLOG_STRANGER_RATE_HZ}/s per endpoint: dropping the rest from the log (logged once; see tlog_dropped)");
-                    }
-                }
+            if let Some(tlog) = &self.tlog
+                && (may_control || self.tlog_allows_stranger(now))
+            {
+                tlog.record(now_us, Arc::from(frame.raw.as_slice()));
             }
             // Strangers may not crowd out the stations that may control.
             let (num, den) = INBOUND_STRANGER_SHARE;
@@ -1053,8 +1074,10 @@ async fn run_udp(
                     }
                     Target::Peer(id) => {
                         if let Some((addr, _)) = target.filter(|&(_, t)| t == id) {
+                            ctx.log_reply(&target_standing, &queued.bytes);
                             dests.push(addr);
-                        } else if let Some((addr, _)) = peers.iter().find(|(_, p)| p.id == id) {
+                        } else if let Some((addr, p)) = peers.iter().find(|(_, p)| p.id == id) {
+                            ctx.log_reply(&p.standing, &queued.bytes);
                             dests.push(*addr);
                         }
                     }
@@ -1189,6 +1212,11 @@ async fn run_tcp_in(
             }
             queued = queue.recv() => {
                 let Some(queued) = queued else { break };
+                if let Target::Peer(id) = queued.target
+                    && let Some(conn) = conns.get(&id)
+                {
+                    ctx.log_reply(&conn.standing, &queued.bytes);
+                }
                 dispatch(&ctx, conns.iter().map(|(id, c)| (*id, &c.tx)), &queued);
             }
         }
@@ -1335,22 +1363,21 @@ async fn run_connector<S, F, Fut>(
         ctx.counters.set_local_addr(local);
         ctx.set_peers(1);
         let (tx, rx) = mpsc::channel(PEER_QUEUE);
+        let standing = PeerStanding::default();
         // tcpout and serial links are ours to keep: no idle timeout.
-        let session = run_stream(
-            Arc::clone(&ctx),
-            peer,
-            PeerStanding::default(),
-            stream,
-            rx,
-            None,
-        );
+        let session = run_stream(Arc::clone(&ctx), peer, standing.clone(), stream, rx, None);
         tokio::pin!(session);
         let stop = loop {
             tokio::select! {
                 () = stopped(&mut shutdown) => break true,
                 () = &mut session => break false,
                 queued = queue.recv() => match queued {
-                    Some(queued) => dispatch(&ctx, std::iter::once((peer, &tx)), &queued),
+                    Some(queued) => {
+                        if matches!(queued.target, Target::Peer(p) if p == peer) {
+                            ctx.log_reply(&standing, &queued.bytes);
+                        }
+                        dispatch(&ctx, std::iter::once((peer, &tx)), &queued);
+                    }
                     None => break true,
                 },
             }
