@@ -984,7 +984,7 @@ fn admit_udp(
         let victim = peers
             .iter()
             .filter(|(_, p)| !p.standing.may_control())
-            .min_by_key(|(_, p)| p.last_seen)
+            .min_by_key(|(_, p)| (p.last_seen, p.id))
             .map(|(addr, _)| *addr)?;
         if let Some(old) = peers.remove(&victim) {
             tracing::debug!(endpoint = %ctx.url, %victim, peer = old.id, "UDP peer evicted");
@@ -1151,7 +1151,8 @@ async fn run_tcp_in(
                         let victim = conns
                             .iter()
                             .filter(|(_, c)| !c.standing.may_control())
-                            .min_by_key(|(_, c)| c.standing.last_heard_ms())
+                            // Ties (same millisecond): the oldest connection.
+                            .min_by_key(|(id, c)| (c.standing.last_heard_ms(), **id))
                             .map(|(id, _)| *id);
                         match victim.and_then(|id| conns.remove(&id).map(|c| (id, c))) {
                             Some((id, conn)) => {
