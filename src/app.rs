@@ -23,7 +23,8 @@ use crate::mavlink::endpoint::{
 };
 use crate::mavlink::frame::{Frame, encode_command_ack_raw, encode_v2};
 use crate::mavlink::signing::{
-    Signer, SigningError, SigningKey, SigningStore, Verdict, Verifier, timestamp_from_unix_us,
+    REPLAY_RESERVATION_AHEAD, ReplayState, Signer, SigningError, SigningKey, SigningStore, Verdict,
+    Verifier, timestamp_from_unix_us,
 };
 use crate::mavlink::tlog::TlogConfig;
 use crate::vehicle::machine::{
@@ -135,6 +136,7 @@ pub async fn run(
         tlog: Some(TlogConfig {
             dir: settings.data_dir.join("tlogs"),
             max_bytes: settings.mavlink.tlog_max_bytes,
+            total_bytes: settings.mavlink.tlog_total_bytes,
         }),
     };
     let specs = settings
@@ -207,24 +209,30 @@ pub async fn run(
                 // signed traffic may control, and nothing can be signed, so
                 // MAVLink stations watch; the browser HMI still controls.
                 tracing::error!(
-                    "message signing key unusable: {e} — MAVLink ground stations may only watch until it is fixed; the browser HMI can still control"
+                    "message signing key unusable: {e} — MAVLink ground stations may only watch until it is fixed; the browser HMI can still control after the pilot login"
                 );
             }
             (
-                LinkSigning {
-                    store: SigningStore::new(&settings.data_dir),
-                    keyed: None,
-                    last_timestamp: 0,
-                    rejected: 0,
-                    last_report: None,
-                },
+                LinkSigning::unkeyed(SigningStore::new(&settings.data_dir)),
                 !no_key,
             )
         }
     };
     vehicle.set_signing_active(signing.active() || fail_closed);
     if signing.active() {
-        tracing::info!("message signing on: unsigned ground stations may watch but not control");
+        tracing::info!(
+            "message signing on: unsigned MAVLink stations may watch but not control; browser \
+             (HMI) sessions may control only after the pilot login; a signed frame is accepted \
+             once (replays refused, also across restarts; after an unclean stop a station's \
+             signed frames may be refused for up to {} s)",
+            REPLAY_RESERVATION_AHEAD / 100_000
+        );
+    } else {
+        tracing::warn!(
+            "message signing off: any station that can reach a MAVLink endpoint and uses an \
+             allowed system id (SYSID_MYGCS, NEPT_GCS_ALLOWn) may control the vehicle — set a \
+             key with `neptunus signing set-passphrase` on untrusted links"
+        );
     }
     if !storage_problems.is_empty() {
         vehicle.set_storage_problem(Some(storage_problems.join("; ")));
@@ -318,7 +326,7 @@ pub async fn run(
             },
             msg = inbound.recv() => match msg {
                 None => break,
-                Some(Inbound { endpoint, peer, frame }) => {
+                Some(Inbound { endpoint, peer, frame, standing }) => {
                     let now = clock();
                     let Some(signed) = io.signing.check(&frame, now, &event_log) else {
                         continue;
@@ -338,6 +346,16 @@ pub async fn run(
                         _ => Input::Mavlink { from, msg: frame.msg },
                     };
                     vehicle.handle(input, now, &mut outputs);
+                    // The router keeps a slot (and the tlog) for peers that
+                    // carry a station that may control. Sticky for the
+                    // peer's life: frames spoofed from its address must not
+                    // get it evicted.
+                    if !standing.may_control()
+                        && vehicle.may_control(from)
+                        && standing.set_may_control(true)
+                    {
+                        tracing::debug!(endpoint, peer, sysid = from.sysid, "peer carries a station that may control");
+                    }
                 }
             },
             changed = async {
@@ -656,30 +674,54 @@ pub async fn emulate_board(
 }
 
 /// Signature checks on what comes in, signatures on what goes out, and the
-/// key and timestamp files behind them. The vehicle core decides policy from
-/// the per-frame result; this only verifies, signs and persists.
+/// key, timestamp and replay files behind them. The vehicle core decides
+/// policy from the per-frame result; this only verifies, signs and persists.
 struct LinkSigning {
     store: SigningStore,
     keyed: Option<(Verifier, Signer)>,
     /// Floor for a new key's timestamps: ours never go backwards.
     last_timestamp: u64,
+    /// Incoming replay state loaded at start, for the first verifier (a key
+    /// set later by SETUP_SIGNING inherits the running verifier's state).
+    replay: ReplayState,
     rejected: u64,
     last_report: Option<Duration>,
+    /// When a replay reservation last failed to be written (logged at most this often).
+    last_replay_error: Option<Duration>,
 }
 
 /// Rejected signatures are logged at most this often.
 const SIGNATURE_REPORT: Duration = Duration::from_secs(5);
 
 impl LinkSigning {
+    /// No key and no replay state: signing off, or a key we cannot read
+    /// (then the core is told signing is on, and nothing verifies).
+    fn unkeyed(store: SigningStore) -> Self {
+        Self {
+            store,
+            keyed: None,
+            last_timestamp: 0,
+            replay: ReplayState::default(),
+            rejected: 0,
+            last_report: None,
+            last_replay_error: None,
+        }
+    }
+
     fn load(store: SigningStore) -> Result<Self, AppError> {
         let key = store.load_key()?;
         let reservation = store.load_reservation();
+        // Loaded without a key too: a key set later by SETUP_SIGNING may be
+        // the one frames were recorded under.
+        let replay = load_replay(&store, key.is_some());
         let mut s = Self {
             store,
             keyed: None,
             last_timestamp: reservation.unwrap_or(0),
+            replay,
             rejected: 0,
             last_report: None,
+            last_replay_error: None,
         };
         if let Some(key) = key {
             s.keyed = Some(s.pair(key));
@@ -689,7 +731,15 @@ impl LinkSigning {
 
     fn pair(&self, key: SigningKey) -> (Verifier, Signer) {
         let reservation = self.store.load_reservation().max(Some(self.last_timestamp));
-        (Verifier::new(key.clone()), Signer::new(key, 0, reservation))
+        // Frames accepted under the old key stay refused under the new one.
+        let replay = match &self.keyed {
+            Some((verifier, _)) => verifier.replay_state(),
+            None => self.replay.clone(),
+        };
+        (
+            Verifier::with_replay_state(key.clone(), &replay),
+            Signer::new(key, 0, reservation),
+        )
     }
 
     fn active(&self) -> bool {
@@ -702,10 +752,30 @@ impl LinkSigning {
             return Some(false);
         };
         let why = match verifier.check(&frame.raw, timestamp_from_unix_us(now.unix_us)) {
-            Verdict::Valid { .. } => return Some(true),
+            Verdict::Valid { .. } => {
+                // Write-ahead: the reservation is on disk before the frame acts.
+                if let Some(state) = verifier.take_reservation()
+                    && let Err(e) = self.store.save_replay(&state)
+                    && self
+                        .last_replay_error
+                        .is_none_or(|t| now.mono.saturating_sub(t) >= SIGNATURE_REPORT)
+                {
+                    // Refusing the frame would cost the pilot control of the
+                    // vehicle whenever the disk fails; accepting it weakens
+                    // only replay protection across a restart. Say so.
+                    self.last_replay_error = Some(now.mono);
+                    tracing::error!(
+                        "{e}; signed frames are still accepted, but frames accepted since the \
+                         last successful write could be replayed after a restart"
+                    );
+                }
+                return Some(true);
+            }
             Verdict::Unsigned => return Some(false),
             Verdict::BadSignature => "bad signature",
-            Verdict::Replayed => "replayed (timestamp not newer than the last of its stream)",
+            Verdict::Replayed => {
+                "replayed (timestamp not newer than the last of its stream, in this run or before a restart)"
+            }
             Verdict::TooOld => "stale timestamp (more than 1 min old)",
             Verdict::Malformed => "malformed signature",
         };
@@ -745,6 +815,9 @@ impl LinkSigning {
         match SigningKey::from_bytes(key) {
             None => {
                 self.store.save_key(None)?;
+                if let Some((verifier, _)) = &self.keyed {
+                    self.replay = verifier.replay_state();
+                }
                 self.keyed = None;
             }
             Some(key) => {
@@ -757,14 +830,54 @@ impl LinkSigning {
         Ok(())
     }
 
-    /// At shutdown: the timestamp in use, so the next start begins above it.
+    /// At shutdown: the timestamp in use, so the next start begins above it,
+    /// and the exact last timestamp of every incoming stream, so a clean
+    /// restart refuses replays without refusing any genuine frame.
     fn persist(&self) {
-        if let Some((_, signer)) = &self.keyed
-            && let Err(e) = self
-                .store
-                .save_reservation(signer.last_timestamp().saturating_add(1))
+        let Some((verifier, signer)) = &self.keyed else {
+            return;
+        };
+        if let Err(e) = self
+            .store
+            .save_reservation(signer.last_timestamp().saturating_add(1))
         {
             tracing::error!("signing timestamp not saved: {e}");
+        }
+        if let Err(e) = self.store.save_replay(&verifier.replay_state()) {
+            tracing::error!("signing replay state not saved: {e}");
+        }
+    }
+}
+
+/// The incoming replay state persisted by the last run. Missing or corrupt:
+/// start with the one-minute stale rule only, loudly, never refuse to start.
+fn load_replay(store: &SigningStore, keyed: bool) -> ReplayState {
+    match store.load_replay() {
+        Ok(state) if !keyed => state.unwrap_or_default(),
+        Err(_) if !keyed => ReplayState::default(),
+        Ok(Some(state)) => {
+            tracing::info!(
+                path = %store.replay_path().display(),
+                streams = state.len(),
+                "signing replay state loaded: signed frames accepted before this start are refused"
+            );
+            state
+        }
+        Ok(None) => {
+            tracing::warn!(
+                path = %store.replay_path().display(),
+                "no signing replay state (normal on the first start with a key): until a \
+                 station's frames are seen, signed frames recorded before this start are \
+                 refused only when more than 1 min old"
+            );
+            ReplayState::default()
+        }
+        Err(e) => {
+            tracing::error!(
+                "{e}. REPLAY PROTECTION ACROSS THE RESTART IS LOST: signed frames recorded \
+                 before this start are refused only when more than 1 min old"
+            );
+            ReplayState::default()
         }
     }
 }

@@ -283,6 +283,8 @@ pub struct MavlinkFileConfig {
     pub peer_timeout_s: Option<f64>,
     /// Telemetry logs rotate at this size.
     pub tlog_max_mb: Option<u64>,
+    /// All telemetry logs together stay under this (oldest deleted first).
+    pub tlog_total_mb: Option<u64>,
 }
 
 /// MAVLink settings, resolved.
@@ -293,6 +295,7 @@ pub struct MavlinkSettings {
     pub sysid: Option<u8>,
     pub peer_timeout: std::time::Duration,
     pub tlog_max_bytes: u64,
+    pub tlog_total_bytes: u64,
 }
 
 /// `[board]` section.
@@ -490,6 +493,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         sysid: file.mavlink.sysid,
         peer_timeout: std::time::Duration::from_secs_f64(peer_timeout_s),
         tlog_max_bytes: file.mavlink.tlog_max_mb.unwrap_or(64).clamp(1, 1 << 20) * 1024 * 1024,
+        tlog_total_bytes: file.mavlink.tlog_total_mb.unwrap_or(256).clamp(1, 1 << 24) * 1024 * 1024,
     };
     Ok(Settings {
         board,

@@ -9,6 +9,7 @@
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
+//! - [`logfile`]: `neptunus.log`, rotated by size.
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`hmi`]: the browser HMI (HTTP, WebSocket sessions as in-process ground stations).
 //! - [`vehicle`]: the vehicle core (parameters so far).
@@ -22,6 +23,7 @@ pub mod dialect;
 pub mod eventlog;
 pub mod firmware;
 pub mod hmi;
+pub mod logfile;
 pub mod mavlink;
 pub mod scenario;
 pub mod sim;

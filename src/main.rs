@@ -72,12 +72,11 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
             let settings = config::resolve(&cli.run)?;
             // A broken data directory degrades (app::run says how, loudly);
             // it never keeps the vehicle from starting.
+            // init_logging falls back to stderr alone when the log file cannot be opened.
             let _ = std::fs::create_dir_all(&settings.data_dir);
-            if let Err(e) = init_logging(Some(&settings.data_dir)) {
-                init_logging(None)?;
-                tracing::error!("{e:#} — logging to stderr only");
-            }
+            init_logging(Some(&settings.data_dir))?;
             tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
+            raise_open_file_limit();
             runtime()?.block_on(neptunus::app::run(settings, shutdown_signal()))?;
         }
     }
@@ -235,25 +234,31 @@ fn profiles_check(dir: Option<&std::path::Path>) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Logs to stderr and, for the vehicle, to `neptunus.log` in the data directory.
+/// Logs to stderr and, for the vehicle, to `neptunus.log` in the data
+/// directory, rotated by size (10 MiB × 5 files). A log file that cannot be
+/// opened (read-only or full data directory) is said loudly on stderr and
+/// the vehicle runs on, logging to stderr only.
 fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
+    use neptunus::logfile::{DEFAULT_FILES, DEFAULT_MAX_BYTES, RotatingFile};
     use tracing_subscriber::prelude::*;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
     let stderr = tracing_subscriber::fmt::layer().with_writer(std::io::stderr);
+    let mut unopened = None;
     let file = match data_dir {
         Some(dir) => {
             let path = dir.join("neptunus.log");
-            let f = std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(&path)
-                .with_context(|| format!("cannot open log file {}", path.display()))?;
-            Some(
-                tracing_subscriber::fmt::layer()
-                    .with_ansi(false)
-                    .with_writer(std::sync::Mutex::new(f)),
-            )
+            match RotatingFile::open(&path, DEFAULT_MAX_BYTES, DEFAULT_FILES) {
+                Ok(f) => Some(
+                    tracing_subscriber::fmt::layer()
+                        .with_ansi(false)
+                        .with_writer(std::sync::Mutex::new(f)),
+                ),
+                Err(e) => {
+                    unopened = Some((path, e));
+                    None
+                }
+            }
         }
         None => None,
     };
@@ -262,7 +267,39 @@ fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
         .with(stderr)
         .with(file)
         .init();
+    if let Some((path, e)) = unopened {
+        tracing::error!(
+            path = %path.display(), error = %e,
+            "CANNOT OPEN THE LOG FILE: logging to stderr only — make the data directory \
+             writable (or free space on it), or pass another --data-dir"
+        );
+    }
     Ok(())
+}
+
+/// Raises the soft open-file limit to the hard one: every ground station,
+/// browser session and log holds descriptors, and a connection flood should
+/// meet the peer table's bound, not EMFILE.
+fn raise_open_file_limit() {
+    use nix::sys::resource::{Resource, getrlimit, setrlimit};
+    // RLIM_INFINITY is not a valid soft limit for descriptors (fs.nr_open caps it).
+    const CEILING: u64 = 1 << 20;
+    match getrlimit(Resource::RLIMIT_NOFILE) {
+        Ok((soft, hard)) => {
+            let target = hard.min(CEILING);
+            if soft >= target {
+                tracing::info!(soft, hard, "open-file limit");
+                return;
+            }
+            match setrlimit(Resource::RLIMIT_NOFILE, target, hard) {
+                Ok(()) => tracing::info!(from = soft, to = target, hard, "open-file limit raised"),
+                Err(e) => {
+                    tracing::warn!(soft, hard, error = %e, "cannot raise the open-file limit")
+                }
+            }
+        }
+        Err(e) => tracing::warn!(error = %e, "cannot read the open-file limit"),
+    }
 }
 
 async fn shutdown_signal() {

@@ -16,6 +16,7 @@ use neptunus::dialect::neptunus::{
     SETUP_SIGNING_DATA,
 };
 use neptunus::firmware::pty::PtyPair;
+use neptunus::mavlink::endpoint::MAX_PEERS;
 use neptunus::mavlink::{
     EndpointError, EndpointSpec, EndpointStats, Frame, FrameDecoder, FrameStats, Inbound,
     MavMessage, Outbound, Route, Router, RouterConfig, RouterHandle, TlogConfig, TlogWriter,
@@ -1010,6 +1011,7 @@ fn tlog_rotates_by_size_and_never_overwrites() {
     let cfg = TlogConfig {
         dir: dir.path().join("logs"),
         max_bytes: 100,
+        total_bytes: u64::MAX,
     };
     let frame = encode_v2(1, 1, 0, &heartbeat(0)); // 21 bytes: 29 per record
     assert_eq!(frame.len(), 21);
@@ -1043,4 +1045,364 @@ fn tlog_rotates_by_size_and_never_overwrites() {
     // Same session name again: a new file, the old ones untouched.
     let again = TlogWriter::create(&cfg, "dive").unwrap();
     assert_eq!(again.path(), cfg.dir.join("dive-5.tlog"));
+}
+
+// ---------------------------------------------------------------------------
+// 7. under attack: full peer tables, idle connections, floods, disk bounds
+// ---------------------------------------------------------------------------
+
+/// Sends one frame from `sysid` on `sock` and returns its inbound record.
+async fn udp_hello(
+    sock: &UdpSocket,
+    addr: SocketAddr,
+    sysid: u8,
+    inbound: &mut mpsc::Receiver<Inbound>,
+) -> Inbound {
+    sock.send_to(&encode_v2(sysid, 190, 0, &heartbeat(0)), addr)
+        .await
+        .unwrap();
+    next_inbound(inbound).await
+}
+
+#[tokio::test]
+async fn udpin_full_table_evicts_strangers_never_a_station_that_may_control() {
+    let (router, mut inbound) = start(&["udpin:127.0.0.1:0"], RouterConfig::default()).await;
+    let addr = router.local_addr(0).unwrap();
+    // The pilot's station first, marked by the vehicle side as it would be.
+    let pilot = udp_client().await;
+    udp_hello(&pilot, addr, 255, &mut inbound)
+        .await
+        .standing
+        .set_may_control(true);
+    // Strangers fill the table and keep coming.
+    let mut strangers = Vec::new();
+    for i in 0..(MAX_PEERS + 10) {
+        let s = udp_client().await;
+        udp_hello(&s, addr, 100 + (i % 100) as u8, &mut inbound).await;
+        strangers.push(s);
+    }
+    let s = &router.stats()[0];
+    assert_eq!(s.peers, MAX_PEERS);
+    assert_eq!(s.peers_evicted, 11, "{s:#?}");
+    assert_eq!(s.inbound_dropped, 0, "nobody refused: {s:#?}");
+    // The pilot is still a peer: it gets the broadcast; the oldest strangers do not.
+    router.send(out_all(encode_v2(1, 1, 0, &heartbeat(7))));
+    assert_eq!(udp_next_frame(&pilot).await.0.msg, heartbeat(7));
+    assert_eq!(
+        udp_next_frame(strangers.last().unwrap()).await.0.msg,
+        heartbeat(7)
+    );
+    let mut buf = [0u8; 64];
+    assert!(
+        timeout(Duration::from_millis(200), strangers[0].recv_from(&mut buf))
+            .await
+            .is_err(),
+        "an evicted stranger still gets telemetry"
+    );
+    router.shutdown().await;
+}
+
+#[tokio::test]
+async fn udpin_table_full_of_stations_that_may_control_refuses_newcomers() {
+    let (router, mut inbound) = start(&["udpin:127.0.0.1:0"], RouterConfig::default()).await;
+    let addr = router.local_addr(0).unwrap();
+    let mut keep = Vec::new();
+    for _ in 0..MAX_PEERS {
+        let s = udp_client().await;
+        udp_hello(&s, addr, 255, &mut inbound)
+            .await
+            .standing
+            .set_may_control(true);
+        keep.push(s);
+    }
+    let late = udp_client().await;
+    late.send_to(&encode_v2(255, 190, 0, &heartbeat(0)), addr)
+        .await
+        .unwrap();
+    wait_stats(&router, "the newcomer refused", |s| {
+        s[0].inbound_dropped == 1
+    })
+    .await;
+    let s = &router.stats()[0];
+    assert_eq!((s.peers, s.peers_evicted), (MAX_PEERS, 0));
+    router.shutdown().await;
+}
+
+#[tokio::test]
+async fn tcpin_idle_clients_are_closed_after_the_peer_timeout_talking_ones_are_not() {
+    let cfg = RouterConfig {
+        peer_timeout: Duration::from_millis(300),
+        ..RouterConfig::default()
+    };
+    let (router, mut inbound) = start(&["tcpin:127.0.0.1:0"], cfg).await;
+    let addr = router.local_addr(0).unwrap();
+    let mut idle = TcpStream::connect(addr).await.unwrap();
+    let mut talker = TcpStream::connect(addr).await.unwrap();
+    wait_stats(&router, "two clients", |s| s[0].peers == 2).await;
+    // The talker sends a frame every 100 ms until the idle one is gone.
+    let talking = async {
+        for seq in 0u8.. {
+            talker
+                .write_all(&encode_v2(255, 190, seq, &heartbeat(0)))
+                .await
+                .unwrap();
+            next_inbound(&mut inbound).await;
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    };
+    let closed = async {
+        let mut buf = [0u8; 64];
+        loop {
+            match idle.read(&mut buf).await {
+                Ok(0) | Err(_) => return,
+                Ok(_) => {}
+            }
+        }
+    };
+    tokio::select! {
+        () = talking => unreachable!(),
+        r = timeout(WAIT, closed) => r.expect("the idle client was never closed"),
+    }
+    wait_stats(&router, "one client left", |s| s[0].peers == 1).await;
+    // The talker still works.
+    router.send(out_all(encode_v2(1, 1, 0, &heartbeat(5))));
+    let mut reader = StreamReader::new();
+    assert_eq!(reader.next(&mut talker).await.msg, heartbeat(5));
+    router.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tcpin_full_table_evicts_idle_strangers_for_newcomers_and_keeps_the_pilot() {
+    let (router, mut inbound) = start(&["tcpin:127.0.0.1:0"], RouterConfig::default()).await;
+    let addr = router.local_addr(0).unwrap();
+    let mut pilot = TcpStream::connect(addr).await.unwrap();
+    pilot
+        .write_all(&encode_v2(255, 190, 0, &heartbeat(0)))
+        .await
+        .unwrap();
+    next_inbound(&mut inbound)
+        .await
+        .standing
+        .set_may_control(true);
+    // 70 connections that never say anything.
+    let mut idle = Vec::new();
+    for _ in 0..70 {
+        idle.push(TcpStream::connect(addr).await.unwrap());
+    }
+    wait_stats(&router, "the evictions", |s| s[0].peers_evicted == 7).await;
+    // A new station gets in and is heard.
+    let mut newcomer = TcpStream::connect(addr).await.unwrap();
+    newcomer
+        .write_all(&encode_v2(254, 190, 0, &heartbeat(0)))
+        .await
+        .unwrap();
+    assert_eq!(next_inbound(&mut inbound).await.frame.sysid, 254);
+    let s = &router.stats()[0];
+    assert_eq!((s.peers, s.peers_evicted), (MAX_PEERS, 8), "{s:#?}");
+    // Both the pilot and the newcomer get telemetry.
+    router.send(out_all(encode_v2(1, 1, 0, &heartbeat(6))));
+    assert_eq!(StreamReader::new().next(&mut pilot).await.msg, heartbeat(6));
+    assert_eq!(
+        StreamReader::new().next(&mut newcomer).await.msg,
+        heartbeat(6)
+    );
+    // The first idle connections were the ones closed.
+    let mut buf = [0u8; 64];
+    let n = timeout(WAIT, idle[0].read(&mut buf))
+        .await
+        .unwrap()
+        .unwrap_or(0);
+    assert_eq!(n, 0, "the oldest idle connection was not closed");
+    router.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tlog_takes_strangers_frames_through_a_rate_limit_and_every_frame_of_a_station_that_may_control()
+ {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = RouterConfig {
+        tlog: Some(TlogConfig::new(dir.path())),
+        ..RouterConfig::default()
+    };
+    let (router, mut inbound) = start(&["tcpin:127.0.0.1:0"], cfg).await;
+    let addr = router.local_addr(0).unwrap();
+    let mut pilot = TcpStream::connect(addr).await.unwrap();
+    pilot
+        .write_all(&encode_v2(255, 190, 0, &heartbeat(0)))
+        .await
+        .unwrap();
+    next_inbound(&mut inbound)
+        .await
+        .standing
+        .set_may_control(true);
+    let started = std::time::Instant::now();
+    // The flood: 20 000 frames from a stranger in big writes, while the pilot
+    // sends 200.
+    let mut stranger = TcpStream::connect(addr).await.unwrap();
+    let flood: Vec<u8> = (0..20_000u32)
+        .flat_map(|i| encode_v2(66, 1, i as u8, &heartbeat(i)))
+        .collect();
+    let flooding = tokio::spawn(async move {
+        stranger.write_all(&flood).await.unwrap();
+        stranger
+    });
+    let mut got_pilot = 0;
+    let mut got_stranger = 0u64;
+    for seq in 1..=200u32 {
+        pilot
+            .write_all(&encode_v2(255, 190, seq as u8, &heartbeat(1000 + seq)))
+            .await
+            .unwrap();
+    }
+    let _stranger = flooding.await.unwrap();
+    // Drain until every pilot frame and the whole flood went through the router.
+    wait_stats(&router, "the flood decoded", |s| s[0].frames_in >= 20_201).await;
+    while let Ok(Some(inb)) = timeout(Duration::from_millis(200), inbound.recv()).await {
+        if inb.frame.sysid == 255 {
+            got_pilot += 1;
+        } else {
+            got_stranger += 1;
+        }
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    assert_eq!(
+        got_pilot, 200,
+        "the pilot's frames must all reach the vehicle"
+    );
+    assert!(got_stranger > 0);
+    let s = router.stats()[0].clone();
+    router.shutdown().await;
+
+    let records: Vec<Vec<u8>> = tlog_files(dir.path())
+        .iter()
+        .flat_map(|p| read_tlog(p))
+        .map(|(_, raw)| raw)
+        .collect();
+    let pilot_logged = records.iter().filter(|r| r[5] == 255).count();
+    let stranger_logged = records.iter().filter(|r| r[5] == 66).count() as f64;
+    assert_eq!(pilot_logged, 201, "every frame of the pilot is logged");
+    let bound = 40.0 + neptunus::mavlink::endpoint::TLOG_STRANGER_RATE_HZ * elapsed + 1.0;
+    assert!(
+        stranger_logged <= bound,
+        "{stranger_logged} stranger frames logged in {elapsed:.2} s (bound {bound:.0})"
+    );
+    assert_eq!(s.tlog_dropped, 20_000 - stranger_logged as u64, "{s:#?}");
+}
+
+#[test]
+fn tlog_total_cap_deletes_the_oldest_of_our_files_first_and_nothing_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let tlogs = dir.path().join("tlogs");
+    std::fs::create_dir_all(&tlogs).unwrap();
+    let kib = |n: usize| vec![0u8; n * 1024];
+    for (name, size) in [
+        ("neptunus-20260101-000000.tlog", 300),
+        ("neptunus-20260101-000000-2.tlog", 300),
+        ("neptunus-20260101-000000-10.tlog", 300),
+        ("neptunus-20260102-000000.tlog", 300),
+        ("notes.txt", 2000),
+        ("other.tlog", 2000),
+    ] {
+        std::fs::write(tlogs.join(name), kib(size)).unwrap();
+    }
+    let cfg = TlogConfig {
+        dir: tlogs.clone(),
+        max_bytes: 64 * 1024 * 1024,
+        total_bytes: 1024 * 1024,
+    };
+    // Files rotate at half the total: room for the live one is kept.
+    assert_eq!(cfg.file_bytes(), 512 * 1024);
+    let mut w = TlogWriter::create(&cfg, "neptunus-20260103-000000").unwrap();
+    let names = |dir: &Path| -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    // 4 × 300 KiB + 512 KiB > 1 MiB: the three oldest (index order, not
+    // string order: -2 before -10) go; other files are not ours to touch.
+    assert_eq!(
+        names(&tlogs),
+        [
+            "neptunus-20260102-000000.tlog",
+            "neptunus-20260103-000000.tlog",
+            "notes.txt",
+            "other.tlog"
+        ]
+    );
+    // Writing 3 MiB keeps our files under the cap at every rotation.
+    let frame = encode_v2(1, 1, 0, &big_message(0));
+    let ours = |dir: &Path| -> u64 {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap())
+            .filter(|e| {
+                neptunus::mavlink::tlog::parse_file_name(&e.file_name().to_string_lossy()).is_some()
+            })
+            .map(|e| e.metadata().unwrap().len())
+            .sum()
+    };
+    let mut written = 0;
+    while written < 3 * 1024 * 1024 {
+        w.write_frame(1, &frame).unwrap();
+        written += frame.len() + 8;
+        w.flush().unwrap();
+        assert!(ours(&tlogs) <= 1024 * 1024, "{} bytes", ours(&tlogs));
+    }
+    assert!(!tlogs.join("neptunus-20260102-000000.tlog").exists());
+    assert!(tlogs.join("notes.txt").exists() && tlogs.join("other.tlog").exists());
+}
+
+#[tokio::test]
+async fn tlog_takes_replies_to_strangers_through_the_rate_limit_and_all_replies_to_the_pilot() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = RouterConfig {
+        tlog: Some(TlogConfig::new(dir.path())),
+        ..RouterConfig::default()
+    };
+    let (router, mut inbound) = start(&["udpin:127.0.0.1:0"], cfg).await;
+    let addr = router.local_addr(0).unwrap();
+    let pilot = udp_client().await;
+    let pilot_in = udp_hello(&pilot, addr, 255, &mut inbound).await;
+    pilot_in.standing.set_may_control(true);
+    let stranger = udp_client().await;
+    let stranger_in = udp_hello(&stranger, addr, 66, &mut inbound).await;
+    let started = std::time::Instant::now();
+    for i in 0..500u32 {
+        let to_pilot = encode_v2(1, 1, 0, &heartbeat(10_000 + i));
+        router.send(out_to(Route::Peer(0, pilot_in.peer), to_pilot));
+        let to_stranger = encode_v2(1, 1, 0, &heartbeat(20_000 + i));
+        router.send(out_to(Route::Peer(0, stranger_in.peer), to_stranger));
+    }
+    // Queue order: once the last frame reached the pilot, all were dispatched.
+    let mut last = 0;
+    while last != 10_499 {
+        if let MavMessage::HEARTBEAT(h) = udp_next_frame(&pilot).await.0.msg {
+            last = h.custom_mode;
+        }
+    }
+    router.shutdown().await;
+    let elapsed = started.elapsed().as_secs_f64();
+    let modes: Vec<u32> = tlog_files(dir.path())
+        .iter()
+        .flat_map(|p| read_tlog(p))
+        .filter_map(|(_, raw)| match decode_all(&raw).0.pop()?.msg {
+            MavMessage::HEARTBEAT(h) if raw[5] == 1 => Some(h.custom_mode),
+            _ => None,
+        })
+        .collect();
+    let to_pilot = modes
+        .iter()
+        .filter(|m| (10_000..20_000).contains(*m))
+        .count();
+    let to_stranger = modes.iter().filter(|m| **m >= 20_000).count();
+    assert_eq!(to_pilot, 500, "every reply to the pilot is logged");
+    // The burst (40, less the stranger's own hello) and the refill.
+    let bound = 40.0 + neptunus::mavlink::endpoint::TLOG_STRANGER_RATE_HZ * elapsed;
+    assert!(
+        (to_stranger as f64) <= bound,
+        "{to_stranger} replies to the stranger logged in {elapsed:.2} s"
+    );
 }

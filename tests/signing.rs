@@ -12,9 +12,9 @@ use neptunus::dialect::neptunus::{
     COMMAND_LONG_DATA, HEARTBEAT_DATA, MavAutopilot, MavCmd, MavModeFlag, MavState, MavType,
 };
 use neptunus::mavlink::signing::{
-    MAX_STREAMS, MAX_TIMESTAMP, NEW_STREAM_WINDOW, RESERVATION_AHEAD, RESERVATION_MARGIN, Signer,
-    SigningError, SigningKey, SigningStore, SigningWarning, Verdict, Verifier, is_signed,
-    timestamp_from_unix_us,
+    MAX_STREAMS, MAX_TIMESTAMP, NEW_STREAM_WINDOW, REPLAY_RESERVATION_AHEAD, RESERVATION_AHEAD,
+    RESERVATION_MARGIN, ReplayState, Signer, SigningError, SigningKey, SigningStore,
+    SigningWarning, Verdict, Verifier, is_signed, timestamp_from_unix_us,
 };
 use neptunus::mavlink::{FrameDecoder, FrameStats, MavMessage, decode_datagram, encode_v2};
 use proptest::prelude::*;
@@ -772,6 +772,136 @@ fn reservation_file_roundtrip() {
         None,
         "a corrupt file is no reservation"
     );
+}
+
+// ---------------------------------------------------------------------------
+// replay state across restarts
+// ---------------------------------------------------------------------------
+
+/// Checks `frame`, persisting (into `persisted`) whatever reservation it asks
+/// for before acting on it, as the vehicle does.
+fn accept(v: &mut Verifier, frame: &[u8], persisted: &mut ReplayState) -> Verdict {
+    let verdict = v.check(frame, TS);
+    if let Some(state) = v.take_reservation() {
+        *persisted = state;
+    }
+    verdict
+}
+
+#[test]
+fn frames_accepted_before_a_restart_are_refused_after_it_even_after_a_crash() {
+    let key = golden_key();
+    let mut persisted = ReplayState::default();
+    let mut v = Verifier::new(key.clone());
+    let mut recorded = Vec::new();
+    for i in 0..50 {
+        let frame = signed_frame(&key, 0, 255, 190, TS + i * 20_000); // 200 ms apart
+        assert!(matches!(
+            accept(&mut v, &frame, &mut persisted),
+            Verdict::Valid { .. }
+        ));
+        recorded.push(frame);
+    }
+    // Crash: only what was persisted on the way survives.
+    let mut after = Verifier::with_replay_state(key.clone(), &persisted);
+    for frame in &recorded {
+        assert_eq!(after.check(frame, TS), Verdict::Replayed);
+    }
+    // The station's next frames pass once its clock is past the reservation.
+    let reserved = persisted.streams[&(0, 255, 190)];
+    let last = TS + 49 * 20_000;
+    assert!(reserved >= last && reserved <= last + REPLAY_RESERVATION_AHEAD);
+    assert_eq!(
+        after.check(&signed_frame(&key, 0, 255, 190, reserved), TS),
+        Verdict::Replayed
+    );
+    assert!(matches!(
+        after.check(&signed_frame(&key, 0, 255, 190, reserved + 1), TS),
+        Verdict::Valid { .. }
+    ));
+
+    // A graceful stop persists the exact last timestamps: nothing genuine is refused.
+    let clean = Verifier::with_replay_state(key.clone(), &v.replay_state());
+    let mut clean = clean;
+    assert_eq!(clean.check(&recorded[49], TS), Verdict::Replayed);
+    assert!(matches!(
+        clean.check(&signed_frame(&key, 0, 255, 190, last + 1), TS),
+        Verdict::Valid { .. }
+    ));
+}
+
+#[test]
+fn reservations_are_written_once_per_margin_and_always_cover_every_accepted_frame() {
+    let key = golden_key();
+    let mut v = Verifier::new(key.clone());
+    let mut persisted = ReplayState::default();
+    let mut writes = 0;
+    // Two stations, 10 Hz each, for 60 s of their clocks.
+    for i in 0..600u64 {
+        for (sysid, offset) in [(255u8, 0u64), (254, 3_333)] {
+            let ts = TS + i * 10_000 + offset;
+            let frame = signed_frame(&key, 0, sysid, 190, ts);
+            assert!(matches!(v.check(&frame, TS), Verdict::Valid { .. }));
+            if let Some(state) = v.take_reservation() {
+                writes += 1;
+                persisted = state;
+            }
+            assert!(
+                persisted.streams[&(0, sysid, 190)] >= ts,
+                "accepted a frame beyond what is on disk"
+            );
+        }
+    }
+    // 60 s at one write per margin (5 s), shared by both streams, plus the first.
+    assert!(
+        writes <= 2 + 60 * 100_000 / REPLAY_RESERVATION_AHEAD as usize * 2,
+        "{writes} writes"
+    );
+    assert!(
+        writes >= 60 * 100_000 / REPLAY_RESERVATION_AHEAD as usize / 2,
+        "{writes} writes"
+    );
+}
+
+#[test]
+fn a_restored_verifier_measures_new_streams_against_the_persisted_newest() {
+    let key = golden_key();
+    let mut state = ReplayState::default();
+    state.streams.insert((0, 255, 190), TS);
+    let mut v = Verifier::with_replay_state(key.clone(), &state);
+    // A stream never seen, recorded 2 min before the newest persisted frame.
+    let old = signed_frame(&key, 0, 250, 190, TS - 2 * NEW_STREAM_WINDOW);
+    assert_eq!(v.check(&old, 0), Verdict::TooOld);
+    // Other streams are untouched by the restored one.
+    assert!(matches!(
+        v.check(&signed_frame(&key, 1, 255, 190, TS - 10), 0),
+        Verdict::Valid { .. }
+    ));
+}
+
+#[test]
+fn replay_file_roundtrip_and_corruption() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = SigningStore::new(dir.path());
+    assert_eq!(store.load_replay().unwrap(), None);
+    let mut state = ReplayState::default();
+    state.streams.insert((0, 255, 190), TS);
+    state.streams.insert((3, 1, 1), MAX_TIMESTAMP);
+    store.save_replay(&state).unwrap();
+    assert_eq!(store.load_replay().unwrap(), Some(state));
+
+    for bad in [
+        "0 255 190 12\n",
+        "# neptunus signing replay state v1: link_id sysid compid timestamp\n0 255 190\n",
+        "# neptunus signing replay state v1: link_id sysid compid timestamp\n0 256 190 1\n",
+        "# neptunus signing replay state v1: link_id sysid compid timestamp\n0 255 190 281474976710656\n",
+    ] {
+        fs::write(store.replay_path(), bad).unwrap();
+        let err = store.load_replay().expect_err(bad).to_string();
+        assert!(err.contains("signing.replay"), "{err}");
+    }
+    fs::write(store.replay_path(), vec![b'0'; 20_000]).unwrap();
+    assert!(store.load_replay().is_err(), "an oversized file is refused");
 }
 
 // ---------------------------------------------------------------------------

@@ -8,6 +8,15 @@
 //! inbound channel tagged with where it came from; outbound bytes are routed
 //! to all endpoints, one endpoint, or one peer.
 //!
+//! Under attack: each peer carries a [`PeerStanding`] the vehicle side sets
+//! once a station that may control the vehicle speaks through it. A full
+//! peer table ([`MAX_PEERS`]) makes room by evicting the least recently heard
+//! peer that may not control (closing its TCP connection), so strangers can
+//! never shut out a station that may control; idle TCP clients are closed
+//! after the peer timeout like UDP peers; frames from peers that may not
+//! control reach the telemetry log through a per-endpoint rate limit and may
+//! use only part of the inbound channel.
+//!
 //! It never interprets a message (no authority, no signing, no replies):
 //! that is the vehicle core's job. It never blocks the caller of
 //! [`RouterHandle::send`]: queues are bounded, and a slow client loses frames
@@ -22,7 +31,7 @@ use std::io;
 use std::net::{Ipv4Addr, Ipv6Addr, SocketAddr, ToSocketAddrs};
 use std::path::PathBuf;
 use std::str::FromStr;
-use std::sync::atomic::{AtomicU32, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
@@ -213,6 +222,46 @@ pub struct Inbound {
     pub endpoint: EndpointId,
     pub peer: PeerId,
     pub frame: Frame,
+    /// The peer's standing with the router; the vehicle side marks it once a
+    /// station that may control speaks through this peer.
+    pub standing: PeerStanding,
+}
+
+/// What the router knows of one peer that the vehicle side tells it: whether
+/// a station that may control the vehicle speaks through it. Shared by the
+/// peer's table entry and every [`Inbound`] from it; cheap to clone and to
+/// check on every frame (one atomic load).
+#[derive(Debug, Clone, Default)]
+pub struct PeerStanding(Arc<PeerShared>);
+
+#[derive(Debug, Default)]
+struct PeerShared {
+    may_control: AtomicBool,
+    /// Milliseconds since the router's epoch when it was last heard (TCP).
+    last_heard_ms: AtomicU64,
+}
+
+impl PeerStanding {
+    /// Whether a station that may control has been heard through this peer.
+    pub fn may_control(&self) -> bool {
+        self.0.may_control.load(Ordering::Relaxed)
+    }
+
+    /// Records whether a station that may control speaks through this peer;
+    /// true when that changed it. A peer that may control is never evicted to
+    /// make room for a newcomer and all its frames are logged.
+    pub fn set_may_control(&self, may: bool) -> bool {
+        self.may_control() != may && self.0.may_control.swap(may, Ordering::Relaxed) != may
+    }
+
+    fn heard(&self, epoch: Instant) {
+        let ms = u64::try_from(epoch.elapsed().as_millis()).unwrap_or(u64::MAX);
+        self.0.last_heard_ms.store(ms, Ordering::Relaxed);
+    }
+
+    fn last_heard_ms(&self) -> u64 {
+        self.0.last_heard_ms.load(Ordering::Relaxed)
+    }
 }
 
 /// Who gets an outbound frame.
@@ -245,14 +294,21 @@ pub struct EndpointStats {
     pub decode: FrameStats,
     pub send_errors: u64,
     /// Frames decoded but dropped because the inbound channel was full (or
-    /// their sender was refused: the peer table was full).
+    /// their sender was refused: the peer table was full of peers that may
+    /// control).
     pub inbound_dropped: u64,
+    /// Peers that may not control evicted to make room for a newcomer.
+    pub peers_evicted: u64,
+    /// Frames from (and replies to) peers that may not control left out of
+    /// the telemetry log by its rate limit.
+    pub tlog_dropped: u64,
 }
 
 /// Router settings.
 #[derive(Debug, Clone)]
 pub struct RouterConfig {
-    /// UDP peers expire after this long without a datagram.
+    /// UDP peers expire, and TCP clients are closed, after this long without
+    /// a frame (a datagram, for UDP).
     pub peer_timeout: Duration,
     pub tlog: Option<TlogConfig>,
 }
@@ -270,9 +326,21 @@ impl Default for RouterConfig {
 const ENDPOINT_QUEUE: usize = 1024;
 /// Frames queued for one TCP/serial peer before its frames are dropped.
 const PEER_QUEUE: usize = 256;
-/// Peers per endpoint (UDP addresses or TCP clients); more are refused so
-/// that spoofed source addresses or a connection flood cannot grow memory.
-const MAX_PEERS: usize = 64;
+/// Peers per endpoint (UDP addresses or TCP clients). When full, the least
+/// recently heard peer that may not control makes room for a newcomer;
+/// only a table full of peers that may control refuses one. Bounded so that
+/// spoofed source addresses or a connection flood cannot grow memory.
+pub const MAX_PEERS: usize = 64;
+/// Frames per second (per endpoint, for all its peers that may not control
+/// together) that reach the telemetry log…
+pub const TLOG_STRANGER_RATE_HZ: f64 = 20.0;
+/// …with bursts of this many.
+const TLOG_STRANGER_BURST: f64 = 40.0;
+/// Peers that may not control may fill the inbound channel only to this
+/// fraction: the rest is kept for stations that may control.
+const INBOUND_STRANGER_SHARE: (usize, usize) = (3, 4);
+/// Evictions are logged at most this often (with the count since).
+const EVICTION_REPORT: Duration = Duration::from_secs(10);
 /// Records queued for the telemetry log thread.
 const TLOG_QUEUE: usize = 8192;
 const TLOG_FLUSH_PERIOD: Duration = Duration::from_secs(1);
@@ -290,15 +358,26 @@ impl Router {
     /// error; `tcpout` and `serial` endpoints that cannot connect yet keep
     /// retrying with backoff instead. Every decoded frame goes to `inbound`
     /// (without waiting: frames are dropped and counted when it is full).
+    ///
+    /// A telemetry log that cannot be opened (a read-only or full data
+    /// directory, no descriptors left) is logged as an error and the router
+    /// runs without one: the vehicle must not depend on its disk.
     pub async fn start(
         specs: Vec<EndpointSpec>,
         cfg: RouterConfig,
         inbound: mpsc::Sender<Inbound>,
     ) -> Result<RouterHandle, EndpointError> {
         let tlog = match &cfg.tlog {
-            Some(tlog_cfg) => Some(TlogHandle::spawn(tlog_cfg)?),
+            Some(tlog_cfg) => match TlogHandle::spawn(tlog_cfg) {
+                Ok(tlog) => Some(tlog),
+                Err(e) => {
+                    tracing::error!("{e}. RUNNING WITHOUT A TELEMETRY LOG");
+                    None
+                }
+            },
             None => None,
         };
+        let epoch = Instant::now();
         let next_peer = Arc::new(AtomicU64::new(1));
         let (shutdown_tx, shutdown_rx) = watch::channel(false);
 
@@ -318,6 +397,10 @@ impl Router {
                 inbound: inbound.clone(),
                 tlog: tlog.as_ref().map(|t| t.sender.clone()),
                 next_peer: Arc::clone(&next_peer),
+                epoch,
+                tlog_bucket: Mutex::new(TokenBucket::new(epoch)),
+                evictions_unreported: AtomicU64::new(0),
+                last_eviction_report: Mutex::new(None),
             });
             let (queue_tx, queue_rx) = mpsc::channel(ENDPOINT_QUEUE);
             let shutdown = shutdown_rx.clone();
@@ -338,7 +421,13 @@ impl Router {
                 }
                 Opened::TcpListener(listener) => {
                     ctx.counters.set_local_addr(listener.local_addr().ok());
-                    tokio::spawn(run_tcp_in(task_ctx, listener, queue_rx, shutdown))
+                    tokio::spawn(run_tcp_in(
+                        task_ctx,
+                        listener,
+                        cfg.peer_timeout,
+                        queue_rx,
+                        shutdown,
+                    ))
                 }
                 Opened::TcpOut(addr) => tokio::spawn(run_connector(
                     task_ctx,
@@ -400,9 +489,15 @@ struct EndpointSlot {
 impl RouterHandle {
     /// Queues bytes for their route. Never blocks: when an endpoint's queue
     /// is full the frame is dropped for that endpoint and counted.
+    ///
+    /// Logged once per send, however many peers get it; a frame for one peer
+    /// is logged by its endpoint, which knows whether that peer may control
+    /// (replies to the others share their rate limit: a stranger's requests
+    /// cannot fill the log with our answers).
     pub fn send(&self, out: Outbound) {
-        if let Some(tlog) = &self.inner.tlog {
-            // Once per send, however many peers get it.
+        if let Some(tlog) = &self.inner.tlog
+            && !matches!(out.route, Route::Peer(..))
+        {
             tlog.sender.record(unix_time_us(), Arc::clone(&out.bytes));
         }
         let (slots, target) = match out.route {
@@ -499,6 +594,39 @@ struct EndpointCtx {
     inbound: mpsc::Sender<Inbound>,
     tlog: Option<TlogSender>,
     next_peer: Arc<AtomicU64>,
+    /// Zero of [`PeerStanding`]'s last-heard times.
+    epoch: Instant,
+    /// The telemetry log's share for peers that may not control.
+    tlog_bucket: Mutex<TokenBucket>,
+    evictions_unreported: AtomicU64,
+    last_eviction_report: Mutex<Option<Instant>>,
+}
+
+/// Frames allowed at [`TLOG_STRANGER_RATE_HZ`] with bursts of [`TLOG_STRANGER_BURST`].
+struct TokenBucket {
+    tokens: f64,
+    last: Instant,
+}
+
+impl TokenBucket {
+    fn new(now: Instant) -> Self {
+        Self {
+            tokens: TLOG_STRANGER_BURST,
+            last: now,
+        }
+    }
+
+    fn take(&mut self, now: Instant) -> bool {
+        let dt = now.saturating_duration_since(self.last).as_secs_f64();
+        self.last = now;
+        self.tokens = (self.tokens + dt * TLOG_STRANGER_RATE_HZ).min(TLOG_STRANGER_BURST);
+        if self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
 }
 
 #[derive(Default)]
@@ -510,6 +638,8 @@ struct Counters {
     bytes_out: AtomicU64,
     send_errors: AtomicU64,
     inbound_dropped: AtomicU64,
+    peers_evicted: AtomicU64,
+    tlog_dropped: AtomicU64,
     decode: Mutex<FrameStats>,
     local_addr: Mutex<Option<SocketAddr>>,
     /// Kinds of trouble already logged (bit per kind): log once, count always.
@@ -539,6 +669,8 @@ const WARN_GARBAGE: u32 = 8;
 const WARN_SEND: u32 = 16;
 const WARN_INBOUND: u32 = 32;
 const WARN_PEERS: u32 = 64;
+const WARN_TLOG_RATE: u32 = 128;
+const WARN_INBOUND_SHARE: u32 = 256;
 
 impl EndpointCtx {
     fn new_peer(&self) -> PeerId {
@@ -560,15 +692,64 @@ impl EndpointCtx {
         }
     }
 
-    /// A new peer was refused because the table is full; its `frames` are
-    /// dropped (counted as inbound drops).
+    /// A new peer was refused because the table is full of peers that may
+    /// control; its `frames` are dropped (counted as inbound drops).
     fn refuse_peer(&self, from: &str, frames: usize) {
         self.counters
             .inbound_dropped
             .fetch_add(frames as u64, Ordering::Relaxed);
         if self.first_time(WARN_PEERS) {
-            tracing::warn!(endpoint = %self.url, %from, "peer table full ({MAX_PEERS}): refusing new peers (logged once)");
+            tracing::warn!(endpoint = %self.url, %from, "peer table full ({MAX_PEERS} peers, all stations that may control): refusing new peers (logged once)");
         }
+    }
+
+    /// A peer that may not control was evicted for `newcomer`: counted
+    /// always, logged once per burst.
+    fn evicted(&self, victim: &str, newcomer: &str) {
+        self.counters.peers_evicted.fetch_add(1, Ordering::Relaxed);
+        let unreported = self.evictions_unreported.fetch_add(1, Ordering::Relaxed) + 1;
+        let now = Instant::now();
+        let mut last = self
+            .last_eviction_report
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if last.is_none_or(|t| now.saturating_duration_since(t) >= EVICTION_REPORT) {
+            *last = Some(now);
+            self.evictions_unreported.store(0, Ordering::Relaxed);
+            tracing::warn!(
+                endpoint = %self.url, %victim, %newcomer, evicted = unreported,
+                "peer table full ({MAX_PEERS}): evicting the least recently heard peers that may \
+                 not control to admit new ones (a flood of peers? logged once per {} s; see \
+                 peers_evicted)",
+                EVICTION_REPORT.as_secs()
+            );
+        }
+    }
+
+    /// Logs a frame addressed to one peer: always for a peer that may
+    /// control, through the shared rate limit for the others.
+    fn log_reply(&self, standing: &PeerStanding, bytes: &Arc<[u8]>) {
+        let Some(tlog) = &self.tlog else { return };
+        if standing.may_control() || self.tlog_allows_stranger(Instant::now()) {
+            tlog.record(unix_time_us(), Arc::clone(bytes));
+        }
+    }
+
+    /// One frame of a peer that may not control into the log, if the rate
+    /// limit allows; counted (and said once) when it does not.
+    fn tlog_allows_stranger(&self, now: Instant) -> bool {
+        let allowed = self
+            .tlog_bucket
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take(now);
+        if !allowed {
+            self.counters.tlog_dropped.fetch_add(1, Ordering::Relaxed);
+            if self.first_time(WARN_TLOG_RATE) {
+                tracing::warn!(endpoint = %self.url, "frames to and from stations that may not control reach the telemetry log at most {TLOG_STRANGER_RATE_HZ}/s per endpoint: dropping the rest from the log (logged once; see tlog_dropped)");
+            }
+        }
+        allowed
     }
 
     fn sent(&self, bytes: usize) {
@@ -580,7 +761,14 @@ impl EndpointCtx {
 
     /// Accounts for `bytes_in` bytes that decoded to `frames` (drained) with
     /// `delta` decoder counters, and passes the frames on.
-    fn deliver(&self, peer: PeerId, bytes_in: usize, frames: &mut Vec<Frame>, delta: &FrameStats) {
+    fn deliver(
+        &self,
+        peer: PeerId,
+        standing: &PeerStanding,
+        bytes_in: usize,
+        frames: &mut Vec<Frame>,
+        delta: &FrameStats,
+    ) {
         let c = &self.counters;
         c.bytes_in.fetch_add(bytes_in as u64, Ordering::Relaxed);
         c.frames_in
@@ -613,15 +801,35 @@ impl EndpointCtx {
                 }
             }
         }
+        if frames.is_empty() {
+            return;
+        }
         let now_us = unix_time_us();
+        let may_control = standing.may_control();
+        let now = Instant::now();
+        standing.heard(self.epoch);
         for frame in frames.drain(..) {
-            if let Some(tlog) = &self.tlog {
+            if let Some(tlog) = &self.tlog
+                && (may_control || self.tlog_allows_stranger(now))
+            {
                 tlog.record(now_us, Arc::from(frame.raw.as_slice()));
+            }
+            // Strangers may not crowd out the stations that may control.
+            let (num, den) = INBOUND_STRANGER_SHARE;
+            if !may_control
+                && self.inbound.capacity() * den < self.inbound.max_capacity() * (den - num)
+            {
+                c.inbound_dropped.fetch_add(1, Ordering::Relaxed);
+                if self.first_time(WARN_INBOUND_SHARE) {
+                    tracing::warn!(endpoint = %self.url, peer, "inbound channel filling up: dropping frames from stations that may not control (logged once)");
+                }
+                continue;
             }
             let inbound = Inbound {
                 endpoint: self.id,
                 peer,
                 frame,
+                standing: standing.clone(),
             };
             if let Err(mpsc::error::TrySendError::Full(_)) = self.inbound.try_send(inbound) {
                 c.inbound_dropped.fetch_add(1, Ordering::Relaxed);
@@ -649,6 +857,8 @@ impl EndpointCtx {
                 .clone(),
             send_errors: c.send_errors.load(Ordering::Relaxed),
             inbound_dropped: c.inbound_dropped.load(Ordering::Relaxed),
+            peers_evicted: c.peers_evicted.load(Ordering::Relaxed),
+            tlog_dropped: c.tlog_dropped.load(Ordering::Relaxed),
         }
     }
 }
@@ -753,6 +963,51 @@ async fn stopped(shutdown: &mut watch::Receiver<bool>) {
 struct UdpPeer {
     id: PeerId,
     last_seen: Instant,
+    standing: PeerStanding,
+}
+
+/// The peer for a datagram of valid MAVLink from `from`: known, admitted
+/// (evicting the least recently heard peer that may not control when the
+/// table is full), or `None` when every slot holds a peer that may control.
+fn admit_udp(
+    ctx: &EndpointCtx,
+    peers: &mut HashMap<SocketAddr, UdpPeer>,
+    from: SocketAddr,
+    now: Instant,
+) -> Option<(PeerId, PeerStanding)> {
+    if let Some(known) = peers.get_mut(&from) {
+        known.last_seen = now;
+        return Some((known.id, known.standing.clone()));
+    }
+    let full = peers.len() >= MAX_PEERS;
+    if full {
+        let victim = peers
+            .iter()
+            .filter(|(_, p)| !p.standing.may_control())
+            .min_by_key(|(_, p)| (p.last_seen, p.id))
+            .map(|(addr, _)| *addr)?;
+        if let Some(old) = peers.remove(&victim) {
+            tracing::debug!(endpoint = %ctx.url, %victim, peer = old.id, "UDP peer evicted");
+        }
+        ctx.evicted(&victim.to_string(), &from.to_string());
+    }
+    let id = ctx.new_peer();
+    if full {
+        // A churning flood of source ports: the eviction report sums it up.
+        tracing::debug!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+    } else {
+        tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
+    }
+    let standing = PeerStanding::default();
+    peers.insert(
+        from,
+        UdpPeer {
+            id,
+            last_seen: now,
+            standing: standing.clone(),
+        },
+    );
+    Some((id, standing))
 }
 
 async fn run_udp(
@@ -765,6 +1020,7 @@ async fn run_udp(
 ) {
     // The configured target is a permanent peer; it never expires.
     let target = target.map(|addr| (addr, ctx.new_peer()));
+    let target_standing = PeerStanding::default();
     let fixed = usize::from(target.is_some());
     let mut peers: HashMap<SocketAddr, UdpPeer> = HashMap::new();
     ctx.set_peers(fixed);
@@ -783,32 +1039,22 @@ async fn run_udp(
                     // Only a sender of valid MAVLink becomes a peer: a port
                     // scan or a stray packet must not start a telemetry stream.
                     let peer = match target {
-                        Some((addr, id)) if addr == from => Some(id),
+                        Some((addr, id)) if addr == from => Some((id, target_standing.clone())),
                         _ if frames.is_empty() => None,
                         _ => {
-                            let now = Instant::now();
-                            if let Some(known) = peers.get_mut(&from) {
-                                known.last_seen = now;
-                                Some(known.id)
-                            } else if peers.len() < MAX_PEERS {
-                                let id = ctx.new_peer();
-                                tracing::info!(endpoint = %ctx.url, %from, peer = id, "new UDP peer");
-                                peers.insert(from, UdpPeer { id, last_seen: now });
-                                ctx.set_peers(fixed + peers.len());
-                                Some(id)
-                            } else {
-                                None
-                            }
+                            let admitted = admit_udp(&ctx, &mut peers, from, Instant::now());
+                            ctx.set_peers(fixed + peers.len());
+                            admitted
                         }
                     };
                     match peer {
-                        Some(peer) => ctx.deliver(peer, n, &mut frames, &delta),
+                        Some((peer, standing)) => ctx.deliver(peer, &standing, n, &mut frames, &delta),
                         None => {
                             if !frames.is_empty() {
                                 ctx.refuse_peer(&from.to_string(), frames.len());
                                 frames.clear();
                             }
-                            ctx.deliver(0, n, &mut frames, &delta);
+                            ctx.deliver(0, &PeerStanding::default(), n, &mut frames, &delta);
                         }
                     }
                 }
@@ -828,8 +1074,10 @@ async fn run_udp(
                     }
                     Target::Peer(id) => {
                         if let Some((addr, _)) = target.filter(|&(_, t)| t == id) {
+                            ctx.log_reply(&target_standing, &queued.bytes);
                             dests.push(addr);
-                        } else if let Some((addr, _)) = peers.iter().find(|(_, p)| p.id == id) {
+                        } else if let Some((addr, p)) = peers.iter().find(|(_, p)| p.id == id) {
+                            ctx.log_reply(&p.standing, &queued.bytes);
                             dests.push(*addr);
                         }
                     }
@@ -861,45 +1109,95 @@ async fn run_udp(
 // TCP server
 // ---------------------------------------------------------------------------
 
+/// One TCP client of a `tcpin` endpoint.
+struct Conn {
+    tx: mpsc::Sender<Arc<[u8]>>,
+    abort: tokio::task::AbortHandle,
+    standing: PeerStanding,
+}
+
 async fn run_tcp_in(
     ctx: Arc<EndpointCtx>,
     listener: TcpListener,
+    idle_timeout: Duration,
     mut queue: mpsc::Receiver<Queued>,
     mut shutdown: watch::Receiver<bool>,
 ) {
-    let mut conns: HashMap<PeerId, mpsc::Sender<Arc<[u8]>>> = HashMap::new();
+    let mut conns: HashMap<PeerId, Conn> = HashMap::new();
     let mut task_peer: HashMap<tokio::task::Id, PeerId> = HashMap::new();
     // Dropping the set at the end aborts every connection.
     let mut tasks = tokio::task::JoinSet::new();
+    // After a failed accept (out of descriptors, mostly) accepting pauses
+    // while everything else goes on: the queue keeps being served, so the
+    // clients already connected keep their telemetry, fresh.
+    let accept_pause = tokio::time::sleep(Duration::ZERO);
+    tokio::pin!(accept_pause);
+    let mut paused = false;
+    let mut accept_failures = 0u64;
 
     loop {
         tokio::select! {
             () = stopped(&mut shutdown) => break,
-            accepted = listener.accept() => match accepted {
-                Ok((stream, from)) if conns.len() >= MAX_PEERS => {
-                    // Each client costs a queue and a task: bound them.
-                    drop(stream);
-                    ctx.refuse_peer(&from.to_string(), 0);
-                }
+            () = &mut accept_pause, if paused => paused = false,
+            accepted = listener.accept(), if !paused => match accepted {
                 Ok((stream, from)) => {
+                    if accept_failures > 0 {
+                        tracing::info!(endpoint = %ctx.url, failures = accept_failures, "accepting TCP clients again");
+                        accept_failures = 0;
+                    }
+                    if conns.len() >= MAX_PEERS {
+                        // Each client costs a queue and a task: bound them,
+                        // at the expense of those that may not control.
+                        let victim = conns
+                            .iter()
+                            .filter(|(_, c)| !c.standing.may_control())
+                            // Ties (same millisecond): the oldest connection.
+                            .min_by_key(|(id, c)| (c.standing.last_heard_ms(), **id))
+                            .map(|(id, _)| *id);
+                        match victim.and_then(|id| conns.remove(&id).map(|c| (id, c))) {
+                            Some((id, conn)) => {
+                                conn.abort.abort();
+                                ctx.evicted(&format!("TCP peer {id}"), &from.to_string());
+                            }
+                            None => {
+                                drop(stream);
+                                ctx.refuse_peer(&from.to_string(), 0);
+                                continue;
+                            }
+                        }
+                    }
                     let peer = ctx.new_peer();
                     if let Err(e) = stream.set_nodelay(true) {
                         tracing::debug!(error = %e, "cannot set TCP_NODELAY");
                     }
                     tracing::info!(endpoint = %ctx.url, %from, peer, "TCP client connected");
                     let (tx, rx) = mpsc::channel(PEER_QUEUE);
-                    conns.insert(peer, tx);
-                    let handle = tasks.spawn(run_stream(Arc::clone(&ctx), peer, stream, rx));
+                    let standing = PeerStanding::default();
+                    standing.heard(ctx.epoch);
+                    let handle = tasks.spawn(run_stream(
+                        Arc::clone(&ctx),
+                        peer,
+                        standing.clone(),
+                        stream,
+                        rx,
+                        Some(idle_timeout),
+                    ));
                     task_peer.insert(handle.id(), peer);
+                    conns.insert(peer, Conn { tx, abort: handle, standing });
                     ctx.set_peers(conns.len());
                 }
                 Err(e) => {
-                    // Out of file descriptors, mostly: back off instead of spinning.
-                    tracing::warn!(endpoint = %ctx.url, error = %e, "accept failed");
-                    tokio::select! {
-                        () = stopped(&mut shutdown) => break,
-                        () = tokio::time::sleep(BACKOFF_MIN) => {}
+                    // EMFILE/ENFILE mostly: back off instead of spinning.
+                    if accept_failures == 0 {
+                        tracing::warn!(
+                            endpoint = %ctx.url, error = %e,
+                            "cannot accept TCP clients (out of file descriptors?); retrying every \
+                             {} ms, connected clients are still served", BACKOFF_MIN.as_millis()
+                        );
                     }
+                    accept_failures += 1;
+                    accept_pause.as_mut().reset(Instant::now() + BACKOFF_MIN);
+                    paused = true;
                 }
             },
             Some(done) = tasks.join_next_with_id() => {
@@ -915,7 +1213,12 @@ async fn run_tcp_in(
             }
             queued = queue.recv() => {
                 let Some(queued) = queued else { break };
-                dispatch(&ctx, &conns, &queued);
+                if let Target::Peer(id) = queued.target
+                    && let Some(conn) = conns.get(&id)
+                {
+                    ctx.log_reply(&conn.standing, &queued.bytes);
+                }
+                dispatch(&ctx, conns.iter().map(|(id, c)| (*id, &c.tx)), &queued);
             }
         }
     }
@@ -923,27 +1226,33 @@ async fn run_tcp_in(
 }
 
 /// Hands a frame to stream peers' queues without waiting.
-fn dispatch(ctx: &EndpointCtx, conns: &HashMap<PeerId, mpsc::Sender<Arc<[u8]>>>, q: &Queued) {
-    let offer = |tx: &mpsc::Sender<Arc<[u8]>>| {
+fn dispatch<'a>(
+    ctx: &EndpointCtx,
+    conns: impl Iterator<Item = (PeerId, &'a mpsc::Sender<Arc<[u8]>>)>,
+    q: &Queued,
+) {
+    for (id, tx) in conns {
+        if matches!(q.target, Target::Peer(p) if p != id) {
+            continue;
+        }
         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(Arc::clone(&q.bytes)) {
             ctx.send_error("a client is not reading: dropping its frames");
         }
-    };
-    match q.target {
-        Target::All => conns.values().for_each(offer),
-        Target::Peer(id) => conns.get(&id).into_iter().for_each(offer),
     }
 }
 
 /// Runs one byte-stream peer (TCP connection or serial port) until it
 /// closes or fails: decodes what it sends, writes what is queued for it.
 /// Reading and writing are polled together so a peer that does not read
-/// still has its input decoded.
+/// still has its input decoded. With `idle_timeout`, a peer that sends no
+/// frame for that long is closed (a connection that only holds a slot).
 async fn run_stream<S>(
     ctx: Arc<EndpointCtx>,
     peer: PeerId,
+    standing: PeerStanding,
     stream: S,
     mut rx: mpsc::Receiver<Arc<[u8]>>,
+    idle_timeout: Option<Duration>,
 ) where
     S: AsyncRead + AsyncWrite + Send + 'static,
 {
@@ -952,13 +1261,35 @@ async fn run_stream<S>(
         let mut decoder = FrameDecoder::new();
         let mut buf = vec![0u8; 4096];
         let mut frames = Vec::new();
+        let mut last_frame = Instant::now();
         loop {
-            match rd.read(&mut buf).await {
+            let read = match idle_timeout {
+                Some(idle) => {
+                    match tokio::time::timeout_at(last_frame + idle, rd.read(&mut buf)).await {
+                        Ok(read) => read,
+                        Err(_) => {
+                            return Err(io::Error::new(
+                                io::ErrorKind::TimedOut,
+                                format!(
+                                    "no MAVLink frame for {:.1} s (peer_timeout_s): closed",
+                                    idle.as_secs_f64()
+                                ),
+                            ));
+                        }
+                    }
+                }
+                None => rd.read(&mut buf).await,
+            };
+            match read {
                 Ok(0) => return Ok(()),
                 Ok(n) => {
                     decoder.push(&buf[..n], &mut frames);
                     let delta = decoder.take_stats();
-                    ctx.deliver(peer, n, &mut frames, &delta);
+                    // Garbage does not keep a connection alive; frames do.
+                    if !frames.is_empty() {
+                        last_frame = Instant::now();
+                    }
+                    ctx.deliver(peer, &standing, n, &mut frames, &delta);
                 }
                 Err(e) => return Err(e),
             }
@@ -1033,15 +1364,21 @@ async fn run_connector<S, F, Fut>(
         ctx.counters.set_local_addr(local);
         ctx.set_peers(1);
         let (tx, rx) = mpsc::channel(PEER_QUEUE);
-        let conns = HashMap::from([(peer, tx)]);
-        let session = run_stream(Arc::clone(&ctx), peer, stream, rx);
+        let standing = PeerStanding::default();
+        // tcpout and serial links are ours to keep: no idle timeout.
+        let session = run_stream(Arc::clone(&ctx), peer, standing.clone(), stream, rx, None);
         tokio::pin!(session);
         let stop = loop {
             tokio::select! {
                 () = stopped(&mut shutdown) => break true,
                 () = &mut session => break false,
                 queued = queue.recv() => match queued {
-                    Some(queued) => dispatch(&ctx, &conns, &queued),
+                    Some(queued) => {
+                        if matches!(queued.target, Target::Peer(p) if p == peer) {
+                            ctx.log_reply(&standing, &queued.bytes);
+                        }
+                        dispatch(&ctx, std::iter::once((peer, &tx)), &queued);
+                    }
                     None => break true,
                 },
             }

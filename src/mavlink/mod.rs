@@ -20,8 +20,8 @@ pub mod signing;
 pub mod tlog;
 
 pub use endpoint::{
-    DEFAULT_ENDPOINTS, EndpointError, EndpointId, EndpointSpec, EndpointStats, Inbound, Outbound,
-    PeerId, Route, Router, RouterConfig, RouterHandle,
+    DEFAULT_ENDPOINTS, EndpointError, EndpointId, EndpointSpec, EndpointStats, Inbound, MAX_PEERS,
+    Outbound, PeerId, PeerStanding, Route, Router, RouterConfig, RouterHandle,
 };
 pub use frame::{Frame, FrameDecoder, FrameStats, MavMessage, decode_datagram, encode_v2};
 pub use tlog::{TlogConfig, TlogWriter};

@@ -4,8 +4,17 @@
 //! Owns: the signing key type ([`SigningKey`]), checking incoming signed
 //! frames against a key and per-stream replay state ([`Verifier`]), signing
 //! our outgoing frames with timestamps that never go backwards, even across
-//! restarts ([`Signer`]), and reading and writing `signing.key` and
-//! `signing.timestamp` in the data directory ([`SigningStore`]).
+//! restarts ([`Signer`]), and reading and writing `signing.key`,
+//! `signing.timestamp` and `signing.replay` in the data directory
+//! ([`SigningStore`]).
+//!
+//! Replay protection survives restarts the way our own timestamps do: by
+//! write-ahead reservations. Before a frame is acted on whose timestamp
+//! passes its stream's reservation, the caller persists a new one
+//! [`REPLAY_RESERVATION_AHEAD`] beyond it ([`Verifier::take_reservation`]);
+//! after a restart (even `kill -9` or a power cut) every stream refuses
+//! timestamps at or below what was persisted, so nothing accepted before the
+//! restart is accepted again.
 //!
 //! It never reads a clock: every "now" is a MAVLink signing timestamp passed
 //! in by the caller (see [`timestamp_from_unix_us`]), so tests and replays
@@ -48,6 +57,11 @@ pub const RESERVATION_MARGIN: u64 = 3_000_000;
 pub const RESERVATION_AHEAD: u64 = 6_000_000;
 /// Replay state is kept for at most this many (link id, sysid, compid) streams.
 pub const MAX_STREAMS: usize = 256;
+/// An incoming stream's persisted reservation is set this far (5 s) beyond
+/// the timestamp that passed the previous one: normally one small synced
+/// write per few seconds, and after an unclean stop a stream's genuine frames
+/// are refused for at most this long (its clock must pass the reservation).
+pub const REPLAY_RESERVATION_AHEAD: u64 = 500_000;
 
 const STX_V1: u8 = mavlink_core::MAV_STX;
 const STX_V2: u8 = mavlink_core::MAV_STX_V2;
@@ -196,6 +210,26 @@ struct Stream {
     last_timestamp: u64,
     /// Value of [`Verifier::tick`] when last accepted, for LRU eviction.
     used: u64,
+    /// ≥ `last_timestamp` once persisted: what a restart starts from.
+    reserved: u64,
+}
+
+/// The replay state that survives a restart: for each (link id, sysid,
+/// compid) stream, a timestamp at or above the last one accepted. A restarted
+/// [`Verifier`] refuses every frame of a stream at or below it.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ReplayState {
+    pub streams: std::collections::BTreeMap<(u8, u8, u8), u64>,
+}
+
+impl ReplayState {
+    pub fn is_empty(&self) -> bool {
+        self.streams.is_empty()
+    }
+
+    pub fn len(&self) -> usize {
+        self.streams.len()
+    }
 }
 
 /// Checks incoming signed frames against one key, keeping the replay state
@@ -208,6 +242,8 @@ pub struct Verifier {
     newest: u64,
     streams: HashMap<StreamKey, Stream>,
     tick: u64,
+    /// A stream passed its reservation: [`Verifier::take_reservation`] has one.
+    reservation_due: bool,
 }
 
 impl fmt::Debug for Verifier {
@@ -227,7 +263,32 @@ impl Verifier {
             newest: 0,
             streams: HashMap::new(),
             tick: 0,
+            reservation_due: false,
         }
+    }
+
+    /// A verifier that starts where a persisted [`ReplayState`] left off:
+    /// each stream refuses timestamps at or below its entry, and new streams
+    /// are measured against the newest entry too. Keeps the
+    /// [`MAX_STREAMS`] newest entries of an oversized state.
+    pub fn with_replay_state(key: SigningKey, state: &ReplayState) -> Self {
+        let mut v = Self::new(key);
+        let mut entries: Vec<_> = state.streams.iter().map(|(k, ts)| (*k, *ts)).collect();
+        entries.sort_by_key(|&(_, ts)| ts);
+        let skip = entries.len().saturating_sub(MAX_STREAMS);
+        for (stream, ts) in entries.into_iter().skip(skip) {
+            v.tick += 1;
+            v.streams.insert(
+                stream,
+                Stream {
+                    last_timestamp: ts,
+                    used: v.tick,
+                    reserved: ts,
+                },
+            );
+            v.newest = v.newest.max(ts);
+        }
+        v
     }
 
     /// `raw` = exactly one complete MAVLink frame (v1 or v2), as
@@ -276,15 +337,58 @@ impl Verifier {
             }
         }
         self.tick += 1;
+        let reserved = self.streams.get(&stream).map_or(0, |s| s.reserved);
+        let reserved = if timestamp > reserved {
+            self.reservation_due = true;
+            timestamp.saturating_add(REPLAY_RESERVATION_AHEAD)
+        } else {
+            reserved
+        };
         self.streams.insert(
             stream,
             Stream {
                 last_timestamp: timestamp,
                 used: self.tick,
+                reserved,
             },
         );
         self.newest = self.newest.max(timestamp);
         Verdict::Valid { link_id, timestamp }
+    }
+
+    /// After a [`Verdict::Valid`]: the replay state to persist *before the
+    /// frame is acted on*, when its timestamp passed its stream's reservation
+    /// (the first frame of every stream does). `None` most of the time.
+    ///
+    /// Streams within half a margin of their own reservation are topped up in
+    /// the same write, so several live stations share one write.
+    pub fn take_reservation(&mut self) -> Option<ReplayState> {
+        if !std::mem::take(&mut self.reservation_due) {
+            return None;
+        }
+        for s in self.streams.values_mut() {
+            if s.last_timestamp
+                .saturating_add(REPLAY_RESERVATION_AHEAD / 2)
+                >= s.reserved
+            {
+                s.reserved = s.last_timestamp.saturating_add(REPLAY_RESERVATION_AHEAD);
+            }
+        }
+        Some(ReplayState {
+            streams: self.streams.iter().map(|(k, s)| (*k, s.reserved)).collect(),
+        })
+    }
+
+    /// The exact last timestamp of every stream: what a graceful shutdown
+    /// persists, so a clean restart refuses no genuine frame.
+    pub fn replay_state(&self) -> ReplayState {
+        ReplayState {
+            streams: self
+                .streams
+                .iter()
+                .map(|(k, s)| (*k, s.last_timestamp))
+                .collect(),
+        }
     }
 
     /// How many streams have replay state (at most [`MAX_STREAMS`]).
@@ -487,10 +591,20 @@ pub enum SigningError {
         .path.display()
     )]
     Remove { path: PathBuf, source: io::Error },
+    #[error(
+        "signing replay file {} {problem}; it is rewritten with the next signed frame \
+         (remove it if this repeats)",
+        .path.display()
+    )]
+    BadReplayFile { path: PathBuf, problem: String },
 }
 
 /// Files longer than this are not what we wrote; don't read a huge file into memory.
 const MAX_FILE_LEN: u64 = 256;
+/// `signing.replay`: [`MAX_STREAMS`] lines of at most 32 bytes, and a header.
+const MAX_REPLAY_FILE_LEN: u64 = 16 * 1024;
+/// First line of `signing.replay`.
+const REPLAY_HEADER: &str = "# neptunus signing replay state v1: link_id sysid compid timestamp";
 
 /// The signing files in the data directory:
 /// - `signing.key`: the key as 64 lowercase hex digits and a newline, mode
@@ -498,9 +612,13 @@ const MAX_FILE_LEN: u64 = 256;
 ///   so it is never readable by others, not even briefly.
 /// - `signing.timestamp`: the reservation (see [`Signer`]) as a decimal
 ///   number and a newline, replaced atomically.
+/// - `signing.replay`: the incoming streams' replay reservations (see
+///   [`Verifier::take_reservation`]), one `link_id sysid compid timestamp`
+///   line each, replaced atomically.
 ///
-/// Both writes are synced (file and directory) before returning: the
-/// reservation must survive a power cut to keep timestamps from going back.
+/// Every write is synced (file and directory) before returning: a
+/// reservation must survive a power cut to keep timestamps from going back
+/// and recorded frames from being accepted again.
 #[derive(Debug, Clone)]
 pub struct SigningStore {
     dir: PathBuf,
@@ -509,6 +627,7 @@ pub struct SigningStore {
 impl SigningStore {
     pub const KEY_FILE: &'static str = "signing.key";
     pub const TIMESTAMP_FILE: &'static str = "signing.timestamp";
+    pub const REPLAY_FILE: &'static str = "signing.replay";
 
     pub fn new(dir: &Path) -> Self {
         Self {
@@ -522,6 +641,33 @@ impl SigningStore {
 
     pub fn timestamp_path(&self) -> PathBuf {
         self.dir.join(Self::TIMESTAMP_FILE)
+    }
+
+    pub fn replay_path(&self) -> PathBuf {
+        self.dir.join(Self::REPLAY_FILE)
+    }
+
+    /// The persisted replay state; `Ok(None)` when there is no file yet. An
+    /// unreadable or corrupt file is an error (the caller decides: Neptunus
+    /// starts with the one-minute stale rule only, and says so).
+    pub fn load_replay(&self) -> Result<Option<ReplayState>, SigningError> {
+        let path = self.replay_path();
+        let Some((text, _)) = read_limited(&path, MAX_REPLAY_FILE_LEN)? else {
+            return Ok(None);
+        };
+        parse_replay(&text)
+            .map(Some)
+            .map_err(|problem| SigningError::BadReplayFile { path, problem })
+    }
+
+    pub fn save_replay(&self, state: &ReplayState) -> Result<(), SigningError> {
+        let mut text = String::with_capacity(REPLAY_HEADER.len() + 1 + 24 * state.len());
+        text.push_str(REPLAY_HEADER);
+        text.push('\n');
+        for ((link, sysid, compid), ts) in &state.streams {
+            text.push_str(&format!("{link} {sysid} {compid} {ts}\n"));
+        }
+        write_atomic(&self.dir, Self::REPLAY_FILE, text.as_bytes(), 0o644)
     }
 
     /// The key, or `None` when there is no key file (or it holds the all-zero
@@ -617,8 +763,44 @@ impl SigningStore {
 
 const HEX_DIGITS: &[u8; 16] = b"0123456789abcdef";
 
+/// Parses `signing.replay`; the problem names the line.
+fn parse_replay(text: &str) -> Result<ReplayState, String> {
+    let mut lines = text.lines();
+    if lines.next().map(str::trim) != Some(REPLAY_HEADER) {
+        return Err("does not start with the replay-state header".to_owned());
+    }
+    let mut state = ReplayState::default();
+    for (i, line) in lines.enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let bad = || format!("line {} is not `link_id sysid compid timestamp`", i + 2);
+        let fields: Vec<&str> = line.split_ascii_whitespace().collect();
+        let [link, sysid, compid, ts] = fields[..] else {
+            return Err(bad());
+        };
+        let key = (
+            link.parse().map_err(|_| bad())?,
+            sysid.parse().map_err(|_| bad())?,
+            compid.parse().map_err(|_| bad())?,
+        );
+        let ts: u64 = ts.parse().map_err(|_| bad())?;
+        if ts > MAX_TIMESTAMP {
+            return Err(format!("line {} has a timestamp beyond 48 bits", i + 2));
+        }
+        state.streams.insert(key, ts);
+    }
+    Ok(state)
+}
+
 /// The file's text and permission bits, `None` if it does not exist.
 fn read_small(path: &Path) -> Result<Option<(String, u32)>, SigningError> {
+    read_limited(path, MAX_FILE_LEN)
+}
+
+/// [`read_small`] with another size limit.
+fn read_limited(path: &Path, max_len: u64) -> Result<Option<(String, u32)>, SigningError> {
     let read_err = |source| SigningError::Read {
         path: path.to_path_buf(),
         source,
@@ -630,13 +812,13 @@ fn read_small(path: &Path) -> Result<Option<(String, u32)>, SigningError> {
     };
     let mode = file.metadata().map_err(read_err)?.permissions().mode();
     let mut bytes = Vec::new();
-    file.take(MAX_FILE_LEN + 1)
+    file.take(max_len + 1)
         .read_to_end(&mut bytes)
         .map_err(read_err)?;
-    if bytes.len() as u64 > MAX_FILE_LEN {
+    if bytes.len() as u64 > max_len {
         return Err(read_err(io::Error::new(
             io::ErrorKind::InvalidData,
-            format!("longer than {MAX_FILE_LEN} bytes"),
+            format!("longer than {max_len} bytes"),
         )));
     }
     // Not UTF-8 is reported by the parsers as "not hex"/"not a number".

@@ -2,7 +2,9 @@
 //! and QGroundControl replay read: each record is an 8-byte big-endian Unix
 //! time in microseconds followed by one raw MAVLink frame.
 //!
-//! Owns: naming, writing, flushing and size-based rotation of the files, and
+//! Owns: naming, writing, flushing and size-based rotation of the files, the
+//! total size cap of the folder (oldest of *our* files deleted first, at
+//! start and at each rotation; nothing else in the folder is touched), and
 //! scrubbing secrets out of frames before they are written. It must never
 //! write a signing key: SETUP_SIGNING (id 256) is logged with its key zeroed.
 //! It is synchronous on purpose; the router runs it on a dedicated thread so
@@ -17,18 +19,30 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TlogConfig {
     pub dir: PathBuf,
-    /// A new file is started before a record would take the current one past this.
+    /// A new file is started before a record would take the current one past
+    /// this (at most half of `total_bytes`, so the cap always leaves room
+    /// for the file being written).
     pub max_bytes: u64,
+    /// The tlog files in `dir` (ours, by name) add up to at most this: the
+    /// oldest are deleted at start and at each rotation.
+    pub total_bytes: u64,
 }
 
 impl TlogConfig {
     pub const DEFAULT_MAX_BYTES: u64 = 64 * 1024 * 1024;
+    pub const DEFAULT_TOTAL_BYTES: u64 = 256 * 1024 * 1024;
 
     pub fn new(dir: impl Into<PathBuf>) -> Self {
         Self {
             dir: dir.into(),
             max_bytes: Self::DEFAULT_MAX_BYTES,
+            total_bytes: Self::DEFAULT_TOTAL_BYTES,
         }
+    }
+
+    /// The size at which files rotate: `max_bytes`, at most half the total.
+    pub fn file_bytes(&self) -> u64 {
+        self.max_bytes.min(self.total_bytes / 2).max(1)
     }
 }
 
@@ -45,6 +59,7 @@ pub struct TlogWriter {
     dir: PathBuf,
     session: String,
     max_bytes: u64,
+    total_bytes: u64,
     /// 1 for `{session}.tlog`, n for `{session}-n.tlog`.
     index: u32,
     path: PathBuf,
@@ -55,13 +70,18 @@ pub struct TlogWriter {
 impl TlogWriter {
     /// Creates `{dir}/{session}.tlog` (and `dir` if needed). An existing file
     /// is never overwritten: the next free `{session}-n.tlog` is used instead.
+    /// Old tlogs are deleted first, oldest first, until they and the new
+    /// file's room fit in `total_bytes`.
     pub fn create(cfg: &TlogConfig, session: &str) -> io::Result<Self> {
         std::fs::create_dir_all(&cfg.dir)?;
+        let max_bytes = cfg.file_bytes();
+        prune(&cfg.dir, None, cfg.total_bytes.saturating_sub(max_bytes));
         let (index, path, file) = open_next(&cfg.dir, session, 1)?;
         Ok(Self {
             dir: cfg.dir.clone(),
             session: session.to_owned(),
-            max_bytes: cfg.max_bytes,
+            max_bytes,
+            total_bytes: cfg.total_bytes,
             index,
             path,
             file: BufWriter::new(file),
@@ -99,7 +119,74 @@ impl TlogWriter {
         self.path = path;
         self.file = BufWriter::new(file);
         self.written = 0;
+        prune(
+            &self.dir,
+            Some(&self.path),
+            self.total_bytes.saturating_sub(self.max_bytes),
+        );
         Ok(())
+    }
+}
+
+/// `(session, index)` of a file name this module gives
+/// (`neptunus-YYYYMMDD-HHMMSS.tlog`, `neptunus-YYYYMMDD-HHMMSS-N.tlog`):
+/// their order is the order they were written in (UTC names sort by time).
+pub fn parse_file_name(name: &str) -> Option<(&str, u32)> {
+    let stem = name.strip_suffix(".tlog")?;
+    let (session, index) = match stem.get(24..) {
+        Some("") => (stem, 1),
+        Some(rest) => (&stem[..24], rest.strip_prefix('-')?.parse().ok()?),
+        None => return None,
+    };
+    let digits = session.strip_prefix("neptunus-")?;
+    let ok = digits.len() == 15
+        && digits.bytes().enumerate().all(|(i, b)| {
+            if i == 8 {
+                b == b'-'
+            } else {
+                b.is_ascii_digit()
+            }
+        });
+    ok.then_some((session, index))
+}
+
+/// Deletes our tlog files in `dir`, oldest first, until those left (other
+/// than `current`) add up to at most `budget` bytes. Never fails: a file
+/// that cannot be deleted is logged and skipped.
+fn prune(dir: &Path, current: Option<&Path>, budget: u64) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let mut files: Vec<(String, u32, PathBuf, u64)> = entries
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().into_string().ok()?;
+            let (session, index) = parse_file_name(&name)?;
+            let path = e.path();
+            if Some(path.as_path()) == current {
+                return None;
+            }
+            // symlink_metadata: a link someone put here is not ours to follow.
+            let meta = std::fs::symlink_metadata(&path).ok()?;
+            meta.is_file()
+                .then(|| (session.to_owned(), index, path, meta.len()))
+        })
+        .collect();
+    files.sort();
+    let mut total: u64 = files.iter().map(|f| f.3).sum();
+    for (_, _, path, len) in files {
+        if total <= budget {
+            break;
+        }
+        match std::fs::remove_file(&path) {
+            Ok(()) => {
+                total -= len;
+                tracing::info!(path = %path.display(), bytes = len, "old telemetry log deleted (tlog_total_mb)");
+            }
+            Err(e) => {
+                tracing::warn!(path = %path.display(), error = %e, "cannot delete an old telemetry log");
+            }
+        }
     }
 }
 
@@ -149,6 +236,29 @@ pub fn redact(raw: &[u8]) -> Cow<'_, [u8]> {
 mod tests {
     use super::*;
     use crate::dialect::neptunus::{MavMessage, SETUP_SIGNING_DATA};
+
+    #[test]
+    fn only_our_names_parse() {
+        assert_eq!(
+            parse_file_name("neptunus-20261124-223000.tlog"),
+            Some(("neptunus-20261124-223000", 1))
+        );
+        assert_eq!(
+            parse_file_name("neptunus-20261124-223000-12.tlog"),
+            Some(("neptunus-20261124-223000", 12))
+        );
+        for other in [
+            "neptunus-20261124-223000.tlog.bak",
+            "neptunus-2026112-223000.tlog",
+            "neptunus-20261124-223000-.tlog",
+            "neptunus-20261124-223000-x.tlog",
+            "other.tlog",
+            "neptunus.log",
+            "../neptunus-20261124-223000.tlog",
+        ] {
+            assert_eq!(parse_file_name(other), None, "{other}");
+        }
+    }
 
     #[test]
     fn key_offset_matches_the_dialect() {
