@@ -21,7 +21,7 @@ use crate::firmware::loopback::LoopbackBoard;
 use crate::mavlink::endpoint::{
     EndpointError, Inbound, Outbound, Route, Router, RouterConfig, RouterHandle,
 };
-use crate::mavlink::frame::{Frame, encode_command_ack_raw, encode_v2};
+use crate::mavlink::frame::{Frame, Undecodable, encode_command_ack_raw, encode_v2};
 use crate::mavlink::signing::{
     REPLAY_RESERVATION_AHEAD, ReplayState, Signer, SigningError, SigningKey, SigningStore, Verdict,
     Verifier, timestamp_from_unix_us,
@@ -336,14 +336,23 @@ pub async fn run(
                         trusted: trusted.get(endpoint).copied().unwrap_or(false),
                         ..Sender::new(endpoint, peer, frame.sysid, frame.compid)
                     };
-                    let input = match (frame.unknown_command, &frame.msg) {
-                        (Some(command), MavMessage::COMMAND_LONG(c)) => Input::UnknownCommand {
+                    let input = match (frame.undecodable, &frame.msg) {
+                        (None, _) => Input::Mavlink { from, msg: frame.msg },
+                        (Some(Undecodable::Command(command)), MavMessage::COMMAND_LONG(c)) => Input::UnknownCommand {
                             from,
                             command,
                             target_system: c.target_system,
                             target_component: c.target_component,
                         },
-                        _ => Input::Mavlink { from, msg: frame.msg },
+                        (Some(Undecodable::ParamType(param_type)), MavMessage::PARAM_SET(p)) => Input::BadParamSet {
+                            from,
+                            target_system: p.target_system,
+                            target_component: p.target_component,
+                            param_id: p.param_id.into(),
+                            param_type,
+                        },
+                        // A placeholder is never handed on as a real message.
+                        (Some(_), _) => continue,
                     };
                     vehicle.handle(input, now, &mut outputs);
                     // The router keeps a slot (and the tlog) for peers that

@@ -294,3 +294,74 @@ fn a_stale_params_tmp_is_removed_at_start() {
     assert!((value - 0.6).abs() < 1e-6, "params.toml wins: {value}");
     assert!(!data.join("params.toml.tmp").exists());
 }
+
+/// A PARAM_SET whose `param_type` is no MAV_PARAM_TYPE at all (0, 200)
+/// cannot be decoded into a message, yet it is answered with the
+/// parameter's unchanged value (as ArduPilot does), never dropped silently.
+#[test]
+fn a_param_set_with_an_invalid_type_is_answered_with_the_current_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_udp_port().unwrap();
+    let url = format!("udpin:127.0.0.1:{port}");
+    let mut vehicle = Vehicle::spawn(bin(), &["--sim", "--mavlink", &url], dir.path(), "").unwrap();
+    let mut owner = Gcs::connect(port).unwrap();
+    owner.wait_ready(&mut vehicle).unwrap();
+    let before = owner.param(&mut vehicle, "JS_GAIN_DEFAULT").unwrap();
+    for bad_type in [0u8, 200] {
+        let mut frame = encode_v2(
+            255,
+            190,
+            0,
+            &MavMessage::PARAM_SET(PARAM_SET_DATA {
+                param_value: 0.9,
+                target_system: 1,
+                target_component: 1,
+                param_id: "JS_GAIN_DEFAULT".into(),
+                param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+            }),
+        );
+        // param_type is the last payload byte (22); the CRC follows it.
+        let crc_at = frame.len() - 2;
+        assert_eq!(crc_at, 10 + 23, "PARAM_SET is sent whole");
+        frame[crc_at - 1] = bad_type;
+        let crc = mavlink_core::calculate_crc(
+            &frame[1..crc_at],
+            <MavMessage as mavlink_core::Message>::extra_crc(23),
+        );
+        frame[crc_at..].copy_from_slice(&crc.to_le_bytes());
+        let sock = UdpSocket::bind("127.0.0.1:0").unwrap();
+        sock.connect(("127.0.0.1", port)).unwrap();
+        sock.set_read_timeout(Some(Duration::from_millis(20)))
+            .unwrap();
+        let end = Instant::now() + GENEROUS;
+        let mut answer = None;
+        let mut buf = [0u8; 4096];
+        while answer.is_none() && Instant::now() < end {
+            sock.send(&frame).unwrap();
+            let until = Instant::now() + Duration::from_millis(300);
+            while answer.is_none() && Instant::now() < until {
+                let Ok(n) = sock.recv(&mut buf) else { continue };
+                let mut frames = Vec::new();
+                decode_datagram(&buf[..n], &mut FrameStats::default(), &mut frames);
+                answer = frames.into_iter().find_map(|f| match f.msg {
+                    MavMessage::PARAM_VALUE(p)
+                        if p.param_id.to_str().ok() == Some("JS_GAIN_DEFAULT") =>
+                    {
+                        Some(p.param_value)
+                    }
+                    _ => None,
+                });
+            }
+        }
+        assert_eq!(
+            answer,
+            Some(before),
+            "type {bad_type}: not answered with the current value\n{}",
+            vehicle.stderr_tail()
+        );
+    }
+    assert_eq!(
+        owner.param(&mut vehicle, "JS_GAIN_DEFAULT").unwrap(),
+        before
+    );
+}

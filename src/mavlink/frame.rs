@@ -18,7 +18,9 @@ use mavlink_core::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, calc
 use serde::Serialize;
 
 pub use crate::dialect::neptunus::MavMessage;
-use crate::dialect::neptunus::{COMMAND_ACK_DATA, COMMAND_LONG_DATA, MavCmd, MavResult};
+use crate::dialect::neptunus::{
+    COMMAND_ACK_DATA, COMMAND_LONG_DATA, MavCmd, MavParamType, MavResult, PARAM_SET_DATA,
+};
 
 const STX_V1: u8 = mavlink_core::MAV_STX;
 const STX_V2: u8 = mavlink_core::MAV_STX_V2;
@@ -46,11 +48,24 @@ pub struct Frame {
     pub signed: bool,
     /// The frame's exact bytes, for the telemetry log and signature checks.
     pub raw: Vec<u8>,
+    /// A message the dialect cannot represent but the vehicle must still
+    /// answer; `msg` is then a placeholder that carries what it can.
+    pub undecodable: Option<Undecodable>,
+}
+
+/// Why a frame with a valid CRC is delivered with a placeholder message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Undecodable {
     /// A COMMAND_LONG or COMMAND_INT whose command number our dialect does
     /// not define: `msg` is a COMMAND_LONG with the targets and the placeholder
-    /// MAV_CMD_NEPTUNUS_UNKNOWN_COMMAND, and this is the number really sent,
-    /// so the vehicle can still answer MAV_RESULT_UNSUPPORTED at once.
-    pub unknown_command: Option<u16>,
+    /// MAV_CMD_NEPTUNUS_UNKNOWN_COMMAND; this is the number really sent, so
+    /// the vehicle can still answer MAV_RESULT_UNSUPPORTED at once.
+    Command(u16),
+    /// A PARAM_SET whose `param_type` is no MAV_PARAM_TYPE: `msg` is the
+    /// PARAM_SET with its targets and name (value 0, type REAL32 as a
+    /// placeholder); this is the type really sent, so the vehicle can answer
+    /// with the parameter's current value, as ArduPilot does.
+    ParamType(u8),
 }
 
 /// What a decoder has seen. Counters only grow.
@@ -319,7 +334,7 @@ fn examine(buf: &[u8]) -> Candidate {
             msg,
             signed: signature_len != 0,
             raw: bytes.to_vec(),
-            unknown_command: None,
+            undecodable: None,
         })),
         Err(mavlink_core::error::ParserError::InvalidEnum {
             enum_type: "MavCmd",
@@ -346,7 +361,36 @@ fn examine(buf: &[u8]) -> Candidate {
                 }),
                 signed: signature_len != 0,
                 raw: bytes.to_vec(),
-                unknown_command: Some(command),
+                undecodable: Some(Undecodable::Command(command)),
+            }))
+        }
+        Err(mavlink_core::error::ParserError::InvalidEnum {
+            enum_type: "MavParamType",
+            ..
+        }) if msg_id == PARAM_SET_ID => {
+            // value 0..4, target_system 4, target_component 5, param_id
+            // 6..22, param_type 22; MAVLink 2 may have truncated trailing zeros.
+            let mut payload = [0u8; 23];
+            let given = &bytes[header_len..crc_at];
+            payload[..given.len().min(23)].copy_from_slice(&given[..given.len().min(23)]);
+            let mut name = [0u8; 16];
+            name.copy_from_slice(&payload[6..22]);
+            Candidate::Valid(Box::new(Frame {
+                version,
+                sysid,
+                compid,
+                seq,
+                msg_id,
+                msg: MavMessage::PARAM_SET(PARAM_SET_DATA {
+                    param_value: 0.0,
+                    target_system: payload[4],
+                    target_component: payload[5],
+                    param_id: name.into(),
+                    param_type: MavParamType::MAV_PARAM_TYPE_REAL32,
+                }),
+                signed: signature_len != 0,
+                raw: bytes.to_vec(),
+                undecodable: Some(Undecodable::ParamType(payload[22])),
             }))
         }
         Err(mavlink_core::error::ParserError::UnknownMessage { .. }) => Candidate::Bad {
@@ -360,6 +404,7 @@ fn examine(buf: &[u8]) -> Candidate {
     }
 }
 
+const PARAM_SET_ID: u32 = 23;
 const COMMAND_INT_ID: u32 = 75;
 const COMMAND_LONG_ID: u32 = 76;
 const COMMAND_ACK_ID: u32 = 77;
