@@ -5,6 +5,8 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
 const BIN: &str = env!("CARGO_BIN_EXE_neptunus");
 
 #[test]
@@ -157,26 +159,10 @@ fn bad_profiles_dir_stops_the_vehicle_at_start_with_the_place() {
 /// `clear-password` removes it.
 #[test]
 fn hmi_set_and_clear_password() {
-    use std::io::Write as _;
     use std::os::unix::fs::PermissionsExt as _;
     let dir = tempfile::tempdir().unwrap();
     let run = |args: &[&str], stdin: &str| {
-        let mut child = Command::new(BIN)
-            .args(args)
-            .arg("--data-dir")
-            .arg(dir.path())
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        child
-            .stdin
-            .take()
-            .unwrap()
-            .write_all(stdin.as_bytes())
-            .unwrap();
-        let out = child.wait_with_output().unwrap();
+        let out = common::run_cli(std::path::Path::new(BIN), dir.path(), args, stdin);
         let text = format!(
             "{}{}",
             String::from_utf8_lossy(&out.stdout),

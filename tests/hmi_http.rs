@@ -697,18 +697,12 @@ async fn next_of(ws: &mut Wss, kind: &str) -> Value {
 
 /// `neptunus hmi set-password` with `PASSWORD` piped in.
 fn set_password(data: &Path) {
-    let mut child = std::process::Command::new(bin())
-        .args(["hmi", "set-password", "--data-dir"])
-        .arg(data)
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    writeln!(stdin, "{PASSWORD}").unwrap();
-    drop(stdin);
-    let out = child.wait_with_output().unwrap();
+    let out = common::run_cli(
+        bin(),
+        data,
+        &["hmi", "set-password"],
+        &format!("{PASSWORD}\n"),
+    );
     assert!(
         out.status.success(),
         "hmi set-password: {}",

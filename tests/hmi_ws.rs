@@ -37,23 +37,7 @@ struct HmiRig {
 
 /// Runs `neptunus ARGS --data-dir DATA` with `stdin` piped in; panics on failure.
 fn cli(data: &Path, args: &[&str], stdin: &str) -> String {
-    use std::io::Write as _;
-    let mut child = std::process::Command::new(bin())
-        .args(args)
-        .arg("--data-dir")
-        .arg(data)
-        .stdin(std::process::Stdio::piped())
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(stdin.as_bytes())
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = common::run_cli(bin(), data, args, stdin);
     assert!(
         out.status.success(),
         "neptunus {args:?}: {}",

@@ -117,6 +117,26 @@ fn newest_mtime(dir: &Path) -> Option<std::time::SystemTime> {
 // The vehicle process
 // ---------------------------------------------------------------------------
 
+/// Runs `BIN ARGS --data-dir DATA` (a CLI command such as `hmi
+/// set-password`) to its end with `stdin` piped in.
+pub fn run_cli(bin: &Path, data: &Path, args: &[&str], stdin: &str) -> std::process::Output {
+    use std::io::Write as _;
+    let mut child = Command::new(bin)
+        .args(args)
+        .arg("--data-dir")
+        .arg(data)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("cannot start neptunus");
+    if let Some(mut pipe) = child.stdin.take() {
+        // A command that does not read its input may have exited already.
+        let _ = pipe.write_all(stdin.as_bytes());
+    }
+    child.wait_with_output().expect("neptunus did not finish")
+}
+
 /// The `neptunus` child process. On drop it is continued (it may have been
 /// stopped with SIGSTOP), sent SIGTERM, and killed if it has not exited
 /// within 2 s — also when the test using it panics.
