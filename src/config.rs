@@ -502,7 +502,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         mavlink,
         profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
         simulator: file.emulator.clone(),
-        hmi: resolve_hmi(args.http, args.tls, &file.hmi)?,
+        hmi: resolve_hmi(args.http, args.tls, &file.hmi, sim)?,
         camera: match &file.camera {
             Some(c) => {
                 c.validate()
@@ -520,6 +520,7 @@ fn resolve_hmi(
     flag: Option<HttpAddr>,
     tls_flag: Option<TlsModeName>,
     file: &HmiFileConfig,
+    sim: bool,
 ) -> Result<crate::hmi::HmiSettings, ConfigError> {
     let mut hmi = crate::hmi::HmiSettings::default();
     let from_file = file
@@ -545,7 +546,15 @@ fn resolve_hmi(
             hmi.sysid_min, hmi.sysid_max
         )));
     }
-    hmi.open_control = file.open_control.unwrap_or_default();
+    // On the vehicle every browser logs in unless the configuration opens
+    // control to some addresses (a reverse proxy or an SSH tunnel makes
+    // every client loopback). A simulation moves no thruster: there a
+    // browser on the same machine may pilot at once.
+    hmi.open_control = file.open_control.unwrap_or(if sim {
+        crate::hmi::auth::OpenControl::Loopback
+    } else {
+        crate::hmi::auth::OpenControl::None
+    });
     hmi.allowed_origins = file
         .allowed_origins
         .iter()

@@ -271,7 +271,10 @@ fn hmi_access_keys_resolve() {
     assert_eq!(s.hmi.open_control, OpenControl::Private);
     assert_eq!(s.hmi.allowed_origins, ["https://topside.local:8443"]);
     assert_eq!(s.hmi.max_watchers, 4);
-    // The defaults: loopback may pilot, 32 watchers.
+    // The defaults: on the vehicle every browser logs in; in a simulation
+    // a browser on the same machine may pilot; 32 watchers.
+    let s = resolve(&Cli::parse_from(["neptunus", "--data-dir", "/tmp/x"]).run).unwrap();
+    assert_eq!(s.hmi.open_control, OpenControl::None);
     let s = resolve(&Cli::parse_from(["neptunus", "--sim", "--data-dir", "/tmp/x"]).run).unwrap();
     assert_eq!(s.hmi.open_control, OpenControl::Loopback);
     assert_eq!(s.hmi.max_watchers, 32);

@@ -62,7 +62,15 @@ impl HmiRig {
         let board = spawn_board_here();
         let serial = board.path().to_string_lossy().into_owned();
         let config = dir.path().join("neptunus.toml");
-        std::fs::write(&config, format!("[hmi]\n{hmi_toml}\n")).unwrap();
+        // A real board here, so the vehicle's default is "every browser
+        // logs in"; a test bench opens control to loopback unless the test
+        // says otherwise.
+        let open = if hmi_toml.contains("open_control") {
+            ""
+        } else {
+            "open_control = \"loopback\"\n"
+        };
+        std::fs::write(&config, format!("[hmi]\n{open}{hmi_toml}\n")).unwrap();
         let gcs_port = common::free_udp_port().unwrap();
         let mut vehicle = Vehicle::spawn(
             bin(),

@@ -216,14 +216,15 @@ impl PasswordStore {
 }
 
 /// `[hmi] open_control`: which client addresses may pilot without the
-/// pilot password. Never applies with MAVLink signing on.
+/// pilot password. Never applies with MAVLink signing on. The default is
+/// `None` on the vehicle and `Loopback` with `--sim` (see `config::resolve`).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum OpenControl {
     /// Every session must log in.
+    #[default]
     None,
     /// A browser on the vehicle itself (127.0.0.0/8, ::1).
-    #[default]
     Loopback,
     /// Also private networks: RFC 1918, IPv6 ULA (fc00::/7) and link-local.
     Private,
