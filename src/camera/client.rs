@@ -19,7 +19,8 @@ use tokio::task::JoinHandle;
 use tokio::time::{Instant, sleep, sleep_until, timeout};
 
 use super::config::{SourceKind, StreamUrl};
-use super::source::{Publisher, SourceError};
+use super::error::SourceError;
+use super::publisher::Publisher;
 use super::splitter::JpegSplitter;
 
 /// Reads `url` until the stream ends, fails or stalls, publishing every

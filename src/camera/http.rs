@@ -21,7 +21,8 @@ use tokio::sync::watch;
 use tokio::time::Instant;
 
 use super::config::SourceKind;
-use super::{CameraState, Frame, Shared};
+use super::frame::Frame;
+use super::shared::{CameraState, Shared};
 
 /// The multipart boundary of `/video.mjpg`.
 pub const BOUNDARY: &str = "neptunusframe";
@@ -201,7 +202,7 @@ fn part_header(first: bool, len: usize) -> Bytes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::camera::CameraConfig;
+    use crate::camera::config::CameraConfig;
     use futures_util::StreamExt;
 
     fn frame(seq: u64) -> Frame {

@@ -15,7 +15,8 @@ use tokio::time::{Instant, sleep_until, timeout};
 
 use super::client;
 use super::config::{CameraConfig, SourceKind, StreamUrl};
-use super::source::{Publisher, SourceError};
+use super::error::SourceError;
+use super::publisher::Publisher;
 use super::splitter::JpegSplitter;
 
 /// Lines of a child's stderr kept for the error message.

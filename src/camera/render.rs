@@ -12,8 +12,8 @@
 use bytes::Bytes;
 use jpeg_encoder::{ColorType, Encoder};
 
-use super::Scene;
 use super::font::{self, ADVANCE, GLYPH_H, GLYPH_W};
+use super::frame::Scene;
 
 /// Vertical field of view (a 4:3 webcam like the OpenROV's).
 const VFOV_DEG: f64 = 45.0;

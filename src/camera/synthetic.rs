@@ -5,10 +5,10 @@ use std::time::Duration;
 use tokio::sync::watch;
 use tokio::time::MissedTickBehavior;
 
-use super::Scene;
 use super::config::CameraConfig;
+use super::frame::Scene;
+use super::publisher::Publisher;
 use super::render::{RenderError, SyntheticRenderer};
-use super::source::Publisher;
 
 /// Renders at `cfg.fps` until aborted. Drawing and encoding take
 /// milliseconds of CPU, so they run on the blocking pool, never on the
