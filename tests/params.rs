@@ -755,7 +755,7 @@ fn readme_parameter_table_is_current() {
             Some((b, e)) => format!("{}{section}{}", &readme[..b], &readme[e..]),
             None => format!(
                 "{}\n## Parameters\n\nEvery MAVLink parameter of Neptunus, generated from \
-                 `src/vehicle/params.rs` (`UPDATE_README=1 cargo test --test params` \
+                 `src/vehicle/params/defs.rs` (`UPDATE_README=1 cargo test --test params` \
                  regenerates it).\n\n{section}\n",
                 readme.trim_end()
             ),
