@@ -33,7 +33,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use serde::Serialize;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt, BufWriter};
@@ -43,7 +43,7 @@ use tokio::task::JoinHandle;
 use tokio::time::{Instant, MissedTickBehavior};
 
 use super::frame::{Frame, FrameDecoder, FrameStats, decode_datagram};
-use super::tlog::{TlogConfig, TlogWriter};
+use super::tlog::{TlogConfig, TlogHandle, TlogSender, unix_time_us};
 
 /// Where a ground station can reach us.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -341,9 +341,6 @@ const TLOG_STRANGER_BURST: f64 = 40.0;
 const INBOUND_STRANGER_SHARE: (usize, usize) = (3, 4);
 /// Evictions are logged at most this often (with the count since).
 const EVICTION_REPORT: Duration = Duration::from_secs(10);
-/// Records queued for the telemetry log thread.
-const TLOG_QUEUE: usize = 8192;
-const TLOG_FLUSH_PERIOD: Duration = Duration::from_secs(1);
 const BACKOFF_MIN: Duration = Duration::from_millis(200);
 const BACKOFF_MAX: Duration = Duration::from_secs(5);
 /// How long `shutdown` waits for an endpoint task before aborting it.
@@ -370,7 +367,11 @@ impl Router {
         let tlog = match &cfg.tlog {
             Some(tlog_cfg) => match TlogHandle::spawn(tlog_cfg) {
                 Ok(tlog) => Some(tlog),
-                Err(e) => {
+                Err(source) => {
+                    let e = EndpointError::Tlog {
+                        dir: tlog_cfg.dir.clone(),
+                        source,
+                    };
                     tracing::error!("{e}. RUNNING WITHOUT A TELEMETRY LOG");
                     None
                 }
@@ -861,13 +862,6 @@ impl EndpointCtx {
             tlog_dropped: c.tlog_dropped.load(Ordering::Relaxed),
         }
     }
-}
-
-fn unix_time_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
-        .unwrap_or(0)
 }
 
 // ---------------------------------------------------------------------------
@@ -1415,145 +1409,5 @@ async fn while_discarding<T>(
             // A closed queue means the router is gone.
             queued = queue.recv() => { queued.as_ref()?; }
         }
-    }
-}
-
-// ---------------------------------------------------------------------------
-// telemetry log thread
-// ---------------------------------------------------------------------------
-
-enum TlogMsg {
-    Frame(u64, Arc<[u8]>),
-    Stop,
-}
-
-#[derive(Clone)]
-struct TlogSender {
-    tx: std::sync::mpsc::SyncSender<TlogMsg>,
-    dropped: Arc<AtomicU64>,
-}
-
-impl TlogSender {
-    fn record(&self, unix_time_us: u64, raw: Arc<[u8]>) {
-        if let Err(std::sync::mpsc::TrySendError::Full(_)) =
-            self.tx.try_send(TlogMsg::Frame(unix_time_us, raw))
-            && self.dropped.fetch_add(1, Ordering::Relaxed) == 0
-        {
-            tracing::warn!("telemetry log cannot keep up: dropping records (logged once)");
-        }
-    }
-}
-
-struct TlogHandle {
-    sender: TlogSender,
-    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
-}
-
-impl TlogHandle {
-    fn spawn(cfg: &TlogConfig) -> Result<Self, EndpointError> {
-        let tlog_err = |source| EndpointError::Tlog {
-            dir: cfg.dir.clone(),
-            source,
-        };
-        let writer = TlogWriter::create(cfg, &session_name(SystemTime::now())).map_err(tlog_err)?;
-        tracing::info!(path = %writer.path().display(), "telemetry log started");
-        let (tx, rx) = std::sync::mpsc::sync_channel(TLOG_QUEUE);
-        // A thread, not a task: file writes may block, and must not hold up
-        // a runtime worker that is serving sockets.
-        let thread = std::thread::Builder::new()
-            .name("neptunus-tlog".into())
-            .spawn(move || run_tlog(writer, rx))
-            .map_err(tlog_err)?;
-        Ok(Self {
-            sender: TlogSender {
-                tx,
-                dropped: Arc::new(AtomicU64::new(0)),
-            },
-            thread: Mutex::new(Some(thread)),
-        })
-    }
-
-    async fn stop(&self) {
-        let thread = self
-            .thread
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .take();
-        let Some(thread) = thread else { return };
-        let tx = self.sender.tx.clone();
-        let joined = tokio::task::spawn_blocking(move || {
-            // Blocks only while the thread drains a full queue.
-            let _ = tx.send(TlogMsg::Stop);
-            thread.join()
-        })
-        .await;
-        if !matches!(joined, Ok(Ok(()))) {
-            tracing::warn!("telemetry log thread did not stop cleanly");
-        }
-    }
-}
-
-fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
-    use std::sync::mpsc::RecvTimeoutError;
-    let mut next_flush = std::time::Instant::now() + TLOG_FLUSH_PERIOD;
-    let mut dirty = false;
-    let mut failed = false;
-    let mut report = |result: io::Result<()>, path: &std::path::Path| {
-        if let Err(e) = result
-            && !std::mem::replace(&mut failed, true)
-        {
-            tracing::warn!(path = %path.display(), error = %e, "cannot write the telemetry log (logged once)");
-        }
-    };
-    loop {
-        let wait = next_flush.saturating_duration_since(std::time::Instant::now());
-        match rx.recv_timeout(wait) {
-            Ok(TlogMsg::Frame(time_us, raw)) => {
-                let result = writer.write_frame(time_us, &raw);
-                report(result, writer.path());
-                dirty = true;
-            }
-            Ok(TlogMsg::Stop) | Err(RecvTimeoutError::Disconnected) => break,
-            Err(RecvTimeoutError::Timeout) => {}
-        }
-        let now = std::time::Instant::now();
-        if now >= next_flush {
-            if dirty {
-                let result = writer.flush();
-                report(result, writer.path());
-                dirty = false;
-            }
-            next_flush = now + TLOG_FLUSH_PERIOD;
-        }
-    }
-    let result = writer.flush();
-    report(result, writer.path());
-}
-
-/// `neptunus-YYYYMMDD-HHMMSS` in UTC: sorts by time, and reads the same on
-/// the ROV (which may have no time zone set) and on the laptop.
-fn session_name(now: SystemTime) -> String {
-    let secs = now.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let rem = secs % 86_400;
-    let (y, m, d) = crate::eventlog::civil_from_days(secs / 86_400);
-    format!(
-        "neptunus-{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
-        rem / 3600,
-        (rem / 60) % 60,
-        rem % 60
-    )
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn session_names_are_utc_dates() {
-        let t = UNIX_EPOCH + Duration::from_secs(1_700_000_000);
-        assert_eq!(session_name(t), "neptunus-20231114-221320");
-        assert_eq!(session_name(UNIX_EPOCH), "neptunus-19700101-000000");
-        let leap = UNIX_EPOCH + Duration::from_secs(951_782_400); // 2000-02-29
-        assert_eq!(session_name(leap), "neptunus-20000229-000000");
     }
 }
