@@ -7,13 +7,18 @@
 //! start and at each rotation; nothing else in the folder is touched), and
 //! scrubbing secrets out of frames before they are written. It must never
 //! write a signing key: SETUP_SIGNING (id 256) is logged with its key zeroed.
-//! It is synchronous on purpose; the router runs it on a dedicated thread so
-//! disk stalls never reach a socket or the vehicle.
+//! The writer is synchronous on purpose; the router runs it on a dedicated
+//! thread (`TlogHandle`) so disk stalls never reach a socket or the
+//! vehicle. Recording never waits: when the thread cannot keep up, records
+//! are dropped (logged once) rather than queued without bound.
 
 use std::borrow::Cow;
 use std::fs::{File, OpenOptions};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 /// Where and how big.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -232,6 +237,140 @@ pub fn redact(raw: &[u8]) -> Cow<'_, [u8]> {
     Cow::Owned(owned)
 }
 
+// ---------------------------------------------------------------------------
+// the writer thread
+// ---------------------------------------------------------------------------
+
+/// Records queued for the telemetry log thread.
+const TLOG_QUEUE: usize = 8192;
+const TLOG_FLUSH_PERIOD: Duration = Duration::from_secs(1);
+
+enum TlogMsg {
+    Frame(u64, Arc<[u8]>),
+    Stop,
+}
+
+#[derive(Clone)]
+pub(super) struct TlogSender {
+    tx: std::sync::mpsc::SyncSender<TlogMsg>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl TlogSender {
+    pub(super) fn record(&self, unix_time_us: u64, raw: Arc<[u8]>) {
+        if let Err(std::sync::mpsc::TrySendError::Full(_)) =
+            self.tx.try_send(TlogMsg::Frame(unix_time_us, raw))
+            && self.dropped.fetch_add(1, Ordering::Relaxed) == 0
+        {
+            tracing::warn!("telemetry log cannot keep up: dropping records (logged once)");
+        }
+    }
+}
+
+pub(super) struct TlogHandle {
+    pub(super) sender: TlogSender,
+    thread: Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+impl TlogHandle {
+    /// Creates the session's first file and starts the thread writing it.
+    pub(super) fn spawn(cfg: &TlogConfig) -> io::Result<Self> {
+        let writer = TlogWriter::create(cfg, &session_name(SystemTime::now()))?;
+        tracing::info!(path = %writer.path().display(), "telemetry log started");
+        let (tx, rx) = std::sync::mpsc::sync_channel(TLOG_QUEUE);
+        // A thread, not a task: file writes may block, and must not hold up
+        // a runtime worker that is serving sockets.
+        let thread = std::thread::Builder::new()
+            .name("neptunus-tlog".into())
+            .spawn(move || run_tlog(writer, rx))?;
+        Ok(Self {
+            sender: TlogSender {
+                tx,
+                dropped: Arc::new(AtomicU64::new(0)),
+            },
+            thread: Mutex::new(Some(thread)),
+        })
+    }
+
+    pub(super) async fn stop(&self) {
+        let thread = self
+            .thread
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .take();
+        let Some(thread) = thread else { return };
+        let tx = self.sender.tx.clone();
+        let joined = tokio::task::spawn_blocking(move || {
+            // Blocks only while the thread drains a full queue.
+            let _ = tx.send(TlogMsg::Stop);
+            thread.join()
+        })
+        .await;
+        if !matches!(joined, Ok(Ok(()))) {
+            tracing::warn!("telemetry log thread did not stop cleanly");
+        }
+    }
+}
+
+fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
+    use std::sync::mpsc::RecvTimeoutError;
+    let mut next_flush = std::time::Instant::now() + TLOG_FLUSH_PERIOD;
+    let mut dirty = false;
+    let mut failed = false;
+    let mut report = |result: io::Result<()>, path: &std::path::Path| {
+        if let Err(e) = result
+            && !std::mem::replace(&mut failed, true)
+        {
+            tracing::warn!(path = %path.display(), error = %e, "cannot write the telemetry log (logged once)");
+        }
+    };
+    loop {
+        let wait = next_flush.saturating_duration_since(std::time::Instant::now());
+        match rx.recv_timeout(wait) {
+            Ok(TlogMsg::Frame(time_us, raw)) => {
+                let result = writer.write_frame(time_us, &raw);
+                report(result, writer.path());
+                dirty = true;
+            }
+            Ok(TlogMsg::Stop) | Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Timeout) => {}
+        }
+        let now = std::time::Instant::now();
+        if now >= next_flush {
+            if dirty {
+                let result = writer.flush();
+                report(result, writer.path());
+                dirty = false;
+            }
+            next_flush = now + TLOG_FLUSH_PERIOD;
+        }
+    }
+    let result = writer.flush();
+    report(result, writer.path());
+}
+
+/// `neptunus-YYYYMMDD-HHMMSS` in UTC: sorts by time, and reads the same on
+/// the ROV (which may have no time zone set) and on the laptop.
+fn session_name(now: SystemTime) -> String {
+    let secs = now.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+    let rem = secs % 86_400;
+    let (y, m, d) = crate::eventlog::civil_from_days(secs / 86_400);
+    format!(
+        "neptunus-{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        (rem / 60) % 60,
+        rem % 60
+    )
+}
+
+/// The time a record is stamped with: microseconds since the Unix epoch.
+pub(super) fn unix_time_us() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
+        .unwrap_or(0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -276,5 +415,14 @@ mod tests {
         assert!(redacted[at..at + 32].iter().all(|&b| b == 0));
         assert_eq!(redacted.len(), raw.len());
         assert_eq!(redacted[raw.len() - 2..], raw[raw.len() - 2..]);
+    }
+
+    #[test]
+    fn session_names_are_utc_dates() {
+        let t = UNIX_EPOCH + Duration::from_secs(1_700_000_000);
+        assert_eq!(session_name(t), "neptunus-20231114-221320");
+        assert_eq!(session_name(UNIX_EPOCH), "neptunus-19700101-000000");
+        let leap = UNIX_EPOCH + Duration::from_secs(951_782_400); // 2000-02-29
+        assert_eq!(session_name(leap), "neptunus-20000229-000000");
     }
 }
