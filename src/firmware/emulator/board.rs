@@ -81,7 +81,7 @@ impl Board {
     /// A board at power-up; nothing is printed until [`Board::start`].
     ///
     /// # Panics
-    /// If `opts.sim` is invalid (see [`SimOptions::validate`]); the defaults
+    /// If `opts.sim` is invalid (see [`SimOptions::validate`](crate::sim::SimOptions::validate)); the defaults
     /// and [`EmulatorOptions::ideal_thesis`] never are. Use
     /// [`Board::try_new`] for options that come from a user.
     pub fn new(opts: EmulatorOptions) -> Self {
