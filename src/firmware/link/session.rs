@@ -387,6 +387,13 @@ mod tests {
 
     use super::*;
 
+    /// What a handshake writes, in order.
+    const HANDSHAKE: [Command; 3] = [
+        Command::Capabilities,
+        Command::DeadMan(true),
+        Command::Start,
+    ];
+
     const NAV: &[u8] = b"hdgd:10.00;deep:1.00;pitc:0.00;roll:0.00;yaw:10.00;fthr:0.00;\r\n";
 
     fn go(us: u16) -> Command {
@@ -433,14 +440,7 @@ mod tests {
             "nothing before boot_wait"
         );
         let t = t0 + s.cfg.boot_wait;
-        assert_eq!(
-            drain_writes(&mut s, t + Duration::from_secs(1)),
-            [
-                Command::Capabilities,
-                Command::DeadMan(true),
-                Command::Start
-            ]
-        );
+        assert_eq!(drain_writes(&mut s, t + Duration::from_secs(1)), HANDSHAKE);
         // The handshake's frames fill `max_ahead`: the ping waits for them.
         let t = t + Duration::from_secs(1);
         s.healthy(t);
@@ -469,21 +469,13 @@ mod tests {
         s.received(b"boot:1;\r\n", t);
         assert_eq!(
             drain_writes(&mut s, t + Duration::from_millis(20)),
-            [
-                Command::Capabilities,
-                Command::DeadMan(true),
-                Command::Start
-            ]
+            HANDSHAKE
         );
         let t = t + Duration::from_secs(1);
         s.received(b"boot:1;\r\n", t);
         assert_eq!(
             drain_writes(&mut s, t + Duration::from_millis(20)),
-            [
-                Command::Capabilities,
-                Command::DeadMan(true),
-                Command::Start
-            ]
+            HANDSHAKE
         );
     }
 
