@@ -3,9 +3,11 @@
 //!
 //! - [`codec`]: sans-IO encoding of commands and decoding of telemetry lines.
 //! - [`link`]: the task that owns the serial device (handshake, keep-alive,
-//!   coalescing and pacing of commands, reconnection).
+//!   coalescing and pacing of commands, reconnection): the decisions in a
+//!   sans-IO session, the device and channels in an I/O loop around it.
 //! - [`emulator`]: a byte-exact emulator of the 2015 board driving the
-//!   simulator, used by `--sim`, `emulate-board` and the tests.
+//!   simulator, used by `--sim`, `emulate-board` and the tests: a sans-IO
+//!   board, and the pty task that runs it.
 //! - [`pty`]: pseudo-terminal helpers so the emulator sits behind a real tty.
 //!
 //! Nothing here decides whether a thruster may move: that is the vehicle

@@ -1,0 +1,583 @@
+//! The link's decisions, sans-IO: what to write to the board, when, and what
+//! to report, as a plain state machine over (state, event, now).
+//!
+//! Owns the start-up handshake (wait for `boot`, or `boot_wait` for a board
+//! that was already running; then `rcap()` once, `dms(1)`, `start()`), the
+//! keep-alive `ping(0)` gated on the vehicle task's health, the outbox that
+//! coalesces thruster commands (the newest wins), the pacing that keeps the
+//! board's 80-byte buffer and 5-slot queue from overflowing, the telemetry
+//! watchdog, the link state and its figures, and the reopen backoff.
+//!
+//! It must never read a clock, sleep, or touch the serial device or a
+//! channel: the I/O loop (`io.rs`) passes the time in with every call, writes
+//! the frames it is handed and delivers the [`Output`]s in order. Nor does it
+//! decide what the vehicle does: commands come from the vehicle task.
+
+use std::collections::VecDeque;
+use std::time::{Duration, Instant};
+
+use super::{LinkConfig, LinkEvent, LinkState, LinkStats};
+use crate::firmware::codec::{Command, Event, LineDecoder, encode};
+
+/// How often the figures are published while the device is open.
+const STATS_PERIOD: Duration = Duration::from_millis(100);
+
+/// What the session asks the I/O loop to deliver, in the order it decided.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) enum Output {
+    /// Publish these figures (a copy taken when they were decided).
+    Stats(LinkStats),
+    /// Hand this to the vehicle task; if it has no room, tell
+    /// [`Session::event_dropped`].
+    Event(LinkEvent),
+}
+
+/// Pending writes: control commands in order, plus the newest thrust command.
+#[derive(Debug, Default)]
+struct Outbox {
+    control: VecDeque<Command>,
+    thrust: Option<Command>,
+}
+
+impl Outbox {
+    fn push(&mut self, cmd: Command, stats: &mut LinkStats) {
+        if cmd.is_thrust() {
+            if self.thrust.replace(cmd).is_some() {
+                stats.thrust_coalesced += 1;
+            }
+        } else {
+            self.control.push_back(cmd);
+        }
+    }
+    fn pop(&mut self) -> Option<Command> {
+        self.control.pop_front().or_else(|| self.thrust.take())
+    }
+    fn is_empty(&self) -> bool {
+        self.control.is_empty() && self.thrust.is_none()
+    }
+}
+
+/// What lives only as long as one opening of the device.
+#[derive(Debug)]
+struct Connection {
+    opened_at: Instant,
+    decoder: LineDecoder,
+    /// Scratch for one read's events, kept to spare an allocation per read.
+    decoded: Vec<Event>,
+    handshake_due: Option<Instant>,
+    handshaken: bool,
+    rcap_sent: bool,
+    /// When the board will have taken everything written so far (a virtual
+    /// finish time: each frame costs its wire time plus `frame_gap`). A
+    /// frame may go out while that is at most `max_ahead` away, so a
+    /// command after a ping is written at once, while a burst is held back
+    /// before it can fill the board's 80-byte buffer or 5-slot queue.
+    line_free_at: Instant,
+    next_ping: Instant,
+    next_stats: Instant,
+    /// Lines accepted before the last handshake: only a newer one proves
+    /// the handshaken board is talking.
+    lines_at_open: u64,
+}
+
+/// The link's state machine (see the module docs).
+#[derive(Debug)]
+pub(super) struct Session {
+    cfg: LinkConfig,
+    stats: LinkStats,
+    outbox: Outbox,
+    last_healthy: Option<Instant>,
+    backoff: Duration,
+    /// The state last reported to the vehicle task.
+    reported: Option<LinkState>,
+    /// When the newest navigation or status line arrived (kept across
+    /// openings; only one newer than the opening counts).
+    last_line: Option<Instant>,
+    conn: Option<Connection>,
+    outputs: VecDeque<Output>,
+}
+
+impl Session {
+    /// A session for a device not opened yet (reported down at once).
+    pub(super) fn new(cfg: LinkConfig) -> Self {
+        let mut session = Self {
+            backoff: cfg.backoff_min,
+            cfg,
+            stats: LinkStats::default(),
+            outbox: Outbox::default(),
+            last_healthy: None,
+            reported: None,
+            last_line: None,
+            conn: None,
+            outputs: VecDeque::new(),
+        };
+        session.report(LinkState::Down, Some("not opened yet".into()));
+        session
+    }
+
+    /// The figures as they are now.
+    pub(super) fn stats(&self) -> &LinkStats {
+        &self.stats
+    }
+
+    /// The next thing to deliver, oldest first.
+    pub(super) fn poll_output(&mut self) -> Option<Output> {
+        self.outputs.pop_front()
+    }
+
+    /// The vehicle task had no room for `event`.
+    pub(super) fn event_dropped(&mut self, event: &LinkEvent) {
+        self.stats.events_dropped += 1;
+        if matches!(event, LinkEvent::State { .. }) {
+            self.publish();
+        }
+    }
+
+    /// A command from the vehicle task. Thruster commands are coalesced:
+    /// only the newest pending one is written. Taken while the device is
+    /// down too, so the newest one is what goes out once the board is back.
+    pub(super) fn command(&mut self, cmd: Command) {
+        self.outbox.push(cmd, &mut self.stats);
+    }
+
+    /// The vehicle task said it is alive at `now`.
+    pub(super) fn healthy(&mut self, now: Instant) {
+        self.last_healthy = Some(now);
+    }
+
+    /// The device could not be opened. Returns when to try again.
+    pub(super) fn open_failed(&mut self, reason: String, now: Instant) -> Instant {
+        self.report(LinkState::Down, Some(reason));
+        self.publish();
+        self.retry_at(now)
+    }
+
+    /// The device was opened at `now`: wait for `boot` (or `boot_wait`),
+    /// then handshake.
+    pub(super) fn opened(&mut self, now: Instant) {
+        self.stats.opens += 1;
+        self.conn = Some(Connection {
+            opened_at: now,
+            decoder: LineDecoder::new(),
+            decoded: Vec::with_capacity(16),
+            handshake_due: Some(now + self.cfg.boot_wait),
+            handshaken: false,
+            rcap_sent: false,
+            line_free_at: now,
+            next_ping: now,
+            next_stats: now,
+            lines_at_open: 0,
+        });
+        self.report(LinkState::Handshaking, None);
+    }
+
+    /// The device failed or closed for `reason`. Returns when to reopen.
+    pub(super) fn closed(&mut self, reason: String, now: Instant) -> Instant {
+        self.conn = None;
+        // What was pending was decided for a board that is gone; the vehicle
+        // task decides again when the link is back.
+        if self.outbox.thrust.take().is_some() {
+            self.stats.thrust_coalesced += 1;
+        }
+        self.report(LinkState::Down, Some(reason));
+        self.publish();
+        self.retry_at(now)
+    }
+
+    /// Bytes read from the device at `now`: decoded and passed on.
+    pub(super) fn received(&mut self, bytes: &[u8], now: Instant) {
+        let Some(conn) = self.conn.as_mut() else {
+            return;
+        };
+        self.stats.bytes_in += bytes.len() as u64;
+        conn.decoded.clear();
+        conn.decoder.push(bytes, &mut conn.decoded);
+        self.stats.decode = conn.decoder.stats().clone();
+        for ev in conn.decoded.drain(..) {
+            match &ev {
+                Event::Boot => {
+                    tracing::info!("board booted; handshaking");
+                    conn.handshake_due = Some(now);
+                    conn.rcap_sent = false;
+                }
+                Event::CrcFail { calc, got } => {
+                    self.stats.crc_failures_echoed += 1;
+                    tracing::debug!(calc, got, "board dropped a frame: CRC mismatch");
+                }
+                Event::Nav(_) | Event::Status(_) => self.last_line = Some(now),
+                _ => {}
+            }
+            self.outputs
+                .push_back(Output::Event(LinkEvent::Telemetry(ev)));
+        }
+    }
+
+    /// What to write at `now`, if anything: handshakes that are due, the
+    /// keep-alive, then one pending command if pacing allows. The frame is
+    /// encoded into `frame`; call [`Session::transmitted`] once it is
+    /// written (a frame that fails to write is lost with the device).
+    pub(super) fn poll_transmit(&mut self, now: Instant, frame: &mut Vec<u8>) -> Option<Command> {
+        let conn = self.conn.as_mut()?;
+        // Handshake: after `boot`, or after boot_wait for a board that was already up.
+        if conn.handshake_due.is_some_and(|t| now >= t) {
+            conn.handshake_due = None;
+            conn.handshaken = true;
+            self.stats.handshakes += 1;
+            self.outputs.push_back(Output::Stats(self.stats.clone()));
+            if !conn.rcap_sent {
+                conn.rcap_sent = true;
+                self.outbox.control.push_front(Command::Capabilities);
+            }
+            self.outbox.control.push_back(Command::DeadMan(true));
+            self.outbox.control.push_back(Command::Start);
+            conn.lines_at_open = self.stats.decode.lines_accepted;
+            // A ping now, so the freshly armed dead-man has a full period.
+            conn.next_ping = now;
+        }
+        if conn.handshaken
+            && now >= conn.next_ping
+            && self
+                .last_healthy
+                .is_some_and(|t| now.duration_since(t) <= self.cfg.healthy_window)
+        {
+            conn.next_ping = now + self.cfg.ping_period;
+            if !self.outbox.control.contains(&Command::Ping(0)) {
+                self.outbox.control.push_back(Command::Ping(0));
+                self.stats.pings_written += 1;
+            }
+        }
+        if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
+            && conn.handshaken
+            && let Some(cmd) = self.outbox.pop()
+        {
+            frame.clear();
+            encode(&cmd, self.cfg.framing, frame);
+            return Some(cmd);
+        }
+        None
+    }
+
+    /// `cmd`, `frame_len` bytes long, was written at `now` (the `now` its
+    /// [`Session::poll_transmit`] was given).
+    pub(super) fn transmitted(&mut self, cmd: &Command, frame_len: usize, now: Instant) {
+        self.stats.bytes_out += frame_len as u64;
+        self.stats.commands_written += 1;
+        if cmd.is_thrust() {
+            self.stats.thrust_written += 1;
+        }
+        if let Some(conn) = self.conn.as_mut() {
+            conn.line_free_at =
+                conn.line_free_at.max(now) + self.cfg.wire_time(frame_len) + self.cfg.frame_gap;
+        }
+    }
+
+    /// The timers at `now`: the telemetry watchdog (down when the board is
+    /// silent, up once a handshaken board talks) and the figures.
+    pub(super) fn poll_timers(&mut self, now: Instant) {
+        let Some(conn) = self.conn.as_ref() else {
+            return;
+        };
+        let opened_at = conn.opened_at;
+        let handshaken = conn.handshaken;
+        let lines_at_open = conn.lines_at_open;
+        let silent_since = self
+            .last_line
+            .filter(|t| *t >= opened_at)
+            .unwrap_or(opened_at);
+        let allowed = self.cfg.stale_after
+            + if handshaken {
+                Duration::ZERO
+            } else {
+                self.cfg.boot_wait
+            };
+        if now.duration_since(silent_since) > allowed {
+            if self.stats.state != LinkState::Down {
+                self.report(
+                    LinkState::Down,
+                    Some(format!(
+                        "no telemetry from the board for {:.1} s",
+                        now.duration_since(silent_since).as_secs_f64()
+                    )),
+                );
+            }
+        } else if handshaken
+            && self.stats.decode.lines_accepted > lines_at_open
+            && self.stats.state != LinkState::Up
+        {
+            self.report(LinkState::Up, None);
+            self.backoff = self.cfg.backoff_min;
+        }
+        if let Some(conn) = self.conn.as_mut()
+            && now >= conn.next_stats
+        {
+            conn.next_stats = now + STATS_PERIOD;
+            self.stats.telemetry_age_ms = self
+                .last_line
+                .map(|t| now.duration_since(t).as_millis() as u64);
+            self.publish();
+        }
+    }
+
+    /// When the session next has something to do without new input (a
+    /// sleep of at most 100 ms, so the watchdog runs).
+    pub(super) fn next_wake(&self, now: Instant) -> Instant {
+        let Some(conn) = self.conn.as_ref() else {
+            return now + STATS_PERIOD;
+        };
+        let mut wake = conn.next_stats.min(now + STATS_PERIOD);
+        if let Some(t) = conn.handshake_due {
+            wake = wake.min(t);
+        }
+        if conn.handshaken && !self.outbox.is_empty() {
+            wake = wake.min(
+                conn.line_free_at
+                    .checked_sub(self.cfg.max_ahead)
+                    .unwrap_or(now),
+            );
+        }
+        if conn.handshaken {
+            wake = wake.min(conn.next_ping);
+        }
+        wake
+    }
+
+    /// When to try the device again after a failure at `now`; the wait
+    /// doubles each time up to `backoff_max`, and is reset once the link is up.
+    fn retry_at(&mut self, now: Instant) -> Instant {
+        // A vanished USB device takes a moment to return.
+        let at = now + self.backoff;
+        self.backoff = (self.backoff * 2).min(self.cfg.backoff_max);
+        at
+    }
+
+    fn publish(&mut self) {
+        self.outputs.push_back(Output::Stats(self.stats.clone()));
+    }
+
+    /// Records the link state; a change is logged and reported, figures first.
+    fn report(&mut self, state: LinkState, reason: Option<String>) {
+        self.stats.state = state;
+        self.stats.down_reason = reason.clone();
+        if self.reported == Some(state) {
+            return;
+        }
+        self.reported = Some(state);
+        let device = self.cfg.device.display();
+        match state {
+            LinkState::Down => {
+                tracing::warn!(device = %device, reason = reason.as_deref().unwrap_or(""), "board link down")
+            }
+            LinkState::Handshaking => {
+                tracing::info!(device = %device, "board link: handshaking")
+            }
+            LinkState::Up => tracing::info!(device = %device, "board link up"),
+        }
+        // Figures first: anyone looking at them after the event sees the
+        // new state (the other order let a test read the old reason).
+        self.publish();
+        self.outputs
+            .push_back(Output::Event(LinkEvent::State { state, reason }));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The session driven with synthetic time and no device: what the I/O
+    //! loop would write and report, decision by decision.
+
+    use super::*;
+
+    /// What a handshake writes, in order.
+    const HANDSHAKE: [Command; 3] = [
+        Command::Capabilities,
+        Command::DeadMan(true),
+        Command::Start,
+    ];
+
+    const NAV: &[u8] = b"hdgd:10.00;deep:1.00;pitc:0.00;roll:0.00;yaw:10.00;fthr:0.00;\r\n";
+
+    fn go(us: u16) -> Command {
+        Command::Go {
+            port_us: us,
+            vertical_us: 1500,
+            starboard_us: 1500,
+        }
+    }
+
+    fn opened(t0: Instant) -> Session {
+        let mut s = Session::new(LinkConfig::new("/dev/null"));
+        s.opened(t0);
+        s
+    }
+
+    /// Everything written at `now` (pacing permitting), as commands.
+    fn drain_writes(s: &mut Session, now: Instant) -> Vec<Command> {
+        let mut frame = Vec::new();
+        let mut written = Vec::new();
+        while let Some(cmd) = s.poll_transmit(now, &mut frame) {
+            s.transmitted(&cmd, frame.len(), now);
+            written.push(cmd);
+        }
+        written
+    }
+
+    fn states(s: &mut Session) -> Vec<LinkState> {
+        std::iter::from_fn(|| s.poll_output())
+            .filter_map(|o| match o {
+                Output::Event(LinkEvent::State { state, .. }) => Some(state),
+                _ => None,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn handshakes_after_boot_wait_and_pings_only_while_healthy() {
+        let t0 = Instant::now();
+        let mut s = opened(t0);
+        assert_eq!(states(&mut s), [LinkState::Down, LinkState::Handshaking]);
+        assert!(
+            drain_writes(&mut s, t0).is_empty(),
+            "nothing before boot_wait"
+        );
+        let t = t0 + s.cfg.boot_wait;
+        assert_eq!(drain_writes(&mut s, t + Duration::from_secs(1)), HANDSHAKE);
+        // The handshake's frames fill `max_ahead`: the ping waits for them.
+        let t = t + Duration::from_secs(1);
+        s.healthy(t);
+        assert!(drain_writes(&mut s, t).is_empty());
+        s.poll_timers(t);
+        assert!(s.next_wake(t) > t);
+        let t = t + Duration::from_millis(20);
+        assert_eq!(drain_writes(&mut s, t), [Command::Ping(0)]);
+        // Unhealthy for longer than the window: no ping, so the board's
+        // dead-man stops the vehicle.
+        assert!(drain_writes(&mut s, t + Duration::from_secs(3)).is_empty());
+        s.healthy(t + Duration::from_secs(3));
+        assert_eq!(
+            drain_writes(&mut s, t + Duration::from_secs(3)),
+            [Command::Ping(0)]
+        );
+        assert_eq!(s.stats().handshakes, 1);
+        assert_eq!(s.stats().pings_written, 2);
+    }
+
+    #[test]
+    fn boot_line_handshakes_at_once_and_asks_rcap_again() {
+        let t0 = Instant::now();
+        let mut s = opened(t0);
+        let t = t0 + Duration::from_millis(10);
+        s.received(b"boot:1;\r\n", t);
+        assert_eq!(
+            drain_writes(&mut s, t + Duration::from_millis(20)),
+            HANDSHAKE
+        );
+        let t = t + Duration::from_secs(1);
+        s.received(b"boot:1;\r\n", t);
+        assert_eq!(
+            drain_writes(&mut s, t + Duration::from_millis(20)),
+            HANDSHAKE
+        );
+    }
+
+    #[test]
+    fn newest_thrust_wins_and_a_burst_is_paced() {
+        let t0 = Instant::now();
+        let mut s = opened(t0);
+        let t = t0 + s.cfg.boot_wait;
+        drain_writes(&mut s, t + Duration::from_secs(1));
+        let t = t + Duration::from_secs(2);
+        s.healthy(t);
+        s.command(go(1600));
+        s.command(go(1700));
+        for n in 0..5 {
+            s.command(Command::Lights(n));
+        }
+        // About `max_ahead` worth of frames (the ping among them) go out at
+        // once; the rest wait until the board has taken them.
+        let first = drain_writes(&mut s, t);
+        assert!(
+            (1..5).contains(&first.len()),
+            "a burst is held back: {first:?}"
+        );
+        s.poll_timers(t);
+        let wake = s.next_wake(t);
+        assert!(
+            wake > t && wake <= t + Duration::from_millis(10),
+            "{wake:?}"
+        );
+        let mut all = first;
+        let mut now = t;
+        while all.len() < 7 {
+            now += Duration::from_millis(5);
+            all.extend(drain_writes(&mut s, now));
+        }
+        assert_eq!(all.last(), Some(&go(1700)), "thrust after control: {all:?}");
+        assert!(
+            !all.contains(&go(1600)),
+            "the stale thrust is never written"
+        );
+        assert_eq!(s.stats().thrust_coalesced, 1);
+        assert_eq!(s.stats().thrust_written, 1);
+    }
+
+    #[test]
+    fn up_on_telemetry_down_when_silent_and_backoff_doubles_then_resets() {
+        let t0 = Instant::now();
+        let mut s = opened(t0);
+        let t = t0 + s.cfg.boot_wait;
+        drain_writes(&mut s, t);
+        s.received(NAV, t);
+        s.poll_timers(t);
+        assert_eq!(s.stats().state, LinkState::Up);
+        let silent = t + s.cfg.stale_after + Duration::from_millis(1);
+        s.poll_timers(silent);
+        assert_eq!(s.stats().state, LinkState::Down);
+        assert!(
+            s.stats()
+                .down_reason
+                .as_deref()
+                .is_some_and(|r| r.starts_with("no telemetry"))
+        );
+        assert_eq!(
+            states(&mut s),
+            [
+                LinkState::Down,
+                LinkState::Handshaking,
+                LinkState::Up,
+                LinkState::Down
+            ]
+        );
+        // A pending thrust is dropped with the device; reopening backs off.
+        s.command(go(1600));
+        let min = s.cfg.backoff_min;
+        assert_eq!(s.closed("device closed".into(), silent), silent + min);
+        assert_eq!(s.stats().thrust_coalesced, 1);
+        assert_eq!(s.open_failed("gone".into(), silent), silent + min * 2);
+        s.opened(silent);
+        // A board that is already running talks before the handshake.
+        s.received(NAV, silent + Duration::from_millis(100));
+        let t = silent + s.cfg.boot_wait;
+        drain_writes(&mut s, t);
+        s.received(NAV, t);
+        s.poll_timers(t);
+        assert_eq!(s.stats().state, LinkState::Up);
+        assert_eq!(
+            s.closed("device closed".into(), t),
+            t + min,
+            "reset once up"
+        );
+    }
+
+    #[test]
+    fn a_dropped_state_event_is_counted_and_published() {
+        let mut s = Session::new(LinkConfig::new("/dev/null"));
+        let event = LinkEvent::State {
+            state: LinkState::Down,
+            reason: None,
+        };
+        while s.poll_output().is_some() {}
+        s.event_dropped(&event);
+        assert_eq!(s.stats().events_dropped, 1);
+        assert!(matches!(s.poll_output(), Some(Output::Stats(st)) if st.events_dropped == 1));
+    }
+}
