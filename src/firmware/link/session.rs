@@ -217,6 +217,7 @@ impl Session {
     /// encoded into `frame`; call [`Session::transmitted`] once it is
     /// written (a frame that fails to write is lost with the device).
     pub(super) fn poll_transmit(&mut self, now: Instant, frame: &mut Vec<u8>) -> Option<Command> {
+        let healthy = self.vehicle_healthy(now);
         let conn = self.conn.as_mut()?;
         // Handshake: after `boot`, or after boot_wait for a board that was already up.
         if conn.handshake_due.is_some_and(|t| now >= t) {
@@ -234,12 +235,7 @@ impl Session {
             // A ping now, so the freshly armed dead-man has a full period.
             conn.next_ping = now;
         }
-        if conn.handshaken
-            && now >= conn.next_ping
-            && self
-                .last_healthy
-                .is_some_and(|t| now.duration_since(t) <= self.cfg.healthy_window)
-        {
+        if conn.handshaken && now >= conn.next_ping && healthy {
             conn.next_ping = now + self.cfg.ping_period;
             if !self.outbox.control.contains(&Command::Ping(0)) {
                 self.outbox.control.push_back(Command::Ping(0));
@@ -335,10 +331,18 @@ impl Session {
                     .unwrap_or(now),
             );
         }
-        if conn.handshaken {
+        // While the vehicle is not healthy no ping is due (a due-but-withheld
+        // ping must not make the loop spin); its next `healthy` wakes the loop.
+        if conn.handshaken && self.vehicle_healthy(now) {
             wake = wake.min(conn.next_ping);
         }
         wake
+    }
+
+    /// The vehicle task said it is alive within the healthy window.
+    fn vehicle_healthy(&self, now: Instant) -> bool {
+        self.last_healthy
+            .is_some_and(|t| now.duration_since(t) <= self.cfg.healthy_window)
     }
 
     /// When to try the device again after a failure at `now`; the wait
@@ -452,6 +456,12 @@ mod tests {
         // Unhealthy for longer than the window: no ping, so the board's
         // dead-man stops the vehicle.
         assert!(drain_writes(&mut s, t + Duration::from_secs(3)).is_empty());
+        // … and the withheld ping is no reason to wake: the loop must not spin.
+        s.poll_timers(t + Duration::from_secs(3));
+        assert!(
+            s.next_wake(t + Duration::from_secs(3)) > t + Duration::from_secs(3),
+            "an unhealthy vehicle keeps the link's loop awake"
+        );
         s.healthy(t + Duration::from_secs(3));
         assert_eq!(
             drain_writes(&mut s, t + Duration::from_secs(3)),
