@@ -151,27 +151,12 @@ pub async fn run(
         .iter()
         .map(|u| u.trusted)
         .collect();
-    let router = match Router::start(specs, router_cfg.clone(), in_tx.clone()).await {
-        Err(EndpointError::Tlog { dir, source }) => {
-            tracing::error!(
-                "telemetry log off: cannot write {}: {source} — the vehicle runs without a tlog",
-                dir.display()
-            );
-            storage_problems.push(format!("telemetry log {}: {source}", dir.display()));
-            let cfg = RouterConfig {
-                tlog: None,
-                ..router_cfg
-            };
-            let specs = settings
-                .mavlink
-                .endpoints
-                .iter()
-                .map(|u| u.spec.clone())
-                .collect();
-            Router::start(specs, cfg, in_tx).await?
-        }
-        other => other?,
-    };
+    // Without a writable tlog folder the router runs without a tlog (it
+    // says so); the vehicle shows it as a storage problem.
+    let router = Router::start(specs, router_cfg, in_tx).await?;
+    if let Some(e) = router.tlog_error() {
+        storage_problems.push(format!("telemetry log: {e}"));
+    }
     for (i, spec) in settings.mavlink.endpoints.iter().enumerate() {
         tracing::info!(endpoint = %spec, local = ?router.local_addr(i), "MAVLink endpoint");
     }

@@ -767,6 +767,18 @@ fn starts_without_a_writable_log_file_or_tlog_folder_and_says_so() {
     let log = vehicle.stderr_text();
     assert!(log.contains("CANNOT OPEN THE LOG FILE"), "{log}");
     assert!(log.contains("RUNNING WITHOUT A TELEMETRY LOG"), "{log}");
+    // Ground stations see it too: logging unhealthy in SYS_STATUS.
+    let logging = MavSysStatusSensor::MAV_SYS_STATUS_LOGGING;
+    let shown = gcs
+        .run_until(&mut vehicle, common::Traffic::Heartbeats, GENEROUS, |m| {
+            m.iter().any(|m| {
+                matches!(m, MavMessage::SYS_STATUS(s)
+                    if s.onboard_control_sensors_present.contains(logging)
+                        && !s.onboard_control_sensors_health.contains(logging))
+            })
+        })
+        .unwrap();
+    assert!(shown, "SYS_STATUS does not show the missing telemetry log");
 }
 
 // ---------------------------------------------------------------------------

@@ -69,6 +69,7 @@ impl Router {
         cfg: RouterConfig,
         inbound: mpsc::Sender<Inbound>,
     ) -> Result<RouterHandle, EndpointError> {
+        let mut tlog_error = None;
         let tlog = match &cfg.tlog {
             Some(tlog_cfg) => match TlogHandle::spawn(tlog_cfg) {
                 Ok(tlog) => Some(tlog),
@@ -78,6 +79,7 @@ impl Router {
                         source,
                     };
                     tracing::error!("{e}. RUNNING WITHOUT A TELEMETRY LOG");
+                    tlog_error = Some(e.to_string());
                     None
                 }
             },
@@ -161,6 +163,7 @@ impl Router {
                 shutdown: shutdown_tx,
                 tasks: Mutex::new(tasks),
                 tlog,
+                tlog_error,
             }),
         })
     }
@@ -178,6 +181,8 @@ struct Inner {
     shutdown: watch::Sender<bool>,
     tasks: Mutex<Vec<JoinHandle<()>>>,
     tlog: Option<TlogHandle>,
+    /// Why the telemetry log could not be opened (the router runs without).
+    tlog_error: Option<String>,
 }
 
 struct EndpointSlot {
@@ -225,6 +230,11 @@ impl RouterHandle {
             );
         }
         slots
+    }
+
+    /// Why the telemetry log asked for could not be opened, if it could not.
+    pub fn tlog_error(&self) -> Option<&str> {
+        self.inner.tlog_error.as_deref()
     }
 
     /// Counters of every endpoint, in the order given to [`Router::start`].
