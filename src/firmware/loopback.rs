@@ -149,3 +149,33 @@ pub fn sim_truth(s: &SimSnapshot) -> SimTruth {
         pitch_rad: s.pitch_deg.to_radians(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_dead_man_hears_one_ping_per_period_however_often_the_vehicle_is_healthy() {
+        let mut sim = BuiltinSim::new(EmulatorOptions::default(), Duration::ZERO);
+        let mut events = Vec::new();
+        for ms in (10..=1000).step_by(10) {
+            let now = Duration::from_millis(ms);
+            sim.healthy(now);
+            sim.step(now, &mut events);
+        }
+        let pongs = events
+            .iter()
+            .filter(|e| matches!(e, Event::Pong(_)))
+            .count();
+        assert_eq!(pongs, 2, "pings at 10 ms and 510 ms: {events:?}");
+    }
+
+    #[test]
+    fn a_placed_vehicle_is_where_it_was_put() {
+        let mut sim = BuiltinSim::new(EmulatorOptions::default(), Duration::ZERO);
+        sim.place(12.0, 90.0);
+        let t = sim.truth();
+        assert!((t.depth_m - 12.0).abs() < 1e-9);
+        assert!((t.heading_rad - 90f64.to_radians()).abs() < 1e-9);
+    }
+}
