@@ -269,7 +269,10 @@ function drivesThrusters(mode) {
 /** The control-mode radio buttons and the SURFACE button, from the welcome's mode list. */
 function showModes(modes) {
   const box = $('control-modes');
-  box.querySelectorAll('label.mode').forEach((l) => l.remove());
+  box.querySelectorAll('label.mode').forEach((l) => {
+    if (l.nextSibling && l.nextSibling.nodeType === Node.TEXT_NODE) l.nextSibling.remove();
+    l.remove();
+  });
   const surface = $('surface');
   for (const m of modes) {
     if (m.button) {
@@ -290,7 +293,9 @@ function showModes(modes) {
       labelTouchpad(m.mode);
     });
     label.append(r, ` ${m.label}`);
+    // The space between inline labels that the static markup had.
     box.insertBefore(label, surface);
+    box.insertBefore(document.createTextNode(' '), surface);
   }
   labelTouchpad();
 }
