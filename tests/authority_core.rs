@@ -2,11 +2,13 @@
 //! through the vehicle core with synthetic time.
 #![allow(clippy::unwrap_used, clippy::expect_used, deprecated)]
 
+mod common;
+
 use std::time::Duration;
 
+use common::core_rig::{CoreRig, NEUTRAL, ack_of, gos, has_event, has_text, msgs, sends, texts};
 use neptunus::dialect::neptunus::*;
-use neptunus::firmware::codec::{Command, Event, NavSample, StatusSample};
-use neptunus::firmware::link::LinkState;
+use neptunus::firmware::codec::Command;
 use neptunus::vehicle::machine::{HmiEvent, Identity, Input, Now, Output, Sender, To, Vehicle};
 use neptunus::vehicle::params::ParamStore;
 
@@ -19,248 +21,19 @@ const C: Sender = Sender::new(1, 3, 245, 190);
 /// Not allowed.
 const STRANGER: Sender = Sender::new(0, 4, 77, 190);
 
-const NEUTRAL: [u16; 3] = [1500; 3];
-
-struct Rig {
-    v: Vehicle,
-    t: Duration,
-    /// Stations that send a GCS heartbeat every second while `run` ticks.
-    alive: Vec<Sender>,
-    volts: f64,
+/// Two endpoints; NEPT_GCS_ALLOW2 = 254 (so that B is allowed) and `params`
+/// on top of the defaults; started (board link up, ready to arm).
+fn rig_with(params: &[(&str, f64)]) -> CoreRig {
+    let mut p = ParamStore::defaults();
+    p.set("NEPT_GCS_ALLOW2", 254.0).unwrap();
+    for (n, v) in params {
+        p.set(n, *v).unwrap();
+    }
+    CoreRig::new(Vehicle::new(Identity::Ardupilot, p, 2)).started()
 }
 
-impl Rig {
-    fn with(params: &[(&str, f64)]) -> Self {
-        let mut p = ParamStore::defaults();
-        p.set("NEPT_GCS_ALLOW2", 254.0).unwrap();
-        for (n, v) in params {
-            p.set(n, *v).unwrap();
-        }
-        let mut r = Self {
-            v: Vehicle::new(Identity::Ardupilot, p, 2),
-            t: Duration::ZERO,
-            alive: Vec::new(),
-            volts: 12.0,
-        };
-        r.input(Input::Link {
-            state: LinkState::Up,
-            reason: None,
-        });
-        r.run(Duration::from_millis(1200));
-        r
-    }
-    fn new() -> Self {
-        Self::with(&[])
-    }
-    fn input(&mut self, i: Input) -> Vec<Output> {
-        let mut out = Vec::new();
-        let now = Now {
-            mono: self.t,
-            unix_us: 1_800_000_000_000_000 + self.t.as_micros() as u64,
-        };
-        self.v.handle(i, now, &mut out);
-        out
-    }
-    fn msg(&mut self, from: Sender, msg: MavMessage) -> Vec<Output> {
-        self.input(Input::Mavlink { from, msg })
-    }
-    /// Ticks at 100 Hz with board telemetry at 10 Hz / 1 Hz and heartbeats
-    /// from the stations in `alive` at 1 Hz.
-    fn run(&mut self, d: Duration) -> Vec<Output> {
-        let end = self.t + d;
-        let mut all = Vec::new();
-        while self.t < end {
-            self.t += Duration::from_millis(10);
-            let ms = self.t.as_millis();
-            if ms.is_multiple_of(100) {
-                all.extend(self.input(Input::Board(Event::Nav(NavSample {
-                    heading_deg: Some(10.0),
-                    depth_m: Some(1.0),
-                    pitch_deg: Some(0.0),
-                    roll_deg: Some(0.0),
-                    yaw_deg: Some(10.0),
-                    fthr_pct: Some(0.0),
-                }))));
-            }
-            if ms.is_multiple_of(1000) {
-                let v = self.volts;
-                all.extend(self.input(Input::Board(Event::Status(StatusSample {
-                    vout_v: Some(v),
-                    btti_a: Some(0.5),
-                    pres_mbar: Some(1113.0),
-                    ..Default::default()
-                }))));
-                for s in self.alive.clone() {
-                    all.extend(self.heartbeat(s));
-                }
-            }
-            all.extend(self.input(Input::Tick));
-        }
-        all
-    }
-    fn heartbeat(&mut self, from: Sender) -> Vec<Output> {
-        self.msg(from, gcs_heartbeat())
-    }
-    fn cmd(&mut self, from: Sender, command: MavCmd, p: [f32; 7]) -> Vec<Output> {
-        self.msg(
-            from,
-            MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                param1: p[0],
-                param2: p[1],
-                param3: p[2],
-                param4: p[3],
-                param5: p[4],
-                param6: p[5],
-                param7: p[6],
-                command,
-                target_system: 1,
-                target_component: 1,
-                confirmation: 0,
-            }),
-        )
-    }
-    fn arm(&mut self, from: Sender) -> Vec<Output> {
-        self.cmd(
-            from,
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        )
-    }
-    /// MAV_CMD_REQUEST_OPERATOR_CONTROL.
-    fn request(&mut self, from: Sender, action: f32, takeover: f32, timeout_s: f32) -> Vec<Output> {
-        self.cmd(
-            from,
-            MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL,
-            [
-                action,
-                takeover,
-                timeout_s,
-                f32::from(from.sysid),
-                0.0,
-                0.0,
-                0.0,
-            ],
-        )
-    }
-    fn stick(&mut self, from: Sender, x: i16) -> Vec<Output> {
-        self.msg(
-            from,
-            MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
-                x,
-                y: 0,
-                z: 500,
-                r: 0,
-                buttons: 0,
-                target: 1,
-                ..Default::default()
-            }),
-        )
-    }
-}
-
-fn gcs_heartbeat() -> MavMessage {
-    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_GCS,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    })
-}
-
-fn gos(out: &[Output]) -> Vec<[u16; 3]> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Board(Command::Go {
-                port_us,
-                vertical_us,
-                starboard_us,
-            }) => Some([*port_us, *vertical_us, *starboard_us]),
-            _ => None,
-        })
-        .collect()
-}
-
-/// STATUSTEXTs, long ones reassembled from their 50-byte chunks.
-fn texts(out: &[Output]) -> Vec<String> {
-    let mut all: Vec<(u16, String)> = Vec::new();
-    for o in out {
-        if let Output::Send {
-            msg: MavMessage::STATUSTEXT(s),
-            ..
-        } = o
-        {
-            let b: &[u8] = s.text.as_ref();
-            let part = String::from_utf8_lossy(b).trim_end_matches('\0').to_owned();
-            match all.last_mut() {
-                Some((id, text)) if s.id != 0 && *id == s.id && s.chunk_seq > 0 => {
-                    text.push_str(&part)
-                }
-                _ => all.push((s.id, part)),
-            }
-        }
-    }
-    all.into_iter().map(|(_, t)| t).collect()
-}
-
-fn has_text(out: &[Output], needle: &str) -> bool {
-    texts(out).iter().any(|t| t.contains(needle))
-}
-
-fn acks(out: &[Output]) -> Vec<(MavCmd, MavResult, To)> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Send {
-                to,
-                msg: MavMessage::COMMAND_ACK(a),
-            } => Some((a.command, a.result, *to)),
-            _ => None,
-        })
-        .collect()
-}
-
-fn ack_of(out: &[Output], cmd: MavCmd) -> MavResult {
-    acks(out)
-        .into_iter()
-        .find(|a| a.0 == cmd)
-        .map(|a| a.1)
-        .unwrap_or_else(|| panic!("no ACK for {cmd:?} in {out:?}"))
-}
-
-fn control_status(out: &[Output]) -> Vec<CONTROL_STATUS_DATA> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Send {
-                msg: MavMessage::CONTROL_STATUS(c),
-                ..
-            } => Some(c.clone()),
-            _ => None,
-        })
-        .collect()
-}
-
-fn events(out: &[Output]) -> Vec<(&'static str, Option<u8>)> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Log(e) => Some((e.kind, e.sysid)),
-            _ => None,
-        })
-        .collect()
-}
-
-fn has_event(out: &[Output], kind: &str, sysid: Option<u8>) -> bool {
-    events(out).iter().any(|e| e.0 == kind && e.1 == sysid)
-}
-
-fn heartbeat_of(out: &[Output]) -> Option<HEARTBEAT_DATA> {
-    out.iter().rev().find_map(|o| match o {
-        Output::Send {
-            msg: MavMessage::HEARTBEAT(h),
-            ..
-        } => Some(h.clone()),
-        _ => None,
-    })
+fn rig() -> CoreRig {
+    rig_with(&[])
 }
 
 /// Position of the first output matching `f`.
@@ -271,12 +44,12 @@ fn pos(out: &[Output], f: impl Fn(&Output) -> bool) -> usize {
 }
 
 /// A rig where `owner` has armed and is driving forward (x = 500).
-fn driving(owner: Sender) -> Rig {
+fn driving(owner: Sender) -> CoreRig {
     driving_with(owner, &[])
 }
 
-fn driving_with(owner: Sender, params: &[(&str, f64)]) -> Rig {
-    let mut r = Rig::with(params);
+fn driving_with(owner: Sender, params: &[(&str, f64)]) -> CoreRig {
+    let mut r = rig_with(params);
     r.alive.push(owner);
     r.heartbeat(owner);
     assert_eq!(
@@ -292,11 +65,11 @@ fn driving_with(owner: Sender, params: &[(&str, f64)]) -> Rig {
 
 #[test]
 fn the_first_allowed_station_to_arm_claims_and_control_status_says_so() {
-    let mut r = Rig::new();
+    let mut r = rig();
     assert_eq!(r.v.owner(), None);
     let out = r.arm(A);
     assert_eq!(r.v.owner(), Some(255));
-    let cs = control_status(&out);
+    let cs = msgs!(&out, CONTROL_STATUS);
     assert_eq!(
         cs.last().map(|c| c.gcs_main),
         Some(255),
@@ -324,13 +97,13 @@ fn the_first_allowed_station_to_arm_claims_and_control_status_says_so() {
             )
         })
         .collect();
-    let n = control_status(&out).len();
+    let n = msgs!(&out, CONTROL_STATUS).len();
     assert!((3..=4).contains(&n), "{n} CONTROL_STATUS in 3 s");
 }
 
 #[test]
 fn stick_input_claims_a_disarmed_vehicle_without_pick_up() {
-    let mut r = Rig::new();
+    let mut r = rig();
     r.stick(B, 500);
     assert_eq!(r.v.owner(), Some(254));
     assert!(
@@ -388,7 +161,7 @@ fn a_non_owner_cannot_move_a_thruster_or_change_state_but_may_watch() {
             [7.0, 1800.0, 0.0, 0.0, 0.0, 0.0, 0.0],
         ),
     ] {
-        let out = r.cmd(B, cmd, p);
+        let out = r.cmd(B, cmd, &p);
         assert_eq!(
             ack_of(&out, cmd),
             MavResult::MAV_RESULT_NOT_IN_CONTROL,
@@ -425,7 +198,7 @@ fn a_non_owner_cannot_move_a_thruster_or_change_state_but_may_watch() {
     let out = r.cmd(
         B,
         C::MAV_CMD_SET_MESSAGE_INTERVAL,
-        [30.0, 100_000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &[30.0, 100_000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(
         ack_of(&out, C::MAV_CMD_SET_MESSAGE_INTERVAL),
@@ -448,7 +221,7 @@ fn a_non_owner_cannot_move_a_thruster_or_change_state_but_may_watch() {
         }
     )));
     // Disarm is open to every station: stopping is never wrong.
-    let out = r.cmd(B, C::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
+    let out = r.cmd(B, C::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7]);
     assert_eq!(
         ack_of(&out, C::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_ACCEPTED
@@ -459,8 +232,8 @@ fn a_non_owner_cannot_move_a_thruster_or_change_state_but_may_watch() {
 
 #[test]
 fn a_station_not_allowed_is_denied_control_and_never_claims() {
-    let mut r = Rig::new();
-    let out = r.request(STRANGER, 1.0, 0.0, 10.0);
+    let mut r = rig();
+    let out = r.request_control(STRANGER, 1.0, 0.0, 10.0);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
         MavResult::MAV_RESULT_DENIED
@@ -477,7 +250,7 @@ fn a_station_not_allowed_is_denied_control_and_never_claims() {
 
 #[test]
 fn with_explicit_claim_only_a_request_gives_control() {
-    let mut r = Rig::with(&[("NEPT_CTRL_CLAIM", 1.0)]);
+    let mut r = rig_with(&[("NEPT_CTRL_CLAIM", 1.0)]);
     let out = r.arm(A);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
@@ -486,7 +259,7 @@ fn with_explicit_claim_only_a_request_gives_control() {
     assert!(has_text(&out, "request control first"));
     r.stick(A, 500);
     assert_eq!(r.v.owner(), None);
-    let out = r.request(A, 1.0, 0.0, 10.0);
+    let out = r.request_control(A, 1.0, 0.0, 10.0);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
         MavResult::MAV_RESULT_ACCEPTED
@@ -500,26 +273,26 @@ fn with_explicit_claim_only_a_request_gives_control() {
 
 #[test]
 fn takeover_allowed_grants_requests_at_once() {
-    let mut r = Rig::new();
-    let out = r.request(B, 1.0, 1.0, 10.0);
+    let mut r = rig();
+    let out = r.request_control(B, 1.0, 1.0, 10.0);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
         MavResult::MAV_RESULT_ACCEPTED
     );
-    let cs = control_status(&out);
+    let cs = msgs!(&out, CONTROL_STATUS);
     let last = cs.last().unwrap();
     assert_eq!(last.gcs_main, 254);
     assert!(
         last.flags
             .contains(GcsControlStatusFlags::GCS_CONTROL_STATUS_FLAGS_TAKEOVER_ALLOWED)
     );
-    let out = r.request(C, 1.0, 0.0, 10.0);
+    let out = r.request_control(C, 1.0, 0.0, 10.0);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert_eq!(r.v.owner(), Some(245));
-    let last = control_status(&out).pop().unwrap();
+    let last = msgs!(&out, CONTROL_STATUS).pop().unwrap();
     assert!(
         !last
             .flags
@@ -531,8 +304,9 @@ fn takeover_allowed_grants_requests_at_once() {
 fn a_request_is_forwarded_and_the_owners_release_hands_over_with_pick_up() {
     let mut r = driving(A);
     r.alive.push(B);
-    let out = r.request(B, 1.0, 0.0, 10.0);
-    let (_, result, to) = acks(&out)[0];
+    let out = r.request_control(B, 1.0, 0.0, 10.0);
+    let (to, ack) = sends!(&out, COMMAND_ACK).remove(0);
+    let result = ack.result;
     assert_eq!(result, MavResult::MAV_RESULT_FAILED);
     assert_eq!(to, To::Peer(0, 2), "the requester gets FAILED");
     let fwd = out
@@ -556,14 +330,14 @@ fn a_request_is_forwarded_and_the_owners_release_hands_over_with_pick_up() {
     assert_eq!(gos(&out), vec![[1300, 1500, 1700]]);
     assert_eq!(r.v.owner(), Some(255));
     // The owner says yes by releasing.
-    let out = r.request(A, 0.0, 0.0, 0.0);
+    let out = r.request_control(A, 0.0, 0.0, 0.0);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert_eq!(r.v.owner(), Some(254));
     assert_eq!(gos(&out).last(), Some(&NEUTRAL), "neutral at the transfer");
-    assert_eq!(control_status(&out).last().unwrap().gcs_main, 254);
+    assert_eq!(msgs!(&out, CONTROL_STATUS).last().unwrap().gcs_main, 254);
     assert!(has_event(&out, "control_released", Some(255)));
     assert!(has_event(&out, "control_granted", Some(254)));
     assert!(r.v.armed(), "armed state is kept");
@@ -585,8 +359,8 @@ fn a_request_is_forwarded_and_the_owners_release_hands_over_with_pick_up() {
 #[test]
 fn re_requesting_with_takeover_allowed_is_the_owners_yes() {
     let mut r = driving(A);
-    r.request(B, 1.0, 0.0, 10.0);
-    let out = r.request(A, 1.0, 1.0, 10.0);
+    r.request_control(B, 1.0, 0.0, 10.0);
+    let out = r.request_control(A, 1.0, 1.0, 10.0);
     assert_eq!(r.v.owner(), Some(254));
     assert_eq!(gos(&out).last(), Some(&NEUTRAL));
     assert!(r.v.pickup_pending());
@@ -595,7 +369,7 @@ fn re_requesting_with_takeover_allowed_is_the_owners_yes() {
 #[test]
 fn the_owners_refusal_leaves_control_where_it_was() {
     let mut r = driving(A);
-    r.request(B, 1.0, 0.0, 10.0);
+    r.request_control(B, 1.0, 0.0, 10.0);
     let out = r.msg(
         A,
         MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
@@ -611,14 +385,14 @@ fn the_owners_refusal_leaves_control_where_it_was() {
     assert_eq!(r.v.owner(), Some(255));
     assert!(gos(&out).is_empty(), "nothing stops");
     // A later release does not hand over to the refused request.
-    r.request(A, 0.0, 0.0, 0.0);
+    r.request_control(A, 0.0, 0.0, 0.0);
     assert_eq!(r.v.owner(), None);
 }
 
 #[test]
 fn an_acknowledgement_alone_is_not_an_answer_and_silence_times_out() {
     let mut r = driving(A);
-    r.request(B, 1.0, 0.0, 3.0);
+    r.request_control(B, 1.0, 0.0, 3.0);
     r.msg(
         A,
         MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
@@ -646,7 +420,7 @@ fn an_acknowledgement_alone_is_not_an_answer_and_silence_times_out() {
         "the owner drove on throughout"
     );
     // Releasing after the timeout no longer hands over.
-    r.request(A, 0.0, 0.0, 0.0);
+    r.request_control(A, 0.0, 0.0, 0.0);
     assert_eq!(r.v.owner(), None);
 }
 
@@ -654,22 +428,22 @@ fn an_acknowledgement_alone_is_not_an_answer_and_silence_times_out() {
 fn a_request_while_the_owner_is_mid_command_lets_the_command_finish_until_handover() {
     let mut r = driving(A);
     let test = [1.0, 1.0, 1700.0, 1.0, 0.0, 0.0, 0.0];
-    r.cmd(A, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
+    r.cmd(A, MavCmd::MAV_CMD_DO_MOTOR_TEST, &test);
     assert_eq!(r.v.motors_us(), [1500, 1500, 1700]);
-    r.request(B, 1.0, 0.0, 10.0);
-    let out = r.cmd(A, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
+    r.request_control(B, 1.0, 0.0, 10.0);
+    let out = r.cmd(A, MavCmd::MAV_CMD_DO_MOTOR_TEST, &test);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_DO_MOTOR_TEST),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert_eq!(r.v.motors_us(), [1500, 1500, 1700]);
-    let out = r.request(A, 0.0, 0.0, 0.0);
+    let out = r.request_control(A, 0.0, 0.0, 0.0);
     assert_eq!(
         gos(&out).last(),
         Some(&NEUTRAL),
         "the motor test ends at the transfer"
     );
-    let out = r.cmd(A, MavCmd::MAV_CMD_DO_MOTOR_TEST, test);
+    let out = r.cmd(A, MavCmd::MAV_CMD_DO_MOTOR_TEST, &test);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_DO_MOTOR_TEST),
         MavResult::MAV_RESULT_NOT_IN_CONTROL
@@ -680,21 +454,21 @@ fn a_request_while_the_owner_is_mid_command_lets_the_command_finish_until_handov
 #[test]
 fn two_requests_the_later_replaces_the_earlier() {
     let mut r = driving(A);
-    r.request(B, 1.0, 0.0, 10.0);
-    r.request(C, 1.0, 0.0, 10.0);
-    r.request(A, 0.0, 0.0, 0.0);
+    r.request_control(B, 1.0, 0.0, 10.0);
+    r.request_control(C, 1.0, 0.0, 10.0);
+    r.request_control(A, 0.0, 0.0, 0.0);
     assert_eq!(r.v.owner(), Some(245));
 }
 
 #[test]
 fn the_primary_takes_over_without_asking_after_warning_the_owner() {
-    let mut r = Rig::new();
+    let mut r = rig();
     r.alive.push(B);
-    r.request(B, 1.0, 0.0, 10.0);
+    r.request_control(B, 1.0, 0.0, 10.0);
     r.arm(B);
     r.stick(B, 500);
     assert_eq!(r.v.motors_us(), [1400, 1500, 1600]);
-    let out = r.request(A, 1.0, 0.0, 10.0);
+    let out = r.request_control(A, 1.0, 0.0, 10.0);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
         MavResult::MAV_RESULT_ACCEPTED
@@ -720,11 +494,11 @@ fn the_primary_takes_over_without_asking_after_warning_the_owner() {
 
 #[test]
 fn a_request_naming_another_station_is_denied() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let out = r.cmd(
         B,
         MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL,
-        [1.0, 0.0, 10.0, 255.0, 0.0, 0.0, 0.0],
+        &[1.0, 0.0, 10.0, 255.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL),
@@ -777,7 +551,7 @@ fn owner_lost_stops_disarms_and_only_its_own_heartbeats_count() {
     let out = r.run(Duration::from_millis(1100));
     assert_eq!(r.v.owner(), None);
     assert_eq!(
-        heartbeat_of(&out).unwrap().system_status,
+        msgs!(&out, HEARTBEAT).pop().unwrap().system_status,
         MavState::MAV_STATE_CRITICAL,
         "active until a station takes control"
     );
@@ -788,14 +562,14 @@ fn owner_lost_stops_disarms_and_only_its_own_heartbeats_count() {
     let out = r.run(Duration::from_millis(1100));
     assert!(has_text(&out, "Failsafe cleared"));
     assert_eq!(
-        heartbeat_of(&out).unwrap().system_status,
+        msgs!(&out, HEARTBEAT).pop().unwrap().system_status,
         MavState::MAV_STATE_STANDBY
     );
 }
 
 #[test]
 fn gcs_failsafe_warn_only_keeps_the_vehicle_armed_with_thrusters_neutral() {
-    let mut r = Rig::with(&[("FS_GCS_ENABLE", 1.0), ("FS_PILOT_INPUT", 0.0)]);
+    let mut r = rig_with(&[("FS_GCS_ENABLE", 1.0), ("FS_PILOT_INPUT", 0.0)]);
     r.alive.push(A);
     r.arm(A);
     r.stick(A, 500);
@@ -824,7 +598,7 @@ fn gcs_failsafe_warn_only_keeps_the_vehicle_armed_with_thrusters_neutral() {
 fn owner_lost_during_a_request_failsafe_first_then_the_requester_gets_control() {
     let mut r = driving_with(A, &[("FS_PILOT_INPUT", 0.0)]);
     r.alive.push(B);
-    r.request(B, 1.0, 0.0, 60.0);
+    r.request_control(B, 1.0, 0.0, 60.0);
     r.alive.retain(|s| *s != A);
     let out = r.run(Duration::from_secs(7));
     assert_eq!(r.v.owner(), Some(254));
@@ -876,7 +650,7 @@ fn pilot_input_lost_goes_neutral_first_then_disarms() {
 
 #[test]
 fn pilot_input_failsafe_warn_keeps_armed_and_timer_starts_at_arming() {
-    let mut r = Rig::with(&[("FS_PILOT_INPUT", 1.0)]);
+    let mut r = rig_with(&[("FS_PILOT_INPUT", 1.0)]);
     r.alive.push(A);
     r.arm(A);
     let out = r.run(Duration::from_millis(2900));
@@ -885,7 +659,8 @@ fn pilot_input_failsafe_warn_keeps_armed_and_timer_starts_at_arming() {
     assert!(has_text(&out, "Failsafe: lost manual control"));
     assert!(r.v.armed());
     assert_eq!(
-        heartbeat_of(&r.run(Duration::from_secs(1)))
+        msgs!(&r.run(Duration::from_secs(1)), HEARTBEAT)
+            .pop()
             .unwrap()
             .system_status,
         MavState::MAV_STATE_CRITICAL
@@ -895,10 +670,7 @@ fn pilot_input_failsafe_warn_keeps_armed_and_timer_starts_at_arming() {
 #[test]
 fn board_link_lost_disarms_at_once_and_refuses_arming_until_back() {
     let mut r = driving(A);
-    let out = r.input(Input::Link {
-        state: LinkState::Down,
-        reason: Some("telemetry stale".into()),
-    });
+    let out = r.link_down("telemetry stale");
     assert!(!r.v.armed());
     assert!(has_text(
         &out,
@@ -911,10 +683,7 @@ fn board_link_lost_disarms_at_once_and_refuses_arming_until_back() {
         ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_FAILED
     );
-    let out = r.input(Input::Link {
-        state: LinkState::Up,
-        reason: None,
-    });
+    let out = r.link_up();
     assert!(has_text(&out, "Failsafe cleared: board link lost"));
     r.run(Duration::from_millis(1200));
     assert_eq!(
@@ -925,10 +694,10 @@ fn board_link_lost_disarms_at_once_and_refuses_arming_until_back() {
 
 #[test]
 fn battery_low_acts_after_ten_seconds_and_clears_after_ten_above() {
-    let mut r = Rig::with(&[("BATT_FS_LOW_ACT", 2.0), ("FS_PILOT_INPUT", 0.0)]);
+    let mut r = rig_with(&[("BATT_FS_LOW_ACT", 2.0), ("FS_PILOT_INPUT", 0.0)]);
     r.alive.push(A);
     r.arm(A);
-    r.volts = 10.2;
+    r.feed.status.vout_v = Some(10.2);
     let out = r.run(Duration::from_secs(9));
     assert!(
         r.v.armed() && !has_text(&out, "Failsafe"),
@@ -938,7 +707,7 @@ fn battery_low_acts_after_ten_seconds_and_clears_after_ten_above() {
     let out = r.run(Duration::from_secs(2));
     assert!(!r.v.armed());
     assert!(has_text(&out, "Failsafe: battery low 10.2 V"));
-    r.volts = 12.0;
+    r.feed.status.vout_v = Some(12.0);
     let out = r.run(Duration::from_secs(9));
     assert!(!has_text(&out, "Failsafe cleared"));
     let out = r.run(Duration::from_secs(2));
@@ -947,7 +716,7 @@ fn battery_low_acts_after_ten_seconds_and_clears_after_ten_above() {
 
 #[test]
 fn depth_hold_action_holds_depth_and_keeps_the_dead_man_fed() {
-    let mut r = Rig::with(&[("FS_GCS_ENABLE", 3.0), ("FS_PILOT_INPUT", 0.0)]);
+    let mut r = rig_with(&[("FS_GCS_ENABLE", 3.0), ("FS_PILOT_INPUT", 0.0)]);
     r.arm(A);
     // No heartbeats, but stick input is a sign of life too.
     for _ in 0..60 {
@@ -970,17 +739,14 @@ fn depth_hold_action_holds_depth_and_keeps_the_dead_man_fed() {
 
 #[test]
 fn depth_hold_action_disarms_when_depth_hold_is_impossible() {
-    let mut r = Rig::with(&[("FS_GCS_ENABLE", 3.0), ("FS_PILOT_INPUT", 0.0)]);
+    let mut r = rig_with(&[("FS_GCS_ENABLE", 3.0), ("FS_PILOT_INPUT", 0.0)]);
     r.arm(A);
     for _ in 0..60 {
         r.stick(A, 0);
         r.run(Duration::from_millis(100));
     }
     // The board link goes down: no depth hold without it.
-    r.input(Input::Link {
-        state: LinkState::Down,
-        reason: Some("test".into()),
-    });
+    r.link_down("test");
     assert!(!r.v.armed(), "the board-link failsafe disarms at once");
 }
 
@@ -992,7 +758,7 @@ fn healthy(out: &[Output]) -> usize {
 
 #[test]
 fn the_dead_man_is_fed_by_the_owners_life_while_armed() {
-    let mut r = Rig::with(&[("FS_PILOT_INPUT", 0.0)]);
+    let mut r = rig_with(&[("FS_PILOT_INPUT", 0.0)]);
     assert_eq!(
         healthy(&r.run(Duration::from_secs(1))),
         100,
@@ -1051,7 +817,7 @@ fn hmi_focus_loss_of_the_owner_stops_and_needs_pick_up() {
 
 #[test]
 fn with_signing_on_unsigned_control_is_refused_and_unsigned_heartbeats_are_no_life() {
-    let mut r = Rig::new();
+    let mut r = rig();
     r.v.set_signing_active(true);
     let signed = Sender { signed: true, ..A };
     let out = r.arm(A);
@@ -1067,7 +833,7 @@ fn with_signing_on_unsigned_control_is_refused_and_unsigned_heartbeats_are_no_li
         ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_ACCEPTED
     );
-    r.msg(signed, MANUAL(500));
+    r.stick(signed, 500);
     assert_eq!(r.v.motors_us(), [1400, 1500, 1600]);
     // Unsigned frames claiming to be A: no effect, and no life.
     let mut out = Vec::new();
@@ -1082,27 +848,17 @@ fn with_signing_on_unsigned_control_is_refused_and_unsigned_heartbeats_are_no_li
     let out = r.cmd(
         B,
         MavCmd::MAV_CMD_REQUEST_MESSAGE,
-        [148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &[148.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_REQUEST_MESSAGE),
         MavResult::MAV_RESULT_ACCEPTED
     );
-    let out = r.cmd(A, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
+    let out = r.cmd(A, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7]);
     assert_eq!(
         ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_DENIED
     );
-}
-
-#[allow(non_snake_case)]
-fn MANUAL(x: i16) -> MavMessage {
-    MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
-        x,
-        z: 500,
-        target: 1,
-        ..Default::default()
-    })
 }
 
 fn setup_signing(key: [u8; 32]) -> MavMessage {
@@ -1128,7 +884,7 @@ fn key_outputs(out: &[Output]) -> Vec<([u8; 32], u64)> {
 
 #[test]
 fn setup_signing_only_over_a_trusted_endpoint_and_then_only_signed() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let out = r.msg(A, setup_signing([7; 32]));
     assert!(key_outputs(&out).is_empty());
     assert!(has_text(&out, "not trusted"));
@@ -1161,7 +917,7 @@ fn setup_signing_only_over_a_trusted_endpoint_and_then_only_signed() {
 
 #[test]
 fn autopilot_version_announces_gcs_control() {
-    let r = Rig::new();
+    let r = rig();
     let msgs = r.v.build(148, Now::default());
     let MavMessage::AUTOPILOT_VERSION(v) = &msgs[0] else {
         panic!()
@@ -1285,7 +1041,7 @@ mod properties {
         #![proptest_config(ProptestConfig::with_cases(256))]
         #[test]
         fn thrusters_move_only_for_the_owner_after_pick_up_while_armed(acts in prop::collection::vec(act(), 1..80)) {
-            let mut r = Rig::new();
+            let mut r = rig();
             let mut m = Model::default();
             for a in acts {
                 let armed_before = r.v.armed();
@@ -1301,14 +1057,14 @@ mod properties {
                         (out, Some((STATIONS[i].sysid, v == 0.0, false)))
                     }
                     Act::MotorTest(i, pwm) => {
-                        let out = r.cmd(STATIONS[i], MavCmd::MAV_CMD_DO_MOTOR_TEST, [1.0, 1.0, pwm, 1.0, 0.0, 0.0, 0.0]);
+                        let out = r.cmd(STATIONS[i], MavCmd::MAV_CMD_DO_MOTOR_TEST, &[1.0, 1.0, pwm, 1.0, 0.0, 0.0, 0.0]);
                         (out, Some((STATIONS[i].sysid, false, true)))
                     }
                     Act::Arm(i) => (r.arm(STATIONS[i]), None),
-                    Act::Disarm(i) => (r.cmd(STATIONS[i], MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]), None),
-                    Act::Mode(i, mode) => (r.cmd(STATIONS[i], MavCmd::MAV_CMD_DO_SET_MODE, [1.0, mode as f32, 0.0, 0.0, 0.0, 0.0, 0.0]), None),
-                    Act::Request(i, t, d) => (r.request(STATIONS[i], 1.0, if t { 1.0 } else { 0.0 }, d), None),
-                    Act::Release(i) => (r.request(STATIONS[i], 0.0, 0.0, 0.0), None),
+                    Act::Disarm(i) => (r.cmd(STATIONS[i], MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7]), None),
+                    Act::Mode(i, mode) => (r.cmd(STATIONS[i], MavCmd::MAV_CMD_DO_SET_MODE, &[1.0, mode as f32, 0.0, 0.0, 0.0, 0.0, 0.0]), None),
+                    Act::Request(i, t, d) => (r.request_control(STATIONS[i], 1.0, if t { 1.0 } else { 0.0 }, d), None),
+                    Act::Release(i) => (r.request_control(STATIONS[i], 0.0, 0.0, 0.0), None),
                     Act::Deny(i) => (r.msg(STATIONS[i], MavMessage::COMMAND_ACK(COMMAND_ACK_DATA {
                         command: MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL,
                         result: MavResult::MAV_RESULT_DENIED,

@@ -3,8 +3,11 @@
 //! the simulator's fixed seeds; and the modes, setpoints and run mode seen
 //! from a ground station.
 
+mod common;
+
 use std::time::Duration;
 
+use common::core_rig::{CoreRig, acks};
 use neptunus::dialect::neptunus::*;
 use neptunus::firmware::codec::Command;
 use neptunus::scenario::report;
@@ -171,54 +174,28 @@ fn position_modes_are_refused_with_the_reason() {
 const GCS: Sender = Sender::new(0, 1, 255, 190);
 const STRANGER: Sender = Sender::new(0, 2, 77, 190);
 
-fn now(ms: u64) -> Now {
-    Now {
-        mono: Duration::from_millis(ms),
-        unix_us: 1_800_000_000_000_000 + ms * 1000,
-    }
-}
-
+/// COMMAND_LONG with param1 and param2 from `from` at `ms` on the rig's
+/// clock: the result of its ACK, and everything the core emitted.
 fn command(
-    v: &mut Vehicle,
+    r: &mut CoreRig,
     from: Sender,
     cmd: MavCmd,
     p1: f32,
     p2: f32,
-    t: u64,
+    ms: u64,
 ) -> (Option<MavResult>, Vec<Output>) {
-    let mut out = Vec::new();
-    v.handle(
-        Input::Mavlink {
-            from,
-            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                target_system: 1,
-                target_component: 1,
-                command: cmd,
-                confirmation: 0,
-                param1: p1,
-                param2: p2,
-                param3: 0.0,
-                param4: 0.0,
-                param5: 0.0,
-                param6: 0.0,
-                param7: 0.0,
-            }),
-        },
-        now(t),
-        &mut out,
-    );
-    let result = out.iter().find_map(|o| match o {
-        Output::Send {
-            msg: MavMessage::COMMAND_ACK(a),
-            ..
-        } if a.command == cmd => Some(a.result),
-        _ => None,
-    });
+    r.t = Duration::from_millis(ms);
+    let out = r.cmd(from, cmd, &[p1, p2]);
+    let result = acks(&out)
+        .into_iter()
+        .find(|a| a.command == cmd)
+        .map(|a| a.result);
     (result, out)
 }
 
-/// A vehicle fed with board telemetry, armed by the GCS, in `mode`.
-fn armed_vehicle(mode: u32) -> Vehicle {
+/// A vehicle fed with board telemetry, armed by the GCS, in `mode`, on a
+/// core rig from here on (the tests place each input in time).
+fn armed_vehicle(mode: u32) -> CoreRig {
     let mut s = Scenario::new(report::options(21));
     s.place(1.0, 0.0);
     s.run(secs(3));
@@ -237,14 +214,14 @@ fn armed_vehicle(mode: u32) -> Vehicle {
         "driving before the switch"
     );
     // The scenario's vehicle, moved out for the core-level assertions.
-    s.into_vehicle()
+    CoreRig::new(s.into_vehicle())
 }
 
 #[test]
 fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
-    let mut v = armed_vehicle(MODE_MANUAL);
+    let mut r = armed_vehicle(MODE_MANUAL);
     let (result, out) = command(
-        &mut v,
+        &mut r,
         GCS,
         MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
         1.0,
@@ -272,18 +249,20 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
         |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
         if String::from_utf8_lossy(t.text.as_ref()).contains("simulated"))
     ));
-    assert_eq!(v.motors_us(), [1500; 3]);
-    assert_eq!(v.run_mode(), RunMode::Simulator);
+    assert_eq!(r.v.motors_us(), [1500; 3]);
+    assert_eq!(r.v.run_mode(), RunMode::Simulator);
     // HEARTBEAT says HIL (simulated) from now on.
-    let hb = v.build(0, now(3700));
+    r.t = Duration::from_millis(3700);
+    let hb = r.v.build(0, r.now());
     let MavMessage::HEARTBEAT(h) = &hb[0] else {
         panic!()
     };
     assert!(h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED));
     // Thruster commands now go to the simulator, never to the real board.
     let mut out = Vec::new();
-    for t in (3700..4500).step_by(10) {
-        v.handle(Input::Tick, now(t), &mut out);
+    for ms in (3700..4500).step_by(10) {
+        r.t = Duration::from_millis(ms);
+        out.extend(r.input(Input::Tick));
     }
     assert!(
         !out.iter().any(|o| matches!(o, Output::Board(Command::Go { .. }) if *o != Output::Board(Command::Go { port_us: 1500, vertical_us: 1500, starboard_us: 1500 }))),
@@ -291,7 +270,7 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
     );
     // And back: another stop, flag cleared.
     let (result, out) = command(
-        &mut v,
+        &mut r,
         GCS,
         MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
         0.0,
@@ -306,7 +285,8 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
             ..
         }
     )));
-    let hb = v.build(0, now(4700));
+    r.t = Duration::from_millis(4700);
+    let hb = r.v.build(0, r.now());
     let MavMessage::HEARTBEAT(h) = &hb[0] else {
         panic!()
     };
@@ -315,9 +295,9 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
 
 #[test]
 fn only_the_owner_switches_run_mode_or_sets_targets() {
-    let mut v = armed_vehicle(MODE_ALT_HOLD);
+    let mut r = armed_vehicle(MODE_ALT_HOLD);
     let (result, _) = command(
-        &mut v,
+        &mut r,
         STRANGER,
         MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
         1.0,
@@ -325,9 +305,9 @@ fn only_the_owner_switches_run_mode_or_sets_targets() {
         3600,
     );
     assert_eq!(result, Some(MavResult::MAV_RESULT_NOT_IN_CONTROL));
-    assert_eq!(v.run_mode(), RunMode::Normal);
+    assert_eq!(r.v.run_mode(), RunMode::Normal);
     let (result, _) = command(
-        &mut v,
+        &mut r,
         STRANGER,
         MavCmd::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET,
         3.0,
@@ -335,9 +315,9 @@ fn only_the_owner_switches_run_mode_or_sets_targets() {
         3610,
     );
     assert_eq!(result, Some(MavResult::MAV_RESULT_NOT_IN_CONTROL));
-    assert_ne!(v.targets().0, Some(3.0));
+    assert_ne!(r.v.targets().0, Some(3.0));
     let (result, _) = command(
-        &mut v,
+        &mut r,
         GCS,
         MavCmd::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET,
         3.0,
@@ -345,11 +325,11 @@ fn only_the_owner_switches_run_mode_or_sets_targets() {
         3620,
     );
     assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
-    assert_eq!(v.targets().0, Some(3.0));
-    assert!((v.targets().1.expect("heading held") - 120.0).abs() < 1e-6);
+    assert_eq!(r.v.targets().0, Some(3.0));
+    assert!((r.v.targets().1.expect("heading held") - 120.0).abs() < 1e-6);
     // Out of range: denied, nothing changes.
     let (result, _) = command(
-        &mut v,
+        &mut r,
         GCS,
         MavCmd::MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET,
         -5.0,
@@ -357,19 +337,19 @@ fn only_the_owner_switches_run_mode_or_sets_targets() {
         3630,
     );
     assert_eq!(result, Some(MavResult::MAV_RESULT_DENIED));
-    assert_eq!(v.targets().0, Some(3.0));
+    assert_eq!(r.v.targets().0, Some(3.0));
 }
 
 #[test]
 fn hold_modes_need_fresh_estimates() {
-    let mut v = Vehicle::new(
+    let mut r = CoreRig::new(Vehicle::new(
         neptunus::vehicle::machine::Identity::Ardupilot,
         neptunus::vehicle::params::ParamStore::default(),
         1,
-    );
+    ));
     for mode in [MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE] {
         let (result, out) = command(
-            &mut v,
+            &mut r,
             GCS,
             MavCmd::MAV_CMD_DO_SET_MODE,
             1.0,

@@ -1,143 +1,37 @@
 //! Driving through the vehicle core with synthetic time: stick to `go()`.
 #![allow(clippy::unwrap_used, clippy::expect_used, deprecated)]
 
+mod common;
+
 use std::time::Duration;
 
+use common::core_rig::{CoreRig, acks, gos, statustexts};
 use neptunus::dialect::neptunus::*;
-use neptunus::firmware::codec::{Command, Event, NavSample, StatusSample};
-use neptunus::firmware::link::LinkState;
-use neptunus::vehicle::machine::{Identity, Input, Now, Output, Sender, Vehicle};
+use neptunus::firmware::codec::Command;
+use neptunus::vehicle::machine::{Identity, Input, Output, Sender, Vehicle};
 use neptunus::vehicle::params::ParamStore;
 
 const GCS: Sender = Sender::new(0, 1, 255, 190);
 const STRANGER: Sender = Sender::new(0, 2, 77, 190);
 
-struct Rig {
-    v: Vehicle,
-    t: Duration,
+/// Board link up and telemetry flowing for 1.2 s: ready to arm. One endpoint.
+fn rig() -> CoreRig {
+    CoreRig::new(Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 1))
+        .unix_epoch(0)
+        .started()
 }
 
-impl Rig {
-    fn new() -> Self {
-        let mut r = Self {
-            v: Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 1),
-            t: Duration::ZERO,
-        };
-        r.input(Input::Link {
-            state: LinkState::Up,
-            reason: None,
-        });
-        r.run(Duration::from_millis(1200));
-        r
-    }
-    fn input(&mut self, i: Input) -> Vec<Output> {
-        let mut out = Vec::new();
-        let now = Now {
-            mono: self.t,
-            unix_us: 0,
-        };
-        self.v.handle(i, now, &mut out);
-        out
-    }
-    /// Ticks at 100 Hz with board telemetry at 10 Hz / 1 Hz.
-    fn run(&mut self, d: Duration) -> Vec<Output> {
-        let end = self.t + d;
-        let mut all = Vec::new();
-        while self.t < end {
-            self.t += Duration::from_millis(10);
-            if self.t.as_millis().is_multiple_of(100) {
-                all.extend(self.input(Input::Board(Event::Nav(NavSample {
-                    heading_deg: Some(10.0),
-                    depth_m: Some(1.0),
-                    pitch_deg: Some(0.0),
-                    roll_deg: Some(0.0),
-                    yaw_deg: Some(10.0),
-                    fthr_pct: Some(0.0),
-                }))));
-            }
-            if self.t.as_millis().is_multiple_of(1000) {
-                all.extend(self.input(Input::Board(Event::Status(StatusSample {
-                    vout_v: Some(12.0),
-                    btti_a: Some(0.5),
-                    pres_mbar: Some(1113.0),
-                    ..Default::default()
-                }))));
-            }
-            all.extend(self.input(Input::Tick));
-        }
-        all
-    }
-    fn arm(&mut self) {
-        let out = self.cmd(
-            MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-            [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        );
-        assert!(self.v.armed(), "{out:?}");
-    }
-    fn cmd(&mut self, command: MavCmd, p: [f32; 7]) -> Vec<Output> {
-        self.input(Input::Mavlink {
-            from: GCS,
-            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                param1: p[0],
-                param2: p[1],
-                param3: p[2],
-                param4: p[3],
-                command,
-                target_system: 1,
-                target_component: 1,
-                ..Default::default()
-            }),
-        })
-    }
-    fn stick(&mut self, from: Sender, x: i16, z: i16, r: i16, buttons: u16) -> Vec<Output> {
-        self.input(Input::Mavlink {
-            from,
-            msg: MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
-                x,
-                y: 0,
-                z,
-                r,
-                buttons,
-                target: 1,
-                ..Default::default()
-            }),
-        })
-    }
-}
-
-fn gos(out: &[Output]) -> Vec<[u16; 3]> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Board(Command::Go {
-                port_us,
-                vertical_us,
-                starboard_us,
-            }) => Some([*port_us, *vertical_us, *starboard_us]),
-            _ => None,
-        })
-        .collect()
-}
-
-fn texts(out: &[Output]) -> Vec<String> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Send {
-                msg: MavMessage::STATUSTEXT(s),
-                ..
-            } => {
-                let b: &[u8] = s.text.as_ref();
-                Some(String::from_utf8_lossy(b).trim_end_matches('\0').to_owned())
-            }
-            _ => None,
-        })
-        .collect()
+/// Arms from the GCS, and checks it did.
+fn arm(r: &mut CoreRig) {
+    let out = r.arm(GCS);
+    assert!(r.v.armed(), "{out:?}");
 }
 
 #[test]
 fn ardusub_worked_example_half_stick_at_half_gain_is_a_quarter_thrust() {
-    let mut r = Rig::new();
-    r.arm();
-    let out = r.stick(GCS, 500, 500, 0, 0);
+    let mut r = rig();
+    arm(&mut r);
+    let out = r.manual(GCS, 500, 500, 0, 0);
     // Port wired reversed (MOT_2_DIRECTION = -1): 1500 − 0.25·400; starboard 1500 + 0.25·400.
     assert_eq!(gos(&out), vec![[1400, 1500, 1600]]);
     assert_eq!(r.v.motors_us(), [1400, 1500, 1600]);
@@ -145,47 +39,47 @@ fn ardusub_worked_example_half_stick_at_half_gain_is_a_quarter_thrust() {
 
 #[test]
 fn yaw_to_starboard_drives_port_forward_and_starboard_back() {
-    let mut r = Rig::new();
-    r.arm();
-    let out = r.stick(GCS, 0, 500, 1000, 0);
+    let mut r = rig();
+    arm(&mut r);
+    let out = r.manual(GCS, 0, 500, 1000, 0);
     // u_port = k·M = 0.5 → reversed wiring → 1300; u_star = −0.5 → 1300.
     assert_eq!(gos(&out), vec![[1300, 1500, 1300]]);
-    let out = r.stick(GCS, 0, 0, 0, 0);
+    let out = r.manual(GCS, 0, 0, 0, 0);
     // z = 0 is full down in the 0..1000 convention: heave +1 (down) · gain 0.5.
     assert_eq!(gos(&out), vec![[1500, 1700, 1500]]);
 }
 
 #[test]
 fn disarmed_input_never_moves_a_thruster() {
-    let mut r = Rig::new();
-    let mut out = r.stick(GCS, 1000, 1000, -1000, 0);
+    let mut r = rig();
+    let mut out = r.manual(GCS, 1000, 1000, -1000, 0);
     out.extend(r.run(Duration::from_millis(200)));
     assert!(gos(&out).iter().all(|g| *g == [1500; 3]), "{:?}", gos(&out));
 }
 
 #[test]
 fn a_station_not_allowed_cannot_drive_and_is_reported_once() {
-    let mut r = Rig::new();
-    r.arm();
+    let mut r = rig();
+    arm(&mut r);
     let mut out = Vec::new();
     for _ in 0..50 {
-        out.extend(r.stick(STRANGER, 1000, 500, 0, 0));
+        out.extend(r.manual(STRANGER, 1000, 500, 0, 0));
         out.extend(r.run(Duration::from_millis(40)));
     }
     assert!(gos(&out).iter().all(|g| *g == [1500; 3]));
     assert_eq!(r.v.refused_inputs(), 50);
-    let reports = texts(&out)
+    let reports = statustexts(&out)
         .iter()
         .filter(|t| t.contains("sysid 77"))
         .count();
-    assert_eq!(reports, 1, "rate-limited: {:?}", texts(&out));
+    assert_eq!(reports, 1, "rate-limited: {:?}", statustexts(&out));
 }
 
 #[test]
 fn lost_pilot_input_goes_neutral_after_fs_pilot_timeout() {
-    let mut r = Rig::new();
-    r.arm();
-    r.stick(GCS, 1000, 500, 0, 0);
+    let mut r = rig();
+    arm(&mut r);
+    r.manual(GCS, 1000, 500, 0, 0);
     assert_ne!(r.v.motors_us(), [1500; 3]);
     r.run(Duration::from_millis(2900));
     assert_ne!(
@@ -200,65 +94,66 @@ fn lost_pilot_input_goes_neutral_after_fs_pilot_timeout() {
 
 #[test]
 fn disarm_is_neutral_within_one_command_cycle() {
-    let mut r = Rig::new();
-    r.arm();
-    r.stick(GCS, 1000, 500, 0, 0);
-    let out = r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
+    let mut r = rig();
+    arm(&mut r);
+    r.manual(GCS, 1000, 500, 0, 0);
+    let out = r.cmd(GCS, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7]);
     assert_eq!(gos(&out).last(), Some(&[1500; 3]));
-    let out = r.stick(GCS, 1000, 500, 0, 0);
+    let out = r.manual(GCS, 1000, 500, 0, 0);
     assert!(gos(&out).iter().all(|g| *g == [1500; 3]));
 }
 
 #[test]
 fn mode_change_is_a_safety_stop() {
-    let mut r = Rig::new();
-    r.arm();
-    r.stick(GCS, 1000, 500, 0, 0);
+    let mut r = rig();
+    arm(&mut r);
+    r.manual(GCS, 1000, 500, 0, 0);
     let out = r.cmd(
+        GCS,
         MavCmd::MAV_CMD_DO_SET_MODE,
-        [1.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &[1.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(gos(&out).last(), Some(&[1500; 3]));
 }
 
 #[test]
 fn buttons_act_on_the_press_edge_only() {
-    let mut r = Rig::new();
+    let mut r = rig();
     // Default map: button 6 = arm, 4 = disarm, 11 = gain_inc.
-    r.stick(GCS, 0, 500, 0, 1 << 6);
+    r.manual(GCS, 0, 500, 0, 1 << 6);
     assert!(r.v.armed());
-    let out = r.stick(GCS, 0, 500, 0, 1 << 11);
+    let out = r.manual(GCS, 0, 500, 0, 1 << 11);
     assert!(
-        texts(&out).contains(&"#Gain is 75%".to_owned()),
+        statustexts(&out).contains(&"#Gain is 75%".to_owned()),
         "{:?}",
-        texts(&out)
+        statustexts(&out)
     );
     // Held: no repeat.
-    let out = r.stick(GCS, 0, 500, 0, 1 << 11);
-    assert!(texts(&out).is_empty());
-    r.stick(GCS, 0, 500, 0, 0);
-    let out = r.stick(GCS, 500, 500, 0, 0);
+    let out = r.manual(GCS, 0, 500, 0, 1 << 11);
+    assert!(statustexts(&out).is_empty());
+    r.manual(GCS, 0, 500, 0, 0);
+    let out = r.manual(GCS, 500, 500, 0, 0);
     // Gain 0.75 now: 0.5 · 0.75 · 400 = 150.
     assert_eq!(gos(&out), vec![[1350, 1500, 1650]]);
-    r.stick(GCS, 0, 500, 0, 1 << 4);
+    r.manual(GCS, 0, 500, 0, 1 << 4);
     assert!(!r.v.armed());
 }
 
 #[test]
 fn lights_buttons_step_the_board_lights() {
-    let mut r = Rig::new();
+    let mut r = rig();
     // 14 = lights1_brighter, 13 = dimmer; JS_LIGHTS_STEPS 8 over 0..255.
-    let out = r.stick(GCS, 0, 500, 0, 1 << 14);
+    let out = r.manual(GCS, 0, 500, 0, 1 << 14);
     assert!(out.contains(&Output::Board(Command::Lights(31))), "{out:?}");
-    r.stick(GCS, 0, 500, 0, 0);
-    let out = r.stick(GCS, 0, 500, 0, 1 << 13);
+    r.manual(GCS, 0, 500, 0, 0);
+    let out = r.manual(GCS, 0, 500, 0, 1 << 13);
     assert!(out.contains(&Output::Board(Command::Lights(0))));
 }
 
 #[test]
 fn rc_override_forward_drives_and_release_stops() {
-    let mut r = Rig::new();
-    r.arm();
+    let mut r = rig();
+    arm(&mut r);
     let mut ch = RC_CHANNELS_OVERRIDE_DATA {
         target_system: 1,
         target_component: 1,
@@ -292,8 +187,8 @@ fn rc_override_forward_drives_and_release_stops() {
 
 #[test]
 fn per_thruster_message_spins_only_the_named_thruster_in_its_mode() {
-    let mut r = Rig::new();
-    r.arm();
+    let mut r = rig();
+    arm(&mut r);
     let msg = MavMessage::NEPTUNUS_THRUSTERS(NEPTUNUS_THRUSTERS_DATA {
         port: 1.0,
         vertical: f32::NAN,
@@ -310,8 +205,9 @@ fn per_thruster_message_spins_only_the_named_thruster_in_its_mode() {
         "ignored outside MANUAL_THRUSTERS"
     );
     r.cmd(
+        GCS,
         MavCmd::MAV_CMD_DO_SET_MODE,
-        [1.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &[1.0, 100.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
     let out = r.input(Input::Mavlink { from: GCS, msg });
     // Port full forward at gain 0.5, reversed wiring: 1500 − 0.5·400.
@@ -320,17 +216,19 @@ fn per_thruster_message_spins_only_the_named_thruster_in_its_mode() {
 
 #[test]
 fn motor_test_needs_arming_and_stops_without_repeats() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let out = r.cmd(
+        GCS,
         MavCmd::MAV_CMD_DO_MOTOR_TEST,
-        [1.0, 1.0, 1600.0, 2.0, 0.0, 0.0, 0.0],
+        &[1.0, 1.0, 1600.0, 2.0, 0.0, 0.0, 0.0],
     );
-    assert!(texts(&out).iter().any(|t| t.contains("arm")));
+    assert!(statustexts(&out).iter().any(|t| t.contains("arm")));
     assert!(gos(&out).iter().all(|g| *g == [1500; 3]), "{:?}", gos(&out));
-    r.arm();
+    arm(&mut r);
     let out = r.cmd(
+        GCS,
         MavCmd::MAV_CMD_DO_MOTOR_TEST,
-        [1.0, 1.0, 1600.0, 2.0, 0.0, 0.0, 0.0],
+        &[1.0, 1.0, 1600.0, 2.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(
         gos(&out),
@@ -349,18 +247,18 @@ fn motor_test_needs_arming_and_stops_without_repeats() {
 
 #[test]
 fn input_hold_latches_and_disarm_clears_it() {
-    let mut r = Rig::new();
-    r.arm();
-    r.stick(GCS, 500, 500, 0, 1 << 8);
-    r.stick(GCS, 0, 500, 0, 0);
+    let mut r = rig();
+    arm(&mut r);
+    r.manual(GCS, 500, 500, 0, 1 << 8);
+    r.manual(GCS, 0, 500, 0, 0);
     assert_eq!(
         r.v.motors_us(),
         [1400, 1500, 1600],
         "held forward with the stick released"
     );
-    r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
-    r.arm();
-    r.stick(GCS, 0, 500, 0, 0);
+    r.cmd(GCS, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7]);
+    arm(&mut r);
+    r.manual(GCS, 0, 500, 0, 0);
     assert_eq!(r.v.motors_us(), [1500; 3]);
 }
 
@@ -404,12 +302,12 @@ mod properties {
         fn rc_override_values_stay_in_range(
             steps in prop::collection::vec((prop::array::uniform10(channel()), any::<bool>(), 0u64..300), 1..40)
         ) {
-            let mut r = Rig::new();
+            let mut r = rig();
             for (ch, arm, wait_ms) in steps {
                 let mut out = if arm {
-                    r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+                    r.cmd(GCS, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
                 } else {
-                    r.cmd(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7])
+                    r.cmd(GCS, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7])
                 };
                 out.extend(r.input(Input::Mavlink { from: GCS, msg: rc(ch) }));
                 out.extend(r.run(Duration::from_millis(wait_ms)));
@@ -431,10 +329,10 @@ mod properties {
         fn go_is_in_range_and_neutral_when_disarmed(
             inputs in prop::collection::vec((any::<i16>(), any::<i16>(), any::<i16>(), any::<u16>(), prop_oneof![Just(255u8), Just(245), Just(77)], 0u64..200), 1..60)
         ) {
-            let mut r = Rig::new();
+            let mut r = rig();
             for (x, z, yaw, buttons, sysid, wait_ms) in inputs {
                 let from = Sender::new(0, u64::from(sysid), sysid, 190);
-                let mut out = r.stick(from, x, z, yaw, buttons);
+                let mut out = r.manual(from, x, z, yaw, buttons);
                 let armed_after_input = r.v.armed();
                 out.extend(r.run(Duration::from_millis(wait_ms)));
                 for g in gos(&out) {
@@ -450,12 +348,13 @@ mod properties {
 
 #[test]
 fn motor_test_with_absurd_timeouts_is_capped_not_a_panic() {
-    let mut r = Rig::new();
-    r.arm();
+    let mut r = rig();
+    arm(&mut r);
     for timeout_s in [1e30f32, f32::INFINITY, f32::NAN, -5.0, f32::MAX] {
         r.cmd(
+            GCS,
             MavCmd::MAV_CMD_DO_MOTOR_TEST,
-            [3.0, 0.0, 75.0, timeout_s, 0.0, 0.0, 0.0],
+            &[3.0, 0.0, 75.0, timeout_s, 0.0, 0.0, 0.0],
         );
         assert_eq!(
             r.v.motors_us(),
@@ -473,49 +372,26 @@ fn motor_test_with_absurd_timeouts_is_capped_not_a_panic() {
 
 #[test]
 fn a_station_not_allowed_can_neither_arm_nor_motor_test_but_can_disarm() {
-    let mut r = Rig::new();
-    let as_stranger = |r: &mut Rig, command: MavCmd, p: [f32; 7]| {
-        r.input(Input::Mavlink {
-            from: STRANGER,
-            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                param1: p[0],
-                param2: p[1],
-                param3: p[2],
-                command,
-                target_system: 1,
-                target_component: 1,
-                ..Default::default()
-            }),
-        })
-    };
-    let ack = |out: &[Output]| {
-        out.iter()
-            .find_map(|o| match o {
-                Output::Send {
-                    msg: MavMessage::COMMAND_ACK(a),
-                    ..
-                } => Some(a.result),
-                _ => None,
-            })
-            .unwrap()
-    };
-    let out = as_stranger(
-        &mut r,
+    let mut r = rig();
+    // The result of the first COMMAND_ACK.
+    let ack = |out: &[Output]| acks(out)[0].result;
+    let out = r.cmd(
+        STRANGER,
         MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
-        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(ack(&out), MavResult::MAV_RESULT_NOT_IN_CONTROL);
     assert!(!r.v.armed());
-    r.arm();
-    let out = as_stranger(
-        &mut r,
+    arm(&mut r);
+    let out = r.cmd(
+        STRANGER,
         MavCmd::MAV_CMD_DO_MOTOR_TEST,
-        [1.0, 1.0, 1700.0, 0.0, 0.0, 0.0, 0.0],
+        &[1.0, 1.0, 1700.0, 0.0, 0.0, 0.0, 0.0],
     );
     assert_eq!(ack(&out), MavResult::MAV_RESULT_NOT_IN_CONTROL);
     assert!(gos(&out).is_empty());
     assert_eq!(r.v.motors_us(), [1500; 3]);
-    let out = as_stranger(&mut r, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, [0.0; 7]);
+    let out = r.cmd(STRANGER, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0; 7]);
     assert_eq!(ack(&out), MavResult::MAV_RESULT_ACCEPTED);
     assert!(!r.v.armed());
 }

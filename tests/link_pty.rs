@@ -148,8 +148,11 @@ async fn telemetry_flows_at_10_hz_and_1_hz() {
         between.iter().all(|&n| n == 10),
         "nav lines between status lines: {between:?}"
     );
+    // The rate, not the punctuality: a loaded machine may wake the emulator
+    // a few ms late (seen: 999, 1000, 1018 ms). 2 Hz or 0.5 Hz fails.
+    let mean = periods.iter().sum::<u64>() as f64 / periods.len() as f64;
     assert!(
-        periods.iter().all(|&p| (990..=1010).contains(&p)),
+        (950.0..=1050.0).contains(&mean) && periods.iter().all(|&p| (500..=1500).contains(&p)),
         "status periods (board clock): {periods:?}"
     );
 }

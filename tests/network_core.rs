@@ -4,13 +4,17 @@
 //! they change, never behind the station's back.
 #![allow(clippy::unwrap_used, clippy::expect_used, deprecated)]
 
+mod common;
+
 use std::time::Duration;
 
-use mavlink_core::Message as _;
+use common::core_rig::{
+    BoardFeed, CoreRig, ack_of, count_reaching, msgs, saves, sends, sent, texts_to,
+};
+use common::statustext;
 use neptunus::dialect::neptunus::*;
-use neptunus::firmware::codec::{Event, NavSample, StatusSample};
-use neptunus::firmware::link::LinkState;
-use neptunus::vehicle::machine::{Identity, Input, Now, Output, Sender, To, Vehicle};
+use neptunus::firmware::codec::StatusSample;
+use neptunus::vehicle::machine::{Identity, Input, Output, Sender, To, Vehicle};
 use neptunus::vehicle::params::ParamStore;
 
 /// The owner's ground station (QGC-like, SYSID_MYGCS) on endpoint 0.
@@ -20,195 +24,32 @@ const STRANGER: Sender = Sender::new(0, 9, 77, 190);
 /// An allowed station (MAVSDK's 245) on the same endpoint.
 const MAVSDK: Sender = Sender::new(0, 3, 245, 190);
 
-struct Rig {
-    v: Vehicle,
-    t: Duration,
-}
-
-impl Rig {
-    fn with(params: ParamStore) -> Self {
-        let mut r = Self {
-            v: Vehicle::new(Identity::Ardupilot, params, 2),
-            t: Duration::ZERO,
-        };
-        r.input(Input::Link {
-            state: LinkState::Up,
-            reason: None,
-        });
-        r.run(Duration::from_millis(1200));
-        r
-    }
-    fn new() -> Self {
-        Self::with(ParamStore::defaults())
-    }
-    fn input(&mut self, i: Input) -> Vec<Output> {
-        let mut out = Vec::new();
-        let now = Now {
-            mono: self.t,
-            unix_us: 1_800_000_000_000_000 + self.t.as_micros() as u64,
-        };
-        self.v.handle(i, now, &mut out);
-        out
-    }
-    fn msg(&mut self, from: Sender, msg: MavMessage) -> Vec<Output> {
-        self.input(Input::Mavlink { from, msg })
-    }
-    fn cmd(&mut self, from: Sender, command: MavCmd, p: &[f32]) -> Vec<Output> {
-        let mut a = [0.0; 7];
-        a[..p.len()].copy_from_slice(p);
-        self.msg(
-            from,
-            MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                param1: a[0],
-                param2: a[1],
-                param3: a[2],
-                param4: a[3],
-                param5: a[4],
-                param6: a[5],
-                param7: a[6],
-                command,
-                target_system: 1,
-                target_component: 1,
-                confirmation: 0,
-            }),
-        )
-    }
-    fn param_set(&mut self, from: Sender, name: &str, value: f32, ty: MavParamType) -> Vec<Output> {
-        self.msg(
-            from,
-            MavMessage::PARAM_SET(PARAM_SET_DATA {
-                param_value: value,
-                target_system: 1,
-                target_component: 1,
-                param_id: name.into(),
-                param_type: ty,
-            }),
-        )
-    }
-    /// 100 Hz ticks with board telemetry (10 Hz nav, 1 Hz status) and the
-    /// owner's heartbeat at 1 Hz.
-    fn run(&mut self, d: Duration) -> Vec<Output> {
-        let end = self.t + d;
-        let mut all = Vec::new();
-        while self.t < end {
-            self.t += Duration::from_millis(10);
-            let ms = self.t.as_millis();
-            if ms.is_multiple_of(100) {
-                all.extend(self.input(Input::Board(Event::Nav(NavSample {
-                    heading_deg: Some(10.0),
-                    depth_m: Some(1.0),
-                    pitch_deg: Some(0.0),
-                    roll_deg: Some(0.0),
-                    yaw_deg: Some(10.0),
-                    fthr_pct: Some(0.0),
-                }))));
-            }
-            if ms.is_multiple_of(1000) {
-                all.extend(self.input(Input::Board(Event::Status(StatusSample {
-                    vout_v: Some(12.0),
-                    iout_a: Some(0.3),
-                    btti_a: Some(0.3),
-                    pres_mbar: Some(1100.0),
-                    temp_c: Some(15.0),
-                    time_ms: Some(ms as u64),
-                    ..Default::default()
-                }))));
-                all.extend(self.msg(OWNER, gcs_heartbeat()));
-            }
-            all.extend(self.input(Input::Tick));
-        }
-        all
+/// What the board reports here: level at 1 m, 12 V, with its uptime.
+fn feed() -> BoardFeed {
+    BoardFeed {
+        status: StatusSample {
+            vout_v: Some(12.0),
+            iout_a: Some(0.3),
+            btti_a: Some(0.3),
+            pres_mbar: Some(1100.0),
+            temp_c: Some(15.0),
+            ..Default::default()
+        },
+        uptime: true,
+        ..BoardFeed::level_at_1_m()
     }
 }
 
-fn gcs_heartbeat() -> MavMessage {
-    MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-        custom_mode: 0,
-        mavtype: MavType::MAV_TYPE_GCS,
-        autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-        base_mode: MavModeFlag::empty(),
-        system_status: MavState::MAV_STATE_ACTIVE,
-        mavlink_version: 3,
-    })
+/// Two endpoints, `params`; the owner's heartbeat at 1 Hz; started.
+fn rig_with(params: ParamStore) -> CoreRig {
+    CoreRig::new(Vehicle::new(Identity::Ardupilot, params, 2))
+        .feed(feed())
+        .alive(OWNER)
+        .started()
 }
 
-fn sent(out: &[Output]) -> Vec<(To, MavMessage)> {
-    out.iter()
-        .filter_map(|o| match o {
-            Output::Send { to, msg } => Some((*to, msg.clone())),
-            _ => None,
-        })
-        .collect()
-}
-
-/// Messages with id `id` that reach the owner (its endpoint, everyone, or it).
-fn reaching_owner(out: &[Output], id: u32) -> usize {
-    sent(out)
-        .iter()
-        .filter(|(to, m)| m.message_id() == id && reaches(*to, OWNER))
-        .count()
-}
-
-fn reaches(to: To, s: Sender) -> bool {
-    match to {
-        To::All => true,
-        To::Endpoint(e) => e == s.endpoint,
-        To::Peer(e, p) => e == s.endpoint && p == s.peer,
-    }
-}
-
-/// The texts reaching `who`, long ones put together from their chunks.
-fn texts_to(out: &[Output], who: Sender) -> Vec<String> {
-    let mut texts: Vec<(u16, String)> = Vec::new();
-    for (to, m) in sent(out) {
-        if let MavMessage::STATUSTEXT(s) = m
-            && reaches(to, who)
-        {
-            match texts.last_mut() {
-                Some((id, t)) if s.id != 0 && *id == s.id && s.chunk_seq > 0 => {
-                    t.push_str(&text(&s))
-                }
-                _ => texts.push((s.id, text(&s))),
-            }
-        }
-    }
-    texts.into_iter().map(|(_, t)| t).collect()
-}
-
-fn text(s: &STATUSTEXT_DATA) -> String {
-    let b: &[u8] = s.text.as_ref();
-    String::from_utf8_lossy(b).trim_end_matches('\0').to_owned()
-}
-
-fn ack(out: &[Output], cmd: MavCmd) -> MavResult {
-    sent(out)
-        .into_iter()
-        .find_map(|(_, m)| match m {
-            MavMessage::COMMAND_ACK(a) if a.command == cmd => Some(a.result),
-            _ => None,
-        })
-        .unwrap_or_else(|| panic!("no ACK for {cmd:?}"))
-}
-
-fn param_values(out: &[Output]) -> Vec<(To, PARAM_VALUE_DATA)> {
-    sent(out)
-        .into_iter()
-        .filter_map(|(to, m)| match m {
-            MavMessage::PARAM_VALUE(v) => Some((to, v)),
-            _ => None,
-        })
-        .collect()
-}
-
-fn saves(out: &[Output]) -> usize {
-    out.iter().filter(|o| **o == Output::SaveParams).count()
-}
-
-fn sys_status(out: &[Output]) -> Option<SYS_STATUS_DATA> {
-    sent(out).into_iter().rev().find_map(|(_, m)| match m {
-        MavMessage::SYS_STATUS(s) => Some(s),
-        _ => None,
-    })
+fn rig() -> CoreRig {
+    rig_with(ParamStore::defaults())
 }
 
 const HEARTBEAT: f32 = 0.0;
@@ -218,17 +59,17 @@ const ATTITUDE: f32 = 30.0;
 
 #[test]
 fn a_stranger_can_neither_silence_nor_flood_the_owners_telemetry() {
-    let mut r = Rig::new();
+    let mut r = rig();
     use MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL as SET;
     // Silence: HEARTBEAT and ATTITUDE off.
     for id in [HEARTBEAT, ATTITUDE] {
         let out = r.cmd(STRANGER, SET, &[id, -1.0]);
-        assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_DENIED, "msg {id}");
+        assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_DENIED, "msg {id}");
     }
     // Flood: every streamable message at 1000 Hz.
     for (id, _) in neptunus::vehicle::telemetry::STREAMABLE {
         let out = r.cmd(STRANGER, SET, &[*id as f32, 1000.0]);
-        assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_DENIED, "msg {id}");
+        assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_DENIED, "msg {id}");
     }
     // The legacy way, which has no ack: off, and 1000 Hz.
     for (rate, start) in [(1000, 0), (1000, 1)] {
@@ -245,20 +86,20 @@ fn a_stranger_can_neither_silence_nor_flood_the_owners_telemetry() {
     }
     assert_eq!(r.v.refused_rate_requests(), 2 + 15 + 2);
     let out = r.run(Duration::from_secs(5));
-    let hb = reaching_owner(&out, 0);
-    let att = reaching_owner(&out, 30);
+    let hb = count_reaching(&out, 0, OWNER);
+    let att = count_reaching(&out, 30, OWNER);
     assert!((5..=6).contains(&hb), "owner's HEARTBEAT in 5 s: {hb}");
     assert!((49..=51).contains(&att), "owner's ATTITUDE in 5 s: {att}");
     // The owner's own request still works (it may control).
     let out = r.cmd(OWNER, SET, &[ATTITUDE, 50_000.0]);
-    assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
-    let att = reaching_owner(&r.run(Duration::from_secs(5)), 30);
+    assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
+    let att = count_reaching(&r.run(Duration::from_secs(5)), 30, OWNER);
     assert!((99..=101).contains(&att), "20 Hz asked by the owner: {att}");
 }
 
 #[test]
 fn with_signing_on_an_unsigned_allowed_id_only_watches() {
-    let mut r = Rig::new();
+    let mut r = rig();
     r.v.set_signing_active(true);
     let unsigned_255 = Sender::new(0, 5, 255, 190);
     let out = r.cmd(
@@ -267,7 +108,7 @@ fn with_signing_on_an_unsigned_allowed_id_only_watches() {
         &[HEARTBEAT, -1.0],
     );
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL),
+        ack_of(&out, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL),
         MavResult::MAV_RESULT_DENIED
     );
     let signed = Sender {
@@ -280,22 +121,22 @@ fn with_signing_on_an_unsigned_allowed_id_only_watches() {
         &[ATTITUDE, 100_000.0],
     );
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL),
+        ack_of(&out, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL),
         MavResult::MAV_RESULT_ACCEPTED
     );
 }
 
 #[test]
 fn one_shot_requests_stay_open_to_watchers_and_answer_only_them() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let out = r.cmd(STRANGER, MavCmd::MAV_CMD_REQUEST_MESSAGE, &[148.0]);
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_REQUEST_MESSAGE),
+        ack_of(&out, MavCmd::MAV_CMD_REQUEST_MESSAGE),
         MavResult::MAV_RESULT_ACCEPTED
     );
     let out = r.cmd(STRANGER, MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL, &[ATTITUDE]);
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL),
+        ack_of(&out, MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert!(
@@ -308,11 +149,11 @@ fn one_shot_requests_stay_open_to_watchers_and_answer_only_them() {
 
 #[test]
 fn rates_are_capped_at_50_hz_and_heartbeat_never_below_1_hz_even_for_the_owner() {
-    let mut r = Rig::new();
+    let mut r = rig();
     use MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL as SET;
     let out = r.cmd(MAVSDK, SET, &[ATTITUDE, 1000.0]);
-    assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
-    let att = reaching_owner(&r.run(Duration::from_secs(2)), 30);
+    assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
+    let att = count_reaching(&r.run(Duration::from_secs(2)), 30, OWNER);
     assert!(
         (99..=101).contains(&att),
         "1000 Hz asked, 50 Hz given: {att}"
@@ -328,14 +169,14 @@ fn rates_are_capped_at_50_hz_and_heartbeat_never_below_1_hz_even_for_the_owner()
             start_stop: 1,
         }),
     );
-    let hud = reaching_owner(&r.run(Duration::from_secs(2)), 74);
+    let hud = count_reaching(&r.run(Duration::from_secs(2)), 74, OWNER);
     assert!((99..=101).contains(&hud), "VFR_HUD capped at 50 Hz: {hud}");
     // HEARTBEAT cannot be turned off, nor slowed below 1 Hz.
     let out = r.cmd(OWNER, SET, &[HEARTBEAT, -1.0]);
-    assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_DENIED);
+    assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_DENIED);
     let out = r.cmd(OWNER, SET, &[HEARTBEAT, 10_000_000.0]);
-    assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
-    let hb = reaching_owner(&r.run(Duration::from_secs(5)), 0);
+    assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
+    let hb = count_reaching(&r.run(Duration::from_secs(5)), 0, OWNER);
     assert!((5..=6).contains(&hb), "HEARTBEAT stays at 1 Hz: {hb}");
     let out = r.cmd(OWNER, MavCmd::MAV_CMD_GET_MESSAGE_INTERVAL, &[HEARTBEAT]);
     let iv = sent(&out)
@@ -348,15 +189,15 @@ fn rates_are_capped_at_50_hz_and_heartbeat_never_below_1_hz_even_for_the_owner()
     assert_eq!(iv, 1_000_000, "GET_MESSAGE_INTERVAL tells the truth");
     // Other messages may still be turned off by an allowed station.
     let out = r.cmd(OWNER, SET, &[ATTITUDE, -1.0]);
-    assert_eq!(ack(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
-    assert_eq!(reaching_owner(&r.run(Duration::from_secs(1)), 30), 0);
+    assert_eq!(ack_of(&out, SET), MavResult::MAV_RESULT_ACCEPTED);
+    assert_eq!(count_reaching(&r.run(Duration::from_secs(1)), 30, OWNER), 0);
 }
 
 // ---- M1: replies to bad requests go to the asker, rate-limited ----------
 
 #[test]
 fn a_flood_of_unknown_param_sets_reaches_only_the_stranger_and_only_a_few() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let mut out = Vec::new();
     // 5,000 in 0.6 s, as in the attack report.
     for i in 0..5000u32 {
@@ -389,7 +230,7 @@ fn a_flood_of_unknown_param_sets_reaches_only_the_stranger_and_only_a_few() {
     let n = texts_to(&out, STRANGER).len();
     assert!((3..=4).contains(&n), "one per second over 3 s: {n}");
     assert!(
-        param_values(&out)
+        sends!(&out, PARAM_VALUE)
             .iter()
             .all(|(to, v)| *to == To::Peer(0, STRANGER.peer) && v.param_value == 2.0)
     );
@@ -398,7 +239,7 @@ fn a_flood_of_unknown_param_sets_reaches_only_the_stranger_and_only_a_few() {
 
 #[test]
 fn refused_commands_and_control_requests_answer_the_asker_alone() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let mut out = Vec::new();
     for _ in 0..1000 {
         r.t += Duration::from_millis(1);
@@ -437,10 +278,10 @@ fn refused_commands_and_control_requests_answer_the_asker_alone() {
 
 #[test]
 fn vehicle_events_still_reach_everyone() {
-    let mut r = Rig::new();
+    let mut r = rig();
     let out = r.cmd(OWNER, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
+        ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert!(
@@ -459,7 +300,7 @@ fn statustext_is_ascii_with_units_spelled_out() {
     assert_eq!(ascii_text("640×480"), "640x480");
     assert_eq!(ascii_text("café\n"), "caf? ");
     // A real text: DO_SET_SERVO out of range names µs.
-    let mut r = Rig::new();
+    let mut r = rig();
     let out = r.cmd(OWNER, MavCmd::MAV_CMD_DO_SET_SERVO, &[7.0, 3000.0]);
     let t = texts_to(&out, OWNER);
     assert!(
@@ -498,7 +339,7 @@ mod every_text_is_ascii {
         /// emits is printable ASCII.
         #[test]
         fn property(inputs in proptest::collection::vec(any_input(), 1..60)) {
-            let mut r = Rig::new();
+            let mut r = rig();
             let mut out = Vec::new();
             for (kind, name, cmd, p, dt_ms) in inputs {
                 r.t += Duration::from_millis(u64::from(dt_ms));
@@ -529,7 +370,7 @@ mod every_text_is_ascii {
             for o in &out {
                 if let Output::Send { msg: MavMessage::STATUSTEXT(s), .. } = o {
                     let b: &[u8] = s.text.as_ref();
-                    prop_assert!(b.iter().all(|&c| c == 0 || (b' '..=b'~').contains(&c)), "{:?}", text(s));
+                    prop_assert!(b.iter().all(|&c| c == 0 || (b' '..=b'~').contains(&c)), "{:?}", statustext(s));
                 }
             }
         }
@@ -538,8 +379,8 @@ mod every_text_is_ascii {
 
 // ---- M3 / H7: saved when changed, off the vehicle task, or the station is told
 
-fn owner_rig() -> Rig {
-    Rig::new()
+fn owner_rig() -> CoreRig {
+    rig()
 }
 
 #[test]
@@ -559,7 +400,7 @@ fn fifty_thousand_sets_of_the_same_value_write_nothing() {
     assert_eq!(saves(&out), 0);
     assert!(!r.v.params_unsaved());
     // Each was still acknowledged.
-    assert_eq!(param_values(&out).len(), 50_000);
+    assert_eq!(sends!(&out, PARAM_VALUE).len(), 50_000);
 }
 
 #[test]
@@ -613,7 +454,9 @@ fn a_never_ending_stream_of_changes_still_saves_within_two_seconds() {
 fn a_failed_save_is_told_to_everyone_shown_in_sys_status_and_retried_until_it_works() {
     let mut r = owner_rig();
     let logging = MavSysStatusSensor::MAV_SYS_STATUS_LOGGING;
-    let s = sys_status(&r.run(Duration::from_secs(1))).unwrap();
+    let s = msgs!(&r.run(Duration::from_secs(1)), SYS_STATUS)
+        .pop()
+        .unwrap();
     assert!(s.onboard_control_sensors_present.contains(logging));
     assert!(s.onboard_control_sensors_health.contains(logging));
 
@@ -633,7 +476,7 @@ fn a_failed_save_is_told_to_everyone_shown_in_sys_status_and_retried_until_it_wo
             _ => None,
         })
         .collect();
-    let joined: String = warn.iter().map(|(_, s)| text(s)).collect();
+    let joined: String = warn.iter().map(|(_, s)| statustext(s)).collect();
     assert!(
         warn.iter()
             .all(|(to, s)| *to == To::All && s.severity == MavSeverity::MAV_SEVERITY_WARNING)
@@ -642,7 +485,9 @@ fn a_failed_save_is_told_to_everyone_shown_in_sys_status_and_retried_until_it_wo
     assert!(joined.contains("No space left"), "{joined}");
     assert!(r.v.params_save_error().is_some());
     // Health shows it; the value is in use all the same.
-    let s = sys_status(&r.run(Duration::from_millis(600))).unwrap();
+    let s = msgs!(&r.run(Duration::from_millis(600)), SYS_STATUS)
+        .pop()
+        .unwrap();
     assert!(!s.onboard_control_sensors_health.contains(logging));
     assert_eq!(r.v.params().get("FS_GCS_TIMEOUT"), Some(9.0));
     // Retried with backoff: 1 s, then 2 s.
@@ -658,7 +503,9 @@ fn a_failed_save_is_told_to_everyone_shown_in_sys_status_and_retried_until_it_wo
     let out = r.input(Input::ParamsSaved(Ok(())));
     let t = texts_to(&out, STRANGER);
     assert!(t.iter().any(|t| t.contains("Parameters saved")), "{t:?}");
-    let s = sys_status(&r.run(Duration::from_secs(1))).unwrap();
+    let s = msgs!(&r.run(Duration::from_secs(1)), SYS_STATUS)
+        .pop()
+        .unwrap();
     assert!(s.onboard_control_sensors_health.contains(logging));
     assert!(!r.v.params_unsaved());
     assert_eq!(r.v.params_save_error(), None);
@@ -669,7 +516,9 @@ fn a_storage_problem_at_start_shows_in_sys_status() {
     let mut r = owner_rig();
     r.v.set_storage_problem(Some("data directory read-only".into()));
     let logging = MavSysStatusSensor::MAV_SYS_STATUS_LOGGING;
-    let s = sys_status(&r.run(Duration::from_secs(1))).unwrap();
+    let s = msgs!(&r.run(Duration::from_secs(1)), SYS_STATUS)
+        .pop()
+        .unwrap();
     assert!(!s.onboard_control_sensors_health.contains(logging));
     // A save that works proves the directory works again.
     r.param_set(
@@ -680,7 +529,9 @@ fn a_storage_problem_at_start_shows_in_sys_status() {
     );
     assert_eq!(saves(&r.run(Duration::from_millis(600))), 1);
     r.input(Input::ParamsSaved(Ok(())));
-    let s = sys_status(&r.run(Duration::from_secs(1))).unwrap();
+    let s = msgs!(&r.run(Duration::from_secs(1)), SYS_STATUS)
+        .pop()
+        .unwrap();
     assert!(s.onboard_control_sensors_health.contains(logging));
 }
 
@@ -696,7 +547,7 @@ fn a_param_set_with_the_wrong_type_is_answered_with_the_current_value() {
         0.7,
         MavParamType::MAV_PARAM_TYPE_INT8,
     );
-    let pv = param_values(&out);
+    let pv = sends!(&out, PARAM_VALUE);
     assert_eq!(pv.len(), 1);
     assert_eq!(pv[0].0, To::Peer(0, OWNER.peer));
     assert_eq!(pv[0].1.param_value, 0.5);
@@ -709,7 +560,7 @@ fn a_param_set_with_the_wrong_type_is_answered_with_the_current_value() {
         1950.0,
         MavParamType::MAV_PARAM_TYPE_INT8,
     );
-    assert_eq!(param_values(&out)[0].1.param_value, 1900.0);
+    assert_eq!(sends!(&out, PARAM_VALUE)[0].1.param_value, 1900.0);
     assert_eq!(r.v.bad_param_types(), 2);
     // Its own type, REAL32 (pymavlink's default), or an integer type that
     // holds the value: accepted.
@@ -719,7 +570,7 @@ fn a_param_set_with_the_wrong_type_is_answered_with_the_current_value() {
         (1930.0, MavParamType::MAV_PARAM_TYPE_INT32),
     ] {
         let out = r.param_set(OWNER, "MOT_PWM_MAX", v, ty);
-        assert_eq!(param_values(&out)[0].1.param_value, v, "{ty:?}");
+        assert_eq!(sends!(&out, PARAM_VALUE)[0].1.param_value, v, "{ty:?}");
     }
     // Not a MAV_PARAM_TYPE at all (the frame decoder hands these over raw).
     let mut id = [0u8; 16];
@@ -731,7 +582,7 @@ fn a_param_set_with_the_wrong_type_is_answered_with_the_current_value() {
         param_id: id,
         param_type: 0,
     });
-    let pv = param_values(&out);
+    let pv = sends!(&out, PARAM_VALUE);
     assert_eq!(pv.len(), 1);
     assert_eq!(pv[0].1.param_value, 0.5);
     assert_eq!(r.v.bad_param_types(), 3);
@@ -753,7 +604,7 @@ fn int32_maximum_sent_as_a_float_sets_exactly_the_maximum() {
     );
     assert_eq!(r.v.params().get("ARMING_CHECK"), Some(2_147_483_647.0));
     // Reported back as ArduPilot's C-cast encoding does: (float)2147483647.
-    let pv = param_values(&out);
+    let pv = sends!(&out, PARAM_VALUE);
     assert_eq!(pv[0].0, To::All);
     assert_eq!(pv[0].1.param_value, 2_147_483_648.0_f32);
     assert_eq!(pv[0].1.param_type, MavParamType::MAV_PARAM_TYPE_INT32);
@@ -780,7 +631,7 @@ fn sysid_thismav_takes_effect_at_the_next_start_and_disarm_to_system_1_still_wor
     let mut r = owner_rig();
     let out = r.cmd(OWNER, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
+        ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_ACCEPTED
     );
     let out = r.param_set(
@@ -789,14 +640,14 @@ fn sysid_thismav_takes_effect_at_the_next_start_and_disarm_to_system_1_still_wor
         2.0,
         MavParamType::MAV_PARAM_TYPE_INT16,
     );
-    assert_eq!(param_values(&out)[0].1.param_value, 2.0, "stored");
+    assert_eq!(sends!(&out, PARAM_VALUE)[0].1.param_value, 2.0, "stored");
     let t = texts_to(&out, OWNER);
     assert!(t.iter().any(|t| t.contains("next start")), "{t:?}");
     assert_eq!(r.v.sysid(), 1, "the live id does not change");
     // The owner disarms system 1, as its ground station still knows it.
     let out = r.cmd(OWNER, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[0.0]);
     assert_eq!(
-        ack(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
+        ack_of(&out, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM),
         MavResult::MAV_RESULT_ACCEPTED
     );
     assert!(!r.v.armed());
@@ -818,7 +669,7 @@ fn sysid_thismav_is_never_a_ground_stations_id() {
             id,
             MavParamType::MAV_PARAM_TYPE_INT16,
         );
-        let pv = param_values(&out);
+        let pv = sends!(&out, PARAM_VALUE);
         assert_eq!(pv[0].1.param_value, 1.0, "{id} refused");
         assert_eq!(pv[0].0, To::Peer(0, OWNER.peer));
         r.t += Duration::from_secs(1);
@@ -831,7 +682,7 @@ fn sysid_thismav_is_never_a_ground_stations_id() {
         1.0,
         MavParamType::MAV_PARAM_TYPE_INT16,
     );
-    assert_eq!(param_values(&out)[0].1.param_value, 255.0);
+    assert_eq!(sends!(&out, PARAM_VALUE)[0].1.param_value, 255.0);
     // The file is held to the same rule.
     let (s, warnings) = ParamStore::from_toml("SYSID_THISMAV = 255\n").unwrap();
     assert_eq!(s.get("SYSID_THISMAV"), Some(1.0));

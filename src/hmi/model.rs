@@ -13,7 +13,7 @@ use super::protocol::{
     ThrustersUs,
 };
 use crate::dialect::neptunus::*;
-use crate::vehicle::machine::mode_name;
+use crate::vehicle::mode::Mode;
 
 /// No vehicle HEARTBEAT for this long: the vehicle is "not seen".
 const VEHICLE_SEEN: Duration = Duration::from_secs(3);
@@ -92,7 +92,7 @@ impl Model {
                 self.hil = h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED);
                 t.simulated = self.hil || t.estimate.is_some_and(|e| e.simulated);
                 t.mode = Some(h.custom_mode);
-                t.mode_name = Some(mode_name(h.custom_mode).to_owned());
+                t.mode_name = Some(Mode::name_of(h.custom_mode).to_owned());
                 t.critical = matches!(
                     h.system_status,
                     MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY

@@ -17,7 +17,7 @@
 //! | `focus_lost` | — | a stop, then the core's HMI event FocusLost (owner: safety stop, pick-up) |
 //! | `input_mode` | `mode`: `keyboard`, `touch`, `gamepad`, `headtracking` | a stop, then InputModeChanged |
 //! | `arm` | `arm`: bool | COMMAND_LONG 400 |
-//! | `mode` | `mode`: 100, 19, 0, 2 or 9 | COMMAND_LONG 176 (p1 1, p2 mode) |
+//! | `mode` | `mode`: the number of one of the welcome's `modes` ([`HMI_MODES`]) | COMMAND_LONG 176 (p1 1, p2 mode) |
 //! | `run_mode` | `mode`: `normal`, `simulator` | COMMAND_LONG 44200 |
 //! | `autopilot_target` | `depth_m` (0..1000) and/or `heading_deg` (0..360), null = unchanged | COMMAND_LONG 44201 (NaN for null) |
 //! | `gain` | `value`: 0..1 | PARAM_SET JS_GAIN_DEFAULT |
@@ -31,7 +31,7 @@
 //! # Server → browser ([`ServerMsg`])
 //! | type | when | fields |
 //! |---|---|---|
-//! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version` |
+//! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version`, `modes` (the modes to offer: `mode`, `name`, `label`, `thrusters`, `button`), `boot_mode` |
 //! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
 //! | `telemetry` | 20 Hz | see [`Telemetry`] |
 //! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text` |
@@ -43,17 +43,63 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::vehicle::mode::Mode;
+
 /// Largest WebSocket message the server reads (bytes).
 pub const MAX_MESSAGE_BYTES: usize = 4096;
 
-/// Modes the HMI offers: (custom_mode, name).
-pub const HMI_MODES: [(u32, &str); 5] = [
-    (100, "MANUAL_THRUSTERS"),
-    (19, "MANUAL"),
-    (0, "STABILIZE"),
-    (2, "ALT_HOLD"),
-    (9, "SURFACE"),
+/// Modes the HMI offers, in the page's order, with the page's label for each.
+/// The page gets them in the welcome ([`ModeView`]) and spells no mode number.
+pub const HMI_MODES: [(Mode, &str); 5] = [
+    (Mode::ManualThrusters, "Manual thrusters"),
+    (Mode::Manual, "Motion"),
+    (Mode::Stabilize, "Heading hold"),
+    (Mode::AltHold, "Depth + heading hold"),
+    (Mode::Surface, "SURFACE"),
 ];
+
+/// A mode the HMI offers, as the welcome tells the page.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct ModeView {
+    /// The number to send in `mode` and that telemetry's `mode` reports.
+    pub mode: u32,
+    /// The vehicle's name for it (telemetry's `mode_name`).
+    pub name: &'static str,
+    /// What the page shows.
+    pub label: &'static str,
+    /// The page drives each thruster (`thrusters`) rather than the sticks.
+    pub thrusters: bool,
+    /// A button of its own (SURFACE: one press from any mode), not a radio button.
+    pub button: bool,
+}
+
+impl ModeView {
+    /// The modes the HMI offers, for the welcome.
+    pub fn offered() -> Vec<ModeView> {
+        HMI_MODES
+            .iter()
+            .map(|&(m, label)| ModeView {
+                mode: m.number(),
+                name: m.name(),
+                label,
+                thrusters: m == Mode::ManualThrusters,
+                button: m == Mode::Surface,
+            })
+            .collect()
+    }
+}
+
+/// "100 (MANUAL_THRUSTERS), 19 (MANUAL) … or 9 (SURFACE)", for error messages.
+fn offered_modes_text() -> String {
+    let each: Vec<String> = HMI_MODES
+        .iter()
+        .map(|(m, _)| format!("{} ({m})", m.number()))
+        .collect();
+    match each.split_last() {
+        Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+        _ => each.concat(),
+    }
+}
 
 /// Input devices of the operator interface.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -189,11 +235,12 @@ impl ClientMsg {
                 in_range("starboard", *starboard, -1.0, 1.0)
             }
             Self::Mode { mode } => {
-                if HMI_MODES.iter().any(|(m, _)| m == mode) {
+                if HMI_MODES.iter().any(|(m, _)| m.number() == *mode) {
                     Ok(())
                 } else {
                     Err(format!(
-                        "mode {mode} is not offered by the HMI — use 100 (MANUAL_THRUSTERS), 19 (MANUAL), 0 (STABILIZE), 2 (ALT_HOLD) or 9 (SURFACE)"
+                        "mode {mode} is not offered by the HMI — use {}",
+                        offered_modes_text()
                     ))
                 }
             }
@@ -357,6 +404,10 @@ pub enum ServerMsg {
         vehicle_sysid: u8,
         camera_rotation_deg: i32,
         version: &'static str,
+        /// The modes the page offers.
+        modes: Vec<ModeView>,
+        /// The mode the vehicle starts in (shown until telemetry says otherwise).
+        boot_mode: u32,
     },
     Identity {
         sysid: Option<u8>,
@@ -402,6 +453,33 @@ impl ServerMsg {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mode_not_offered_names_the_offered_ones() {
+        assert_eq!(
+            ClientMsg::parse(r#"{"type":"mode","mode":3}"#),
+            Err("mode 3 is not offered by the HMI — use 100 (MANUAL_THRUSTERS), 19 (MANUAL), 0 (STABILIZE), 2 (ALT_HOLD) or 9 (SURFACE)".to_owned())
+        );
+        for m in ModeView::offered() {
+            let msg = format!(r#"{{"type":"mode","mode":{}}}"#, m.mode);
+            assert_eq!(ClientMsg::parse(&msg), Ok(ClientMsg::Mode { mode: m.mode }));
+        }
+    }
+
+    #[test]
+    fn the_welcome_offers_the_pages_modes() {
+        let modes = serde_json::to_value(ModeView::offered()).unwrap();
+        assert_eq!(
+            modes,
+            serde_json::json!([
+                {"mode": 100, "name": "MANUAL_THRUSTERS", "label": "Manual thrusters", "thrusters": true, "button": false},
+                {"mode": 19, "name": "MANUAL", "label": "Motion", "thrusters": false, "button": false},
+                {"mode": 0, "name": "STABILIZE", "label": "Heading hold", "thrusters": false, "button": false},
+                {"mode": 2, "name": "ALT_HOLD", "label": "Depth + heading hold", "thrusters": false, "button": false},
+                {"mode": 9, "name": "SURFACE", "label": "SURFACE", "thrusters": false, "button": true},
+            ])
+        );
+    }
 
     #[test]
     fn parses_and_validates() {

@@ -19,14 +19,16 @@ use std::time::{Duration, Instant};
 
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
 use futures_util::{SinkExt as _, StreamExt as _};
+use mavlink_core::MessageData;
 use tokio::sync::broadcast::error::RecvError;
 
 use super::auth::OpenControl;
 use super::model::Model;
-use super::protocol::{ClientMsg, RunMode, ServerMsg};
+use super::protocol::{ClientMsg, ModeView, RunMode, ServerMsg};
 use super::{Shared, SysidLease, guard};
 use crate::dialect::neptunus::*;
 use crate::vehicle::machine::{COMPONENT_ID, HmiEvent, Input};
+use crate::vehicle::mode::Mode;
 
 /// Telemetry push period (20 Hz).
 const PUSH_PERIOD: Duration = Duration::from_millis(50);
@@ -50,14 +52,19 @@ const REFUSAL_REPLY: Duration = Duration::from_secs(2);
 /// Telemetry rates this HMI asks the vehicle for on its endpoint (msg id, Hz),
 /// once, from the server's own peer (see [`request_rates`]).
 const RATES: [(u32, f32); 8] = [
-    (30, 20.0),    // ATTITUDE: heading, roll, pitch
-    (74, 20.0),    // VFR_HUD: depth
-    (36, 10.0),    // SERVO_OUTPUT_RAW: thrusters
-    (1, 4.0),      // SYS_STATUS: health, voltage, current
-    (251, 4.0),    // NAMED_VALUE_FLOAT: lights, gain, tilt
-    (44101, 20.0), // NEPTUNUS_SIM_STATE
-    (44102, 20.0), // NEPTUNUS_ESTIMATE
-    (44103, 10.0), // NEPTUNUS_AUTOPILOT
+    // Heading, roll, pitch.
+    (ATTITUDE_DATA::ID, 20.0),
+    // Depth.
+    (VFR_HUD_DATA::ID, 20.0),
+    // Thrusters.
+    (SERVO_OUTPUT_RAW_DATA::ID, 10.0),
+    // Health, voltage, current.
+    (SYS_STATUS_DATA::ID, 4.0),
+    // Lights, gain, tilt.
+    (NAMED_VALUE_FLOAT_DATA::ID, 4.0),
+    (NEPTUNUS_SIM_STATE_DATA::ID, 20.0),
+    (NEPTUNUS_ESTIMATE_DATA::ID, 20.0),
+    (NEPTUNUS_AUTOPILOT_DATA::ID, 10.0),
 ];
 
 /// Asks the vehicle for the HMI's telemetry rates on its endpoint, once at
@@ -380,6 +387,8 @@ impl Session {
             vehicle_sysid: self.shared.vehicle_sysid,
             camera_rotation_deg: self.shared.camera_rotation_deg,
             version: env!("CARGO_PKG_VERSION"),
+            modes: ModeView::offered(),
+            boot_mode: Mode::BOOT.number(),
         }
     }
 
@@ -423,6 +432,7 @@ impl Session {
             return;
         }
         self.to_vehicle(MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            // A ground station has no mode.
             custom_mode: 0,
             mavtype: MavType::MAV_TYPE_GCS,
             autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,

@@ -14,12 +14,15 @@
 //! and an operator chasing a flaky radio needs to tell garbage from CRC
 //! errors from messages of a dialect we do not speak.
 
-use mavlink_core::{MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, calculate_crc};
+use mavlink_core::{
+    MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message, MessageData, calculate_crc,
+};
 use serde::Serialize;
 
 pub use crate::dialect::neptunus::MavMessage;
 use crate::dialect::neptunus::{
-    COMMAND_ACK_DATA, COMMAND_LONG_DATA, MavCmd, MavParamType, MavResult, PARAM_SET_DATA,
+    COMMAND_ACK_DATA, COMMAND_INT_DATA, COMMAND_LONG_DATA, MavCmd, MavParamType, MavResult,
+    PARAM_SET_DATA,
 };
 
 const STX_V1: u8 = mavlink_core::MAV_STX;
@@ -404,10 +407,10 @@ fn examine(buf: &[u8]) -> Candidate {
     }
 }
 
-const PARAM_SET_ID: u32 = 23;
-const COMMAND_INT_ID: u32 = 75;
-const COMMAND_LONG_ID: u32 = 76;
-const COMMAND_ACK_ID: u32 = 77;
+const PARAM_SET_ID: u32 = PARAM_SET_DATA::ID;
+const COMMAND_INT_ID: u32 = COMMAND_INT_DATA::ID;
+const COMMAND_LONG_ID: u32 = COMMAND_LONG_DATA::ID;
+const COMMAND_ACK_ID: u32 = COMMAND_ACK_DATA::ID;
 
 /// COMMAND_ACK for a command number our dialect cannot represent (the
 /// generated `MavCmd` enum has no value for it): encoded with a placeholder,

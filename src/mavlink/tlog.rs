@@ -51,8 +51,8 @@ impl TlogConfig {
     }
 }
 
-/// Message id of SETUP_SIGNING.
-const SETUP_SIGNING_ID: u32 = 256;
+const SETUP_SIGNING_ID: u32 =
+    <crate::dialect::neptunus::SETUP_SIGNING_DATA as mavlink_core::MessageData>::ID;
 /// `secret_key[32]` sits after `initial_timestamp` (u64), `target_system`
 /// and `target_component` (u8 each) in SETUP_SIGNING's wire order.
 const SETUP_SIGNING_KEY: std::ops::Range<usize> = 10..42;

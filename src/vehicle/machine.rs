@@ -16,6 +16,7 @@
 
 use std::time::Duration;
 
+use mavlink_core::MessageData;
 use mavlink_core::types::CharArray;
 
 mod authority;
@@ -26,12 +27,13 @@ mod param_set;
 mod persist;
 mod texts;
 
-pub use holds::{MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE, RunMode};
+pub use holds::RunMode;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 use texts::ReplyKind;
 pub use texts::ascii_text;
 
 use super::input::Profiles;
+pub use super::mode::Mode;
 use super::params::ParamStore;
 use super::telemetry::{self, Schedule};
 use crate::dialect::neptunus::*;
@@ -243,60 +245,23 @@ pub enum Identity {
     Generic,
 }
 
-/// ArduSub's modes: number, name, and whether Neptunus can honour it now.
-pub const MODES: &[(u32, &str, Option<&str>)] = &[
-    (19, "MANUAL", None),
-    (MODE_MANUAL_THRUSTERS, "MANUAL_THRUSTERS", None),
-    (MODE_STABILIZE, "STABILIZE", None),
-    (
-        1,
-        "ACRO",
-        Some("rate control is not implemented on this vehicle"),
-    ),
-    (MODE_ALT_HOLD, "ALT_HOLD", None),
-    (
-        3,
-        "AUTO",
-        Some("needs a position estimate, which this vehicle does not have"),
-    ),
-    (
-        4,
-        "GUIDED",
-        Some("needs a position estimate, which this vehicle does not have"),
-    ),
-    (
-        7,
-        "CIRCLE",
-        Some("needs a position estimate, which this vehicle does not have"),
-    ),
-    (MODE_SURFACE, "SURFACE", None),
-    (
-        16,
-        "POSHOLD",
-        Some("needs a position estimate, which this vehicle does not have"),
-    ),
-    (20, "MOTOR_DETECT", Some("not available on this vehicle")),
-    (
-        21,
-        "SURFTRAK",
-        Some("needs a rangefinder, which this vehicle does not have"),
-    ),
-];
-pub const MODE_MANUAL: u32 = 19;
 /// All thrusters neutral.
 pub const NEUTRAL_GO: Command = Command::Go {
     port_us: 1500,
     vertical_us: 1500,
     starboard_us: 1500,
 };
-/// Neptunus' own mode: each thruster driven directly (NEPTUNUS_THRUSTERS).
-pub const MODE_MANUAL_THRUSTERS: u32 = 100;
 
+// The mode numbers by name, for code and tests that speak `custom_mode`.
+pub const MODE_MANUAL: u32 = Mode::Manual.number();
+pub const MODE_MANUAL_THRUSTERS: u32 = Mode::ManualThrusters.number();
+pub const MODE_STABILIZE: u32 = Mode::Stabilize.number();
+pub const MODE_ALT_HOLD: u32 = Mode::AltHold.number();
+pub const MODE_SURFACE: u32 = Mode::Surface.number();
+
+/// The name of a `custom_mode` number ("UNKNOWN" for none of ours).
 pub fn mode_name(mode: u32) -> &'static str {
-    MODES
-        .iter()
-        .find(|m| m.0 == mode)
-        .map_or("UNKNOWN", |m| m.1)
+    Mode::name_of(mode)
 }
 
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -310,7 +275,7 @@ struct Stamped<T> {
 pub struct Vehicle {
     identity: Identity,
     params: ParamStore,
-    mode: u32,
+    mode: Mode,
     armed: bool,
     link: LinkState,
     link_reason: Option<String>,
@@ -384,7 +349,7 @@ impl Vehicle {
         Self {
             identity,
             params,
-            mode: MODE_MANUAL,
+            mode: Mode::BOOT,
             armed: false,
             link: LinkState::Down,
             link_reason: None,
@@ -473,8 +438,9 @@ impl Vehicle {
     pub fn armed(&self) -> bool {
         self.armed
     }
+    /// The mode's number (HEARTBEAT.custom_mode).
     pub fn mode(&self) -> u32 {
-        self.mode
+        self.mode.number()
     }
     /// The system id in use (SYSID_THISMAV as it was at start).
     pub fn sysid(&self) -> u8 {
@@ -884,7 +850,7 @@ impl Vehicle {
             MavState::MAV_STATE_STANDBY
         };
         MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            custom_mode: self.mode,
+            custom_mode: self.mode.number(),
             mavtype: MavType::MAV_TYPE_SUBMARINE,
             autopilot: match self.identity {
                 Identity::Ardupilot => MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
@@ -912,8 +878,8 @@ impl Vehicle {
             (self.depth_m.value, 0.0)
         };
         match id {
-            0 => vec![self.heartbeat()],
-            1 => {
+            HEARTBEAT_DATA::ID => vec![self.heartbeat()],
+            SYS_STATUS_DATA::ID => {
                 let (present, enabled, health) = self.sensors(now);
                 let s = &self.status.value;
                 vec![MavMessage::SYS_STATUS(SYS_STATUS_DATA {
@@ -931,11 +897,11 @@ impl Vehicle {
                     ..Default::default()
                 })]
             }
-            2 => vec![MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
+            SYSTEM_TIME_DATA::ID => vec![MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
                 time_unix_usec: now.unix_us,
                 time_boot_ms: boot_ms,
             })],
-            30 if self.fresh(&self.heading_deg, now) => {
+            ATTITUDE_DATA::ID if self.fresh(&self.heading_deg, now) => {
                 let yaw = (heading + 180.0).rem_euclid(360.0) - 180.0;
                 vec![MavMessage::ATTITUDE(ATTITUDE_DATA {
                     time_boot_ms: boot_ms,
@@ -947,7 +913,7 @@ impl Vehicle {
                     yawspeed: yaw_rate_rps as f32,
                 })]
             }
-            33 if self.fresh(&self.depth_m, now) => {
+            GLOBAL_POSITION_INT_DATA::ID if self.fresh(&self.depth_m, now) => {
                 vec![MavMessage::GLOBAL_POSITION_INT(GLOBAL_POSITION_INT_DATA {
                     time_boot_ms: boot_ms,
                     lat: 0,
@@ -964,7 +930,7 @@ impl Vehicle {
                     },
                 })]
             }
-            36 => {
+            SERVO_OUTPUT_RAW_DATA::ID => {
                 let [port, vert, star] = self.motors_us;
                 let laser_pwm = if self.laser > 0 { 1900 } else { 1100 };
                 let lights_pwm = (1100 + (u32::from(self.lights) * 800) / 255) as u16;
@@ -981,7 +947,9 @@ impl Vehicle {
                     ..Default::default()
                 })]
             }
-            74 if self.fresh(&self.heading_deg, now) || self.fresh(&self.depth_m, now) => {
+            VFR_HUD_DATA::ID
+                if self.fresh(&self.heading_deg, now) || self.fresh(&self.depth_m, now) =>
+            {
                 let throttle =
                     ((i32::from(self.motors_us[1]) - 1500).unsigned_abs() / 5).min(100) as u16;
                 vec![MavMessage::VFR_HUD(VFR_HUD_DATA {
@@ -993,7 +961,9 @@ impl Vehicle {
                     throttle,
                 })]
             }
-            137 if self.fresh(&self.status, now) && self.status.value.pres_mbar.is_some() => {
+            SCALED_PRESSURE2_DATA::ID
+                if self.fresh(&self.status, now) && self.status.value.pres_mbar.is_some() =>
+            {
                 let s = &self.status.value;
                 vec![MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
                     time_boot_ms: boot_ms,
@@ -1003,7 +973,7 @@ impl Vehicle {
                     temperature_press_diff: 0,
                 })]
             }
-            147 => {
+            BATTERY_STATUS_DATA::ID => {
                 let s = &self.status.value;
                 let mut voltages = [u16::MAX; 10];
                 voltages[0] = s.vout_v.map_or(u16::MAX, |v| {
@@ -1024,7 +994,7 @@ impl Vehicle {
                     ..Default::default()
                 })]
             }
-            251 => {
+            NAMED_VALUE_FLOAT_DATA::ID => {
                 let tilt_min = self.param("NEPT_TILT_MIN_US", 1000.0);
                 let tilt_max = self.param("NEPT_TILT_MAX_US", 2000.0);
                 let tilt = if tilt_max > tilt_min {
@@ -1052,9 +1022,9 @@ impl Vehicle {
                 })
                 .collect()
             }
-            148 => vec![self.autopilot_version()],
-            512 => vec![self.control_status()],
-            44101
+            AUTOPILOT_VERSION_DATA::ID => vec![self.autopilot_version()],
+            CONTROL_STATUS_DATA::ID => vec![self.control_status()],
+            NEPTUNUS_SIM_STATE_DATA::ID
                 if self
                     .sim_truth
                     .at
@@ -1346,45 +1316,41 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) -> MavResult {
-        match MODES.iter().find(|m| m.0 == mode) {
-            None => {
-                self.statustext(
-                    MavSeverity::MAV_SEVERITY_WARNING,
-                    &format!("Mode {mode} does not exist"),
-                    out,
-                );
-                MavResult::MAV_RESULT_FAILED
-            }
-            Some((_, name, Some(why))) => {
-                self.statustext(
-                    MavSeverity::MAV_SEVERITY_WARNING,
-                    &format!("Mode {name} refused: {why}"),
-                    out,
-                );
-                MavResult::MAV_RESULT_FAILED
-            }
-            Some((m, name, None)) => {
-                if self.mode != *m {
-                    if let Some(why) = self.hold_unavailable(*m, now) {
-                        self.statustext(
-                            MavSeverity::MAV_SEVERITY_WARNING,
-                            &format!("Mode {name} refused: {why}"),
-                            out,
-                        );
-                        return MavResult::MAV_RESULT_FAILED;
-                    }
-                    let old = mode_name(self.mode);
-                    self.mode = *m;
-                    // A mode change is a safety-mode stop.
-                    self.stop_pilot();
-                    self.holds_reset();
-                    self.send_neutral(out);
-                    self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {name}"), out);
-                    self.log("mode", by, format!("{old} -> {name}"), out);
-                }
-                MavResult::MAV_RESULT_ACCEPTED
-            }
+        let Some(m) = Mode::from_number(mode) else {
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &format!("Mode {mode} does not exist"),
+                out,
+            );
+            return MavResult::MAV_RESULT_FAILED;
+        };
+        if let Some(why) = m.refused() {
+            self.statustext(
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &format!("Mode {m} refused: {why}"),
+                out,
+            );
+            return MavResult::MAV_RESULT_FAILED;
         }
+        if self.mode != m {
+            if let Some(why) = self.hold_unavailable(m, now) {
+                self.statustext(
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!("Mode {m} refused: {why}"),
+                    out,
+                );
+                return MavResult::MAV_RESULT_FAILED;
+            }
+            let old = self.mode;
+            self.mode = m;
+            // A mode change is a safety-mode stop.
+            self.stop_pilot();
+            self.holds_reset();
+            self.send_neutral(out);
+            self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {m}"), out);
+            self.log("mode", by, format!("{old} -> {m}"), out);
+        }
+        MavResult::MAV_RESULT_ACCEPTED
     }
 
     fn command(&mut self, from: Sender, cmd: MavCmd, p: [f32; 7], now: Now, out: &mut Vec<Output>) {
@@ -1487,14 +1453,16 @@ impl Vehicle {
             C::MAV_CMD_REQUEST_MESSAGE => {
                 let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
                 let msgs = match id {
-                    435 => self.available_modes(given(p[1]).unwrap_or(0.0) as u32),
-                    22 => {
+                    AVAILABLE_MODES_DATA::ID => {
+                        self.available_modes(given(p[1]).unwrap_or(0.0) as u32)
+                    }
+                    PARAM_VALUE_DATA::ID => {
                         // PARAM_VALUE by index (param2).
                         self.param_value(given(p[1]).unwrap_or(-1.0).max(0.0) as usize)
                             .into_iter()
                             .collect()
                     }
-                    300 => vec![protocol_version()],
+                    PROTOCOL_VERSION_DATA::ID => vec![protocol_version()],
                     _ => self.build(id, now),
                 };
                 if msgs.is_empty() {
@@ -1699,15 +1667,15 @@ impl Vehicle {
     }
 
     fn available_modes(&self, index: u32) -> Vec<MavMessage> {
-        let n = MODES.len() as u8;
-        MODES
+        let n = Mode::ALL.len() as u8;
+        Mode::ALL
             .iter()
             .enumerate()
             .filter(|(i, _)| index == 0 || *i as u32 + 1 == index)
-            .map(|(i, (num, name, refused))| {
+            .map(|(i, m)| {
                 MavMessage::AVAILABLE_MODES(AVAILABLE_MODES_DATA {
-                    custom_mode: *num,
-                    properties: if refused.is_some() {
+                    custom_mode: m.number(),
+                    properties: if m.refused().is_some() {
                         MavModeProperty::MAV_MODE_PROPERTY_NOT_USER_SELECTABLE
                     } else {
                         MavModeProperty::empty()
@@ -1715,7 +1683,7 @@ impl Vehicle {
                     number_modes: n,
                     mode_index: i as u8 + 1,
                     standard_mode: MavStandardMode::MAV_STANDARD_MODE_NON_STANDARD,
-                    mode_name: chars(name),
+                    mode_name: chars(m.name()),
                 })
             })
             .collect()

@@ -7,6 +7,8 @@
 //!   RC override to normalised sticks, button edges.
 //! - [`params`]: the MAVLink parameter set (ArduSub names and types where
 //!   the meaning is the same), its validation and its file storage.
+//! - [`mode`]: the flight modes (ArduSub's numbers and ours), their names and
+//!   whether Neptunus can honour them.
 //! - [`telemetry`]: the per-endpoint telemetry schedule.
 //! - [`estimator`]: depth and heading Kalman filters with wild-point gating.
 //! - [`autopilot`]: depth and heading hold (PID controllers and setpoints).
@@ -19,5 +21,6 @@ pub mod estimator;
 pub mod input;
 pub mod machine;
 pub mod mixer;
+pub mod mode;
 pub mod params;
 pub mod telemetry;

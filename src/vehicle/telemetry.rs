@@ -8,36 +8,60 @@
 use std::collections::BTreeMap;
 use std::time::Duration;
 
+use mavlink_core::MessageData;
+
+use crate::dialect::neptunus::*;
+
 /// Message ids Neptunus can stream, with ArduSub's default rate in Hz
 /// (0 = not streamed unless asked for).
 pub const STREAMABLE: &[(u32, f64)] = &[
-    (0, 1.0),      // HEARTBEAT
-    (1, 2.0),      // SYS_STATUS
-    (2, 3.0),      // SYSTEM_TIME
-    (30, 10.0),    // ATTITUDE
-    (33, 3.0),     // GLOBAL_POSITION_INT
-    (36, 2.0),     // SERVO_OUTPUT_RAW
-    (62, 4.0),     // NAV_CONTROLLER_OUTPUT (autopilot setpoints and errors)
-    (74, 10.0),    // VFR_HUD
-    (137, 2.0),    // SCALED_PRESSURE2
-    (147, 3.0),    // BATTERY_STATUS
-    (251, 2.0),    // NAMED_VALUE_FLOAT (a group: Lights1, PilotGain, CamTilt, Laser …)
-    (512, 1.0),    // CONTROL_STATUS
-    (44101, 10.0), // NEPTUNUS_SIM_STATE (only while simulating)
-    (44102, 10.0), // NEPTUNUS_ESTIMATE (raw readings beside the estimates)
-    (44103, 4.0),  // NEPTUNUS_AUTOPILOT (setpoints and controller outputs)
+    (HEARTBEAT_DATA::ID, 1.0),
+    (SYS_STATUS_DATA::ID, 2.0),
+    (SYSTEM_TIME_DATA::ID, 3.0),
+    (ATTITUDE_DATA::ID, 10.0),
+    (GLOBAL_POSITION_INT_DATA::ID, 3.0),
+    (SERVO_OUTPUT_RAW_DATA::ID, 2.0),
+    // The autopilot's setpoints and errors.
+    (NAV_CONTROLLER_OUTPUT_DATA::ID, 4.0),
+    (VFR_HUD_DATA::ID, 10.0),
+    (SCALED_PRESSURE2_DATA::ID, 2.0),
+    (BATTERY_STATUS_DATA::ID, 3.0),
+    // A group: Lights1, PilotGain, CamTilt, Laser …
+    (NAMED_VALUE_FLOAT_DATA::ID, 2.0),
+    (CONTROL_STATUS_DATA::ID, 1.0),
+    // Only while simulating.
+    (NEPTUNUS_SIM_STATE_DATA::ID, 10.0),
+    // Raw readings beside the estimates.
+    (NEPTUNUS_ESTIMATE_DATA::ID, 10.0),
+    // Setpoints and controller outputs.
+    (NEPTUNUS_AUTOPILOT_DATA::ID, 4.0),
 ];
 
 /// Legacy REQUEST_DATA_STREAM groups, as ArduPilot maps them for a submarine.
 pub fn stream_group(stream_id: u8) -> &'static [u32] {
     match stream_id {
-        1 => &[137],          // RAW_SENSORS
-        2 => &[1, 62, 44103], // EXTENDED_STATUS (with the controllers, as ArduPilot)
-        3 => &[36],           // RC_CHANNELS
-        6 => &[33],           // POSITION
-        10 => &[30, 44102],   // EXTRA1 (attitude and the estimates)
-        11 => &[74],          // EXTRA2
-        12 => &[2, 147, 251], // EXTRA3
+        // RAW_SENSORS
+        1 => &[SCALED_PRESSURE2_DATA::ID],
+        // EXTENDED_STATUS (with the controllers, as ArduPilot)
+        2 => &[
+            SYS_STATUS_DATA::ID,
+            NAV_CONTROLLER_OUTPUT_DATA::ID,
+            NEPTUNUS_AUTOPILOT_DATA::ID,
+        ],
+        // RC_CHANNELS
+        3 => &[SERVO_OUTPUT_RAW_DATA::ID],
+        // POSITION
+        6 => &[GLOBAL_POSITION_INT_DATA::ID],
+        // EXTRA1 (attitude and the estimates)
+        10 => &[ATTITUDE_DATA::ID, NEPTUNUS_ESTIMATE_DATA::ID],
+        // EXTRA2
+        11 => &[VFR_HUD_DATA::ID],
+        // EXTRA3
+        12 => &[
+            SYSTEM_TIME_DATA::ID,
+            BATTERY_STATUS_DATA::ID,
+            NAMED_VALUE_FLOAT_DATA::ID,
+        ],
         _ => &[],
     }
 }
@@ -80,7 +104,7 @@ pub const MIN_INTERVAL: Duration = Duration::from_millis(20);
 /// it (QGC after a few seconds, MAVProxy's "link down", our own GCS
 /// failsafe on their side).
 pub fn max_interval(msg_id: u32) -> Option<Duration> {
-    (msg_id == 0).then_some(Duration::from_secs(1))
+    (msg_id == HEARTBEAT_DATA::ID).then_some(Duration::from_secs(1))
 }
 
 /// Whether a message may be turned off (HEARTBEAT may not).

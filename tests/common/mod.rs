@@ -1,7 +1,8 @@
 //! Shared by the tests and benches that run the `neptunus` binary as a child
 //! process: finding the binary, the process itself (never left behind, not
 //! even stopped), a bare UDP ground station (sysid 255, MAVLink 2 through our
-//! dialect) and the board emulator on a real pty.
+//! dialect) and the board emulator on a real pty. The `*_core` tests, which
+//! drive the vehicle core alone on synthetic time, share [`core_rig`].
 //!
 //! Tests include it as `mod common;`, benches as
 //! `#[path = "../tests/common/mod.rs"] mod common;`. Waiting is always for a
@@ -10,6 +11,8 @@
     dead_code,
     reason = "each test or bench binary uses a part of this module"
 )]
+
+pub mod core_rig;
 
 use std::fs::File;
 use std::net::UdpSocket;

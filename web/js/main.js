@@ -9,7 +9,6 @@ import { Recorder, Plots, Logger, SIGNALS } from '/js/dev.js';
 const $ = (id) => document.getElementById(id);
 const SEND_PERIOD_MS = 50; // sticks at 20 Hz
 const ALIVE_PERIOD_MS = 500;
-const MODE_MANUAL_THRUSTERS = 100;
 
 const state = {
   ws: null,
@@ -86,6 +85,7 @@ function handle(m) {
 
 function onWelcome(m) {
   state.welcome = m;
+  showModes(m.modes || []);
   showRights();
   applyRotation(m.camera_rotation_deg || 0);
   // Tell the vehicle which input mode is in use (a stop, harmless at start).
@@ -250,8 +250,54 @@ function closeRequest() {
 
 // ---- commands from the page -------------------------------------------------
 
+/** The vehicle's mode number: telemetry's, else the one it starts in (null before the welcome). */
 function currentMode() {
-  return state.t && state.t.mode != null ? state.t.mode : 19;
+  if (state.t && state.t.mode != null) return state.t.mode;
+  return state.welcome ? state.welcome.boot_mode : null;
+}
+
+/** The modes the server offers (from the welcome); the page knows no mode number. */
+function offeredModes() {
+  return (state.welcome && state.welcome.modes) || [];
+}
+
+/** In this mode the page drives each thruster rather than the sticks. */
+function drivesThrusters(mode) {
+  return offeredModes().some((m) => m.mode === mode && m.thrusters);
+}
+
+/** The control-mode radio buttons and the SURFACE button, from the welcome's mode list. */
+function showModes(modes) {
+  const box = $('control-modes');
+  box.querySelectorAll('label.mode').forEach((l) => {
+    if (l.nextSibling && l.nextSibling.nodeType === Node.TEXT_NODE) l.nextSibling.remove();
+    l.remove();
+  });
+  const surface = $('surface');
+  for (const m of modes) {
+    if (m.button) {
+      surface.textContent = m.label;
+      continue;
+    }
+    const label = document.createElement('label');
+    label.className = 'mode';
+    const r = document.createElement('input');
+    r.type = 'radio';
+    r.name = 'mode';
+    r.value = String(m.mode);
+    r.checked = m.mode === currentMode();
+    r.addEventListener('change', () => {
+      if (!r.checked) return;
+      safetyStop(null);
+      send({ type: 'mode', mode: m.mode });
+      labelTouchpad(m.mode);
+    });
+    label.append(r, ` ${m.label}`);
+    // The space between inline labels that the static markup had.
+    box.insertBefore(label, surface);
+    box.insertBefore(document.createTextNode(' '), surface);
+  }
+  labelTouchpad();
 }
 
 function inControl() {
@@ -263,7 +309,7 @@ function inControl() {
  * held, and one neutral command on release. */
 function sendTick() {
   if (!state.welcome || !state.welcome.pilot) return;
-  const manual = currentMode() === MODE_MANUAL_THRUSTERS;
+  const manual = drivesThrusters(currentMode());
   const cmd = input.command(manual);
   const active = Object.values(cmd).some((v) => v !== 0);
   if (inControl() || active || state.wasActive) {
@@ -316,13 +362,11 @@ function bindControls() {
     if (r.value === 'headtracking') input.startHead((n) => { $('input-note').textContent = n; });
     if (r.value === 'gamepad') $('input-note').textContent = input.pad ? input.pad.id : 'press a button on the gamepad';
   }));
-  document.querySelectorAll('input[name=mode]').forEach((r) => r.addEventListener('change', () => {
-    if (!r.checked) return;
+  $('surface').onclick = () => {
     safetyStop(null);
-    send({ type: 'mode', mode: Number(r.value) });
-    labelTouchpad(Number(r.value));
-  }));
-  $('surface').onclick = () => { safetyStop(null); send({ type: 'mode', mode: 9 }); };
+    const surface = offeredModes().find((m) => m.button);
+    if (surface) send({ type: 'mode', mode: surface.mode });
+  };
   document.querySelectorAll('input[name=run]').forEach((r) => r.addEventListener('change', () => {
     if (!r.checked) return;
     safetyStop(null);
@@ -402,7 +446,7 @@ function bindKeys() {
 }
 
 function labelTouchpad(mode) {
-  const manual = (mode ?? currentMode()) === MODE_MANUAL_THRUSTERS;
+  const manual = drivesThrusters(mode ?? currentMode());
   const labels = manual ? KEY_LABELS.manual : KEY_LABELS.motion;
   document.querySelectorAll('#touchpad .tp').forEach((b) => { b.textContent = labels[b.dataset.key]; });
 }
@@ -495,7 +539,7 @@ bindControls();
 bindKeys();
 bindTouch();
 bindSafety();
-labelTouchpad(19);
+labelTouchpad();
 startVideo();
 connect();
 setInterval(sendTick, SEND_PERIOD_MS);

@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use super::authority::Control;
-use super::{MODE_MANUAL, MODE_MANUAL_THRUSTERS, Now, Output, Sender, Vehicle, holds};
+use super::{Mode, Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
 use crate::firmware::link::LinkState;
@@ -91,7 +91,7 @@ impl Vehicle {
             d.yaw = v;
         }
         // In MANUAL_THRUSTERS the sticks do not drive (buttons still work).
-        if self.mode != MODE_MANUAL_THRUSTERS {
+        if self.mode != Mode::ManualThrusters {
             self.pilot.last_input = Some(now.mono);
             if self.picked_up(is_neutral(&d), now, out) {
                 self.pilot.sticks = d;
@@ -150,7 +150,7 @@ impl Vehicle {
         apply(&mut d.surge, u.forward);
         apply(&mut d.heave, u.heave_down);
         apply(&mut d.yaw, u.yaw);
-        let sticks_drive = self.mode != MODE_MANUAL_THRUSTERS;
+        let sticks_drive = self.mode != Mode::ManualThrusters;
         if sticks_drive && self.picked_up(is_neutral(&d), now, out) {
             self.pilot.sticks = d;
         }
@@ -185,7 +185,7 @@ impl Vehicle {
             return;
         }
         self.note_life(from, now);
-        if self.mode != MODE_MANUAL_THRUSTERS {
+        if self.mode != Mode::ManualThrusters {
             // Not this mode's input: it neither drives nor keeps other input fresh.
             return;
         }
@@ -292,7 +292,7 @@ impl Vehicle {
             let mut us = [NEUTRAL_US; 3];
             us[t.slot] = t.pwm_us;
             us
-        } else if holds::holds_depth(self.mode) || holds::holds_heading(self.mode) {
+        } else if self.mode.holds_depth() || self.mode.holds_heading() {
             // The autopilots act only while a live owner (or a failsafe
             // action) is behind them: the same rule that feeds the dead-man.
             if self.owner_alive(now, super::authority::LIFE_FEEDS_DEADMAN)
@@ -312,7 +312,7 @@ impl Vehicle {
         } else if !self.input_fresh(now) {
             // Pilot input lost: neutral first (the failsafe action comes on top).
             [NEUTRAL_US; 3]
-        } else if self.mode == MODE_MANUAL {
+        } else if self.mode == Mode::Manual {
             let mut d = self.pilot.sticks;
             if let Some(h) = self.pilot.hold {
                 d.surge = (d.surge + h.surge).clamp(-1.0, 1.0);
@@ -321,7 +321,7 @@ impl Vehicle {
             }
             d.heave *= f64::from(self.params.js_thr_gain());
             mixer::mix(&d, &self.mixer())
-        } else if self.mode == MODE_MANUAL_THRUSTERS {
+        } else if self.mode == Mode::ManualThrusters {
             let cfg = self.mixer();
             let dirs = cfg.directions;
             let [p, v, s] = self.pilot.thrusters;
@@ -441,18 +441,19 @@ impl Vehicle {
                 self.disarm("button", Some(from.sysid), out);
             }
             5..=13 => {
+                // ArduSub's mode_* button functions.
                 let mode = match function {
-                    5 => 19,
-                    6 => 0,
-                    7 => 2,
-                    8 => 16,
-                    9 => 3,
-                    10 => 7,
-                    11 => 4,
-                    12 => 1,
-                    _ => 21,
+                    5 => Mode::Manual,
+                    6 => Mode::Stabilize,
+                    7 => Mode::AltHold,
+                    8 => Mode::PosHold,
+                    9 => Mode::Auto,
+                    10 => Mode::Circle,
+                    11 => Mode::Guided,
+                    12 => Mode::Acro,
+                    _ => Mode::SurfTrak,
                 };
-                self.set_mode(mode, Some(from.sysid), now, out);
+                self.set_mode(mode.number(), Some(from.sysid), now, out);
             }
             21 => self.set_tilt_us(1500.0, out),
             22 | 23 => {

@@ -7,9 +7,7 @@
 
 use std::time::Duration;
 
-use super::{
-    MODE_ALT_HOLD, MODE_MANUAL, MODE_MANUAL_THRUSTERS, MODE_SURFACE, MODES, Now, Output, Vehicle,
-};
+use super::{Mode, Now, Output, Vehicle};
 use crate::dialect::neptunus::{MavResult, MavSeverity};
 use crate::firmware::link::LinkState;
 use crate::vehicle::params::{FailsafeAction, ParamStore};
@@ -94,7 +92,7 @@ pub(super) const RULES: [Rule; 5] = [
 #[derive(Debug, Clone, Default, PartialEq)]
 pub(super) struct Failsafes {
     pub active: [bool; RULES.len()],
-    pub mode: Option<u32>,
+    pub mode: Option<Mode>,
 }
 
 /// How long a battery voltage has been below / above one threshold.
@@ -147,7 +145,7 @@ impl Vehicle {
     /// No stick input from the owner (nor a motor test) for FS_PILOT_TIMEOUT
     /// since the input, the test or arming, in a mode the pilot drives.
     fn pilot_input_stale(&self, now: Now) -> bool {
-        let pilot_mode = matches!(self.mode, MODE_MANUAL | MODE_MANUAL_THRUSTERS);
+        let pilot_mode = matches!(self.mode, Mode::Manual | Mode::ManualThrusters);
         let timeout = Duration::from_secs_f32(self.params.fs_pilot_timeout_s().clamp(0.1, 3.0));
         let last = [
             self.pilot.last_input,
@@ -222,24 +220,26 @@ impl Vehicle {
                 self.disarm(&format!("failsafe: {name}"), None, out);
                 return;
             }
-            FailsafeAction::DepthHold => MODE_ALT_HOLD,
-            FailsafeAction::Surface => MODE_SURFACE,
+            FailsafeAction::DepthHold => Mode::AltHold,
+            FailsafeAction::Surface => Mode::Surface,
         };
-        let why = if !MODES.iter().any(|m| m.0 == mode && m.2.is_none()) {
+        let why = if mode.refused().is_some() {
             Some("not available on this vehicle")
         } else if !self.armed || self.link != LinkState::Up {
             Some("not possible without the board link")
         } else {
             self.hold_unavailable(mode, now)
         };
-        if why.is_none() && self.set_mode(mode, None, now, out) == MavResult::MAV_RESULT_ACCEPTED {
+        if why.is_none()
+            && self.set_mode(mode.number(), None, now, out) == MavResult::MAV_RESULT_ACCEPTED
+        {
             self.failsafes.mode = Some(mode);
         } else {
             self.statustext(
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!(
                     "Failsafe {name}: {} is {}, disarming instead",
-                    super::mode_name(mode),
+                    mode,
                     why.unwrap_or("refused")
                 ),
                 out,

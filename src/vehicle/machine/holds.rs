@@ -10,17 +10,15 @@
 
 use std::time::Duration;
 
+use mavlink_core::MessageData;
+
 use super::authority::Control;
-use super::{Now, Output, Sender, Vehicle};
+use super::{Mode, Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
 use crate::vehicle::autopilot::{DepthHold, HeadingHold, Measured};
 use crate::vehicle::estimator::{Estimate, Estimator, Fused};
 use crate::vehicle::mixer::Demand;
-
-pub const MODE_STABILIZE: u32 = 0;
-pub const MODE_ALT_HOLD: u32 = 2;
-pub const MODE_SURFACE: u32 = 9;
 
 /// Where thruster commands go and telemetry comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
@@ -57,16 +55,6 @@ pub(super) struct Holds {
     pub run_mode: RunMode,
     /// Setpoint messages in a mode that cannot use them, reported at most every 5 s.
     pub ignored_target_report: Option<Duration>,
-}
-
-/// Modes in which the heading controller drives yaw.
-pub(super) fn holds_heading(mode: u32) -> bool {
-    matches!(mode, MODE_STABILIZE | MODE_ALT_HOLD)
-}
-
-/// Modes in which a controller drives the vertical thruster.
-pub(super) fn holds_depth(mode: u32) -> bool {
-    matches!(mode, MODE_ALT_HOLD | MODE_SURFACE)
 }
 
 /// POSITION_TARGET_TYPEMASK bits.
@@ -139,18 +127,18 @@ impl Vehicle {
         }
         let m = self.measured(now);
         let sticks = self.pilot_sticks(now);
-        self.holds.yaw_out = if holds_heading(self.mode) {
+        self.holds.yaw_out = if self.mode.holds_heading() {
             let g = self.params.heading_gains();
             Some(self.holds.heading.step(&g, &m, sticks.yaw, dt_s))
         } else {
             None
         };
         self.holds.heave_out = match self.mode {
-            MODE_ALT_HOLD => {
+            Mode::AltHold => {
                 let g = self.params.depth_gains();
                 Some(self.holds.depth.step(&g, &m, sticks.heave, dt_s))
             }
-            MODE_SURFACE => {
+            Mode::Surface => {
                 // SURFACE_DEPTH is negative below the surface: −0.1 m → 0.1 m deep.
                 let surfaced_at_m = -f64::from(self.params.surface_depth_m());
                 if !self.holds.surfaced && m.depth_m <= surfaced_at_m {
@@ -179,12 +167,12 @@ impl Vehicle {
     }
 
     /// Why the autopilot `mode` cannot be entered now, if it cannot.
-    pub(super) fn hold_unavailable(&self, mode: u32, now: Now) -> Option<&'static str> {
+    pub(super) fn hold_unavailable(&self, mode: Mode, now: Now) -> Option<&'static str> {
         let e = self.holds.est.estimate(now.mono);
-        if holds_depth(mode) && !e.depth_valid {
+        if mode.holds_depth() && !e.depth_valid {
             return Some("no depth estimate (no fresh depth from the board)");
         }
-        if holds_heading(mode) && !e.heading_valid {
+        if mode.holds_heading() && !e.heading_valid {
             return Some("no heading estimate (no fresh heading from the board)");
         }
         None
@@ -314,7 +302,7 @@ impl Vehicle {
     ) {
         let mut used = false;
         if let Some(d) = depth_m
-            && self.mode == MODE_ALT_HOLD
+            && self.mode == Mode::AltHold
         {
             if self
                 .holds
@@ -333,7 +321,7 @@ impl Vehicle {
             used = true;
         }
         if let Some(h) = heading_rad
-            && holds_heading(self.mode)
+            && self.mode.holds_heading()
         {
             self.holds.heading.set_target(h);
             used = true;
@@ -348,7 +336,7 @@ impl Vehicle {
             self.holds.ignored_target_report = Some(now.mono);
             self.statustext(
                 MavSeverity::MAV_SEVERITY_WARNING,
-                &format!("{what} ignored in {}: depth targets need ALT_HOLD, heading targets STABILIZE or ALT_HOLD", super::mode_name(self.mode)),
+                &format!("{what} ignored in {}: depth targets need ALT_HOLD, heading targets STABILIZE or ALT_HOLD", self.mode),
                 out,
             );
         }
@@ -372,14 +360,14 @@ impl Vehicle {
         {
             return MavResult::MAV_RESULT_DENIED;
         }
-        if (depth.is_some() && self.mode != MODE_ALT_HOLD)
-            || (heading.is_some() && !holds_heading(self.mode))
+        if (depth.is_some() && self.mode != Mode::AltHold)
+            || (heading.is_some() && !self.mode.holds_heading())
         {
             self.statustext(
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!(
                     "Autopilot target refused in {}: depth needs ALT_HOLD, heading STABILIZE or ALT_HOLD",
-                    super::mode_name(self.mode)
+                    self.mode
                 ),
                 out,
             );
@@ -482,7 +470,7 @@ impl Vehicle {
         let e = self.holds.est.estimate(now.mono);
         let nan = f32::NAN;
         match id {
-            62 => {
+            NAV_CONTROLLER_OUTPUT_DATA::ID => {
                 let heading_target = self.holds.heading.target_rad.map(f64::to_degrees);
                 let bearing = heading_target.unwrap_or(e.heading_deg);
                 let depth_error = self.holds.depth.target_m.map_or(0.0, |t| t - e.depth_m);
@@ -500,7 +488,7 @@ impl Vehicle {
                     },
                 ))
             }
-            44102
+            NEPTUNUS_ESTIMATE_DATA::ID
                 if self.holds.est.depth_filter().initialised()
                     || self.holds.est.heading_filter().initialised() =>
             {
@@ -530,15 +518,15 @@ impl Vehicle {
                     flags,
                 }))
             }
-            44103 => {
+            NEPTUNUS_AUTOPILOT_DATA::ID => {
                 let mut flags = NeptunusAutopilotFlags::empty();
-                if self.holds.heave_out.is_some() && self.mode == MODE_ALT_HOLD {
+                if self.holds.heave_out.is_some() && self.mode == Mode::AltHold {
                     flags |= NeptunusAutopilotFlags::NEPTUNUS_AUTOPILOT_FLAGS_DEPTH_HOLD;
                 }
                 if self.holds.yaw_out.is_some() {
                     flags |= NeptunusAutopilotFlags::NEPTUNUS_AUTOPILOT_FLAGS_HEADING_HOLD;
                 }
-                if self.mode == MODE_SURFACE && self.armed && !self.holds.surfaced {
+                if self.mode == Mode::Surface && self.armed && !self.holds.surfaced {
                     flags |= NeptunusAutopilotFlags::NEPTUNUS_AUTOPILOT_FLAGS_SURFACING;
                 }
                 let h = &self.holds;
