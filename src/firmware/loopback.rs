@@ -2,15 +2,18 @@
 //! built-in simulator of run mode SIMULATOR and the closed-loop scenarios
 //! that run on simulated time.
 //!
-//! Owns one sans-IO [`Board`] and a telemetry decoder, and moves bytes
-//! between them and typed commands/events. It must never read a clock:
-//! the caller passes the time, so a scenario runs as fast as the CPU allows
-//! and gives the same result every time.
+//! [`LoopbackBoard`] owns one sans-IO [`Board`] and a telemetry decoder, and
+//! moves bytes between them and typed commands/events. [`BuiltinSim`] is the
+//! one type the app (run mode SIMULATOR) and `scenario/` step: commands,
+//! dead-man pings and ground truth. Neither must ever read a clock: the
+//! caller passes the time, so a scenario runs as fast as the CPU allows and
+//! gives the same result every time.
 
 use std::time::Duration;
 
 use super::codec::{self, Command, Event, Framing, LineDecoder};
-use super::emulator::{Board, BoardSnapshot, EmulatorOptions};
+use super::emulator::{Board, BoardSnapshot, EmulatorOptions, SimSnapshot};
+use crate::vehicle::machine::SimTruth;
 
 /// A board emulator driven by calls instead of a serial line.
 #[derive(Debug)]
@@ -59,5 +62,120 @@ impl LoopbackBoard {
     /// The emulated board (to place the simulated vehicle, stall it …).
     pub fn board_mut(&mut self) -> &mut Board {
         &mut self.board
+    }
+}
+
+/// Dead-man pings to the built-in simulator's board, at most this often (its
+/// dead man stops the motors after 2 s without one).
+pub const PING_PERIOD: Duration = Duration::from_millis(500);
+
+/// The built-in simulator: a board emulator and its physics in this
+/// process, stepped on the caller's tick. The app's run mode SIMULATOR and
+/// the closed-loop scenarios both drive it through this type: stepping,
+/// commands, the dead-man ping and the ground truth.
+#[derive(Debug)]
+pub struct BuiltinSim {
+    board: LoopbackBoard,
+    last_ping: Option<Duration>,
+}
+
+impl BuiltinSim {
+    /// A board powered up at `now`, the simulated vehicle at rest at the surface.
+    pub fn new(opts: EmulatorOptions, now: Duration) -> Self {
+        Self {
+            board: LoopbackBoard::new(opts, now),
+            last_ping: None,
+        }
+    }
+
+    /// Places the simulated vehicle, at rest, at this depth and heading.
+    pub fn place(&mut self, depth_m: f64, heading_deg: f64) {
+        let mut s = crate::sim::SimState::default();
+        s.eta[2] = depth_m;
+        s.eta[3] = heading_deg.to_radians();
+        self.board.board_mut().set_sim_state(s);
+    }
+
+    /// Runs the board and its simulator to `now`; the telemetry it printed
+    /// since the last step is appended to `events`.
+    pub fn step(&mut self, now: Duration, events: &mut Vec<Event>) {
+        self.board.advance(now, events);
+    }
+
+    /// A command for the board, at `now`.
+    pub fn command(&mut self, cmd: &Command, now: Duration) {
+        self.board.send(cmd, now);
+    }
+
+    /// The vehicle is healthy: the board's dead man hears a ping (at most
+    /// every [`PING_PERIOD`]).
+    pub fn healthy(&mut self, now: Duration) {
+        if self
+            .last_ping
+            .is_none_or(|t| now.saturating_sub(t) >= PING_PERIOD)
+        {
+            self.last_ping = Some(now);
+            self.board.send(&Command::Ping(0), now);
+        }
+    }
+
+    /// Where the simulated vehicle really is, for the core.
+    pub fn truth(&self) -> SimTruth {
+        sim_truth(&self.board.snapshot().sim)
+    }
+
+    pub fn snapshot(&self) -> BoardSnapshot {
+        self.board.snapshot()
+    }
+
+    pub fn loopback(&self) -> &LoopbackBoard {
+        &self.board
+    }
+}
+
+/// A simulator's state (the emulator's, in or out of process) as the core
+/// takes it.
+pub fn sim_truth(s: &SimSnapshot) -> SimTruth {
+    SimTruth {
+        north_m: s.north_m,
+        east_m: s.east_m,
+        depth_m: s.depth_m,
+        heading_rad: s.heading_deg.to_radians(),
+        surge_mps: s.surge_mps,
+        sway_mps: s.sway_mps,
+        heave_mps: s.heave_mps,
+        yaw_rate_rps: s.yaw_rate_dps.to_radians(),
+        roll_rad: s.roll_deg.to_radians(),
+        pitch_rad: s.pitch_deg.to_radians(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_dead_man_hears_one_ping_per_period_however_often_the_vehicle_is_healthy() {
+        let mut sim = BuiltinSim::new(EmulatorOptions::default(), Duration::ZERO);
+        let mut events = Vec::new();
+        for ms in (10..=1000).step_by(10) {
+            let now = Duration::from_millis(ms);
+            sim.healthy(now);
+            sim.step(now, &mut events);
+        }
+        let pongs = events
+            .iter()
+            .filter(|e| matches!(e, Event::Pong(_)))
+            .count();
+        assert_eq!(pongs, 2, "pings at 10 ms and 510 ms: {events:?}");
+    }
+
+    #[test]
+    fn a_placed_vehicle_is_where_it_was_put() {
+        let mut sim = BuiltinSim::new(EmulatorOptions::default(), Duration::ZERO);
+        sim.place(12.0, 90.0);
+        let t = sim.truth();
+        assert!((t.depth_m - 12.0).abs() < 1e-9);
+        assert!((t.heading_rad - 90f64.to_radians()).abs() < 1e-9);
     }
 }

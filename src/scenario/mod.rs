@@ -5,7 +5,7 @@
 //! and gives the same numbers every time (the simulator is seeded).
 //!
 //! Owns the loop that moves commands and telemetry between
-//! [`Vehicle::handle`] and a [`LoopbackBoard`], and the recorded samples.
+//! [`Vehicle::handle`] and a [`BuiltinSim`], and the recorded samples.
 //! Used by the acceptance tests and by `neptunus sim-report` ([`report`]).
 //! It must never read a clock or sleep.
 
@@ -14,10 +14,10 @@ pub mod report;
 use std::time::Duration;
 
 use crate::dialect::neptunus::*;
-use crate::firmware::codec::{Command, Event};
+use crate::firmware::codec::Event;
 use crate::firmware::emulator::EmulatorOptions;
 use crate::firmware::link::LinkState;
-use crate::firmware::loopback::LoopbackBoard;
+use crate::firmware::loopback::{BuiltinSim, LoopbackBoard};
 use crate::vehicle::machine::{Identity, Input, Now, Output, Sender, Vehicle};
 use crate::vehicle::params::ParamStore;
 
@@ -76,14 +76,13 @@ pub struct Sample {
 /// A vehicle, its simulated board and a scripted pilot.
 pub struct Scenario {
     vehicle: Vehicle,
-    board: LoopbackBoard,
+    sim: BuiltinSim,
     now: Duration,
     outputs: Vec<Output>,
     events: Vec<Event>,
     sticks: Sticks,
     next_stick: Duration,
     next_heartbeat: Duration,
-    last_ping: Option<Duration>,
     samples: Vec<Sample>,
     /// Messages the vehicle sent (for assertions on texts and acks).
     pub sent: Vec<MavMessage>,
@@ -100,14 +99,13 @@ impl Scenario {
     pub fn with_params(opts: EmulatorOptions, params: ParamStore) -> Self {
         let mut s = Self {
             vehicle: Vehicle::new(Identity::Ardupilot, params, 1),
-            board: LoopbackBoard::new(opts, Duration::ZERO),
+            sim: BuiltinSim::new(opts, Duration::ZERO),
             now: Duration::ZERO,
             outputs: Vec::with_capacity(64),
             events: Vec::with_capacity(16),
             sticks: Sticks::CENTRED,
             next_stick: Duration::ZERO,
             next_heartbeat: Duration::ZERO,
-            last_ping: None,
             samples: Vec::new(),
             sent: Vec::new(),
             record_every: 1,
@@ -141,15 +139,8 @@ impl Scenario {
     fn apply(&mut self) {
         for out in std::mem::take(&mut self.outputs) {
             match out {
-                Output::Board(cmd) => self.board.send(&cmd, self.now),
-                Output::Healthy
-                    if self.last_ping.is_none_or(|t| {
-                        self.now.saturating_sub(t) >= Duration::from_millis(500)
-                    }) =>
-                {
-                    self.last_ping = Some(self.now);
-                    self.board.send(&Command::Ping(0), self.now);
-                }
+                Output::Board(cmd) => self.sim.command(&cmd, self.now),
+                Output::Healthy => self.sim.healthy(self.now),
                 Output::Send { msg, .. } => self.sent.push(msg),
                 _ => {}
             }
@@ -237,10 +228,7 @@ impl Scenario {
 
     /// Places the simulated vehicle (at rest).
     pub fn place(&mut self, depth_m: f64, heading_deg: f64) {
-        let mut s = crate::sim::SimState::default();
-        s.eta[2] = depth_m;
-        s.eta[3] = heading_deg.to_radians();
-        self.board.board_mut().set_sim_state(s);
+        self.sim.place(depth_m, heading_deg);
     }
 
     /// Runs for `duration` of simulated time, the ground station sending its
@@ -273,7 +261,7 @@ impl Scenario {
                     ..Default::default()
                 }));
             }
-            self.board.advance(self.now, &mut self.events);
+            self.sim.step(self.now, &mut self.events);
             for ev in std::mem::take(&mut self.events) {
                 self.input(Input::Board(ev));
             }
@@ -287,7 +275,7 @@ impl Scenario {
 
     fn record(&mut self) {
         let now = self.clock();
-        let snap = self.board.snapshot();
+        let snap = self.sim.snapshot();
         let e = self.vehicle.estimate(now);
         let (depth_target, heading_target) = self.vehicle.targets();
         let demand = self.vehicle.applied_demand();
@@ -337,7 +325,7 @@ impl Scenario {
     }
 
     pub fn board(&self) -> &LoopbackBoard {
-        &self.board
+        self.sim.loopback()
     }
 
     pub fn now(&self) -> Duration {

@@ -1800,4 +1800,9 @@ impl Vehicle {
             out,
         );
     }
+
+    /// The output voltage of the last full power reading (V), for the app's log line.
+    pub fn battery_v(&self) -> Option<f64> {
+        self.status.value.vout_v
+    }
 }

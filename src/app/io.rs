@@ -1,0 +1,162 @@
+//! Carries the core's outputs out: frames to the stations (one send path:
+//! encode → sequence → sign → route), commands to the board link or the
+//! built-in simulator, parameter saves, event-log records, the signing key.
+//! Decides nothing about the vehicle.
+
+use std::time::Duration;
+
+use super::params::ParamSaver;
+use super::signing::LinkSigning;
+use crate::eventlog::EventLog;
+use crate::firmware::emulator::EmulatorOptions;
+use crate::firmware::link::LinkHandle;
+use crate::firmware::loopback::BuiltinSim;
+use crate::mavlink::endpoint::{Outbound, Route, RouterHandle};
+use crate::mavlink::frame::{encode_command_ack_raw, encode_v2};
+use crate::vehicle::machine::{COMPONENT_ID, Now, Output, RunMode, To, Vehicle};
+
+/// The link hears that the vehicle is healthy at most this often.
+const HEALTHY_PERIOD: Duration = Duration::from_millis(100);
+
+pub(super) struct Io {
+    pub(super) hmi: crate::hmi::Outlet,
+    pub(super) router: RouterHandle,
+    pub(super) link: LinkHandle,
+    pub(super) params: ParamSaver,
+    pub(super) events: EventLog,
+    pub(super) signing: LinkSigning,
+    /// The built-in simulator while the run mode is SIMULATOR.
+    pub(super) simulator: Option<BuiltinSim>,
+    pub(super) simulator_opts: EmulatorOptions,
+    seq: u8,
+    last_healthy: Option<Duration>,
+}
+
+impl Io {
+    pub(super) fn new(
+        hmi: crate::hmi::Outlet,
+        router: RouterHandle,
+        link: LinkHandle,
+        params: ParamSaver,
+        events: EventLog,
+        signing: LinkSigning,
+        simulator_opts: EmulatorOptions,
+    ) -> Self {
+        Self {
+            hmi,
+            router,
+            link,
+            params,
+            events,
+            signing,
+            simulator: None,
+            simulator_opts,
+            seq: 0,
+            last_healthy: None,
+        }
+    }
+
+    pub(super) fn apply(&mut self, outputs: &mut Vec<Output>, vehicle: &Vehicle, now: Now) {
+        let sysid = vehicle.sysid();
+        for out in outputs.drain(..) {
+            match out {
+                Output::Send { to, msg } => {
+                    self.hmi.deliver(to, &msg);
+                    if self.hmi.only_hmi(to) {
+                        continue;
+                    }
+                    self.send_frame(to, now, |seq| encode_v2(sysid, COMPONENT_ID, seq, &msg));
+                }
+                Output::AckUnknown {
+                    to,
+                    command,
+                    result,
+                    target_system,
+                    target_component,
+                } => self.send_frame(to, now, |seq| {
+                    encode_command_ack_raw(
+                        sysid,
+                        COMPONENT_ID,
+                        seq,
+                        command,
+                        result,
+                        target_system,
+                        target_component,
+                    )
+                }),
+                Output::Board(cmd) => self.link.send(cmd),
+                Output::SimBoard(cmd) => {
+                    if let Some(sim) = self.simulator.as_mut() {
+                        sim.command(&cmd, now.mono);
+                    }
+                }
+                Output::RunMode {
+                    mode,
+                    start_depth_m,
+                    start_heading_deg,
+                } => {
+                    self.simulator = match mode {
+                        RunMode::Normal => None,
+                        RunMode::Simulator => {
+                            let mut sim = BuiltinSim::new(self.simulator_opts.clone(), now.mono);
+                            sim.place(start_depth_m, start_heading_deg);
+                            Some(sim)
+                        }
+                    };
+                    tracing::warn!(?mode, "run mode changed");
+                }
+                Output::Log(ev) => {
+                    tracing::info!(event = ev.kind, sysid = ?ev.sysid, "{}", ev.detail);
+                    self.events.record(now.unix_us, now.mono, &ev);
+                }
+                Output::SetSigningKey {
+                    key,
+                    initial_timestamp,
+                } => {
+                    if let Err(e) = self.signing.set_key(key, initial_timestamp) {
+                        tracing::error!("signing key not saved: {e}");
+                    }
+                }
+                Output::SaveParams => self.params.save(vehicle.params().clone()),
+                Output::Healthy => {
+                    // The link only needs to hear this every few hundred ms.
+                    if self
+                        .last_healthy
+                        .is_none_or(|t| now.mono.saturating_sub(t) >= HEALTHY_PERIOD)
+                    {
+                        self.last_healthy = Some(now.mono);
+                        self.link.healthy();
+                    }
+                    if let Some(sim) = self.simulator.as_mut() {
+                        sim.healthy(now.mono);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The one way a frame leaves for the stations: encoded with the next
+    /// sequence number, signed (when a key is set), routed.
+    fn send_frame(&mut self, to: To, now: Now, encode: impl FnOnce(u8) -> Vec<u8>) {
+        let mut bytes = encode(self.seq);
+        self.seq = self.seq.wrapping_add(1);
+        self.signing.sign(&mut bytes, now);
+        self.router.send(Outbound {
+            route: route(to),
+            bytes: bytes.into(),
+        });
+    }
+
+    /// Thrusters to neutral, first thing at shutdown.
+    pub(super) fn neutral(&self) {
+        self.link.send(super::NEUTRAL);
+    }
+}
+
+fn route(to: To) -> Route {
+    match to {
+        To::All => Route::All,
+        To::Endpoint(e) => Route::Endpoint(e),
+        To::Peer(e, p) => Route::Peer(e, p),
+    }
+}

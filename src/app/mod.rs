@@ -1,0 +1,103 @@
+//! Wiring: starts the board (real or emulated), the serial link, the
+//! MAVLink endpoints, the HMI and the vehicle task, and shuts them down in
+//! order.
+//!
+//! Owns task lifetimes and nothing else: every decision about the vehicle
+//! lives in the vehicle core; the files here only connect channels.
+//! - [`tasks`]: start-up and shutdown, in order;
+//! - [`vehicle_task`]: the one task that owns the vehicle, its inputs and the log line;
+//! - [`io`]: the core's outputs carried out (one send path for frames);
+//! - [`signing`]: message signing and its files;
+//! - [`params`]: parameter saving off the vehicle task;
+//! - [`storage`]: the data directory's problems at start.
+
+mod io;
+mod params;
+mod signing;
+mod storage;
+mod tasks;
+mod vehicle_task;
+
+use std::future::Future;
+
+use crate::config::Settings;
+use crate::eventlog::EventLogError;
+use crate::firmware::codec::Command;
+use crate::firmware::emulator::PtyBoard;
+use crate::firmware::link::LinkError;
+use crate::mavlink::endpoint::EndpointError;
+use crate::mavlink::signing::SigningError;
+use crate::vehicle::machine::Input;
+
+/// Errors starting the vehicle.
+#[derive(Debug, thiserror::Error)]
+pub enum AppError {
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    #[error("cannot start the board emulator: {0}")]
+    Emulator(#[from] crate::firmware::pty::PtyError),
+    #[error(transparent)]
+    Endpoint(#[from] EndpointError),
+    #[error("ground-station profiles: {0}")]
+    Profiles(#[from] crate::vehicle::input::ProfileError),
+    #[error("event log: {0}")]
+    EventLog(#[from] EventLogError),
+    #[error("message signing: {0}")]
+    Signing(#[from] SigningError),
+    #[error(transparent)]
+    Hmi(#[from] crate::hmi::HmiError),
+    #[error("cannot create the data directory {path}: {source}")]
+    DataDir {
+        path: std::path::PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// Neutral for all three thrusters.
+pub const NEUTRAL: Command = Command::Go {
+    port_us: 1500,
+    vertical_us: 1500,
+    starboard_us: 1500,
+};
+
+/// Runs the vehicle until `shutdown` resolves.
+pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Result<(), AppError> {
+    let (mut t, mut vehicle) = tasks::start(settings).await?;
+    let mut shutdown = std::pin::pin!(shutdown);
+    loop {
+        tokio::select! {
+            () = &mut shutdown => break,
+            _ = t.tick.tick() => vehicle.tick(),
+            input = t.hmi.recv() => vehicle.handle(input),
+            Some(result) = t.saved.recv() => vehicle.handle(Input::ParamsSaved(result)),
+            ev = t.link_events.recv() => match ev {
+                None => break,
+                Some(ev) => vehicle.link_event(ev),
+            },
+            msg = t.inbound.recv() => match msg {
+                None => break,
+                Some(msg) => vehicle.inbound(msg),
+            },
+            truth = tasks::board_truth(&mut t.truth) => vehicle.board_truth(&truth),
+            _ = t.report.tick() => vehicle.report(),
+        }
+        vehicle.flush();
+    }
+    t.shutdown(vehicle).await;
+    Ok(())
+}
+
+/// `neptunus emulate-board`: runs the emulator until `shutdown`, printing the
+/// device path through `announce`.
+pub async fn emulate_board(
+    opts: crate::firmware::emulator::EmulatorOptions,
+    symlink: Option<std::path::PathBuf>,
+    announce: impl FnOnce(&std::path::Path),
+    shutdown: impl Future<Output = ()>,
+) -> Result<(), AppError> {
+    let board = PtyBoard::spawn(opts, symlink)?;
+    announce(board.path());
+    shutdown.await;
+    board.shutdown().await;
+    Ok(())
+}

@@ -1,0 +1,192 @@
+//! Starting the tasks around the vehicle, in order, and stopping them in
+//! order: the board (real or emulated), the MAVLink endpoints, the serial
+//! link, the event log, the camera and the browser HMI.
+
+use tokio::sync::{mpsc, watch};
+use tokio::time::{Duration, Instant, Interval};
+
+use super::io::Io;
+use super::params::ParamSaver;
+use super::signing::LinkSigning;
+use super::vehicle_task::VehicleTask;
+use super::{AppError, storage};
+use crate::config::{BoardSource, Settings};
+use crate::eventlog::{EventLog, EventLogConfig};
+use crate::firmware::emulator::{BoardSnapshot, PtyBoard, SimSnapshot};
+use crate::firmware::link::{self, LinkEvent};
+use crate::mavlink::endpoint::{Inbound, Router, RouterConfig, RouterHandle};
+use crate::mavlink::tlog::TlogConfig;
+use crate::vehicle::machine::Vehicle;
+
+/// What the vehicle task waits on, and what is shut down after it.
+pub(super) struct Tasks {
+    /// The vehicle's 10-ms tick.
+    pub(super) tick: Interval,
+    /// The 5-s log line.
+    pub(super) report: Interval,
+    pub(super) hmi: crate::hmi::Hmi,
+    pub(super) saved: mpsc::UnboundedReceiver<Result<(), String>>,
+    pub(super) link_events: mpsc::Receiver<LinkEvent>,
+    pub(super) inbound: mpsc::Receiver<Inbound>,
+    /// The board emulator's ground truth (`--sim`); None on a real board.
+    pub(super) truth: Option<watch::Receiver<BoardSnapshot>>,
+    camera: crate::camera::Camera,
+    router: RouterHandle,
+    event_log: EventLog,
+    board: Option<PtyBoard>,
+}
+
+/// Starts everything; the vehicle task is returned ready to run.
+pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask), AppError> {
+    let mut storage_problems = storage::create_data_dir(&settings.data_dir);
+    let board = match &settings.board {
+        BoardSource::Simulated(opts) => {
+            let board = PtyBoard::spawn(opts.clone(), None)?;
+            tracing::info!(pty = %board.path().display(), "simulation: board emulator on a pseudo-terminal");
+            settings.link.device = board.path().to_path_buf();
+            Some(board)
+        }
+        BoardSource::Serial => {
+            link::probe(&settings.link)?;
+            None
+        }
+    };
+    let (param_file, store) = storage::load_params(
+        &settings.data_dir,
+        settings.mavlink.sysid,
+        &mut storage_problems,
+    );
+
+    let (in_tx, inbound) = mpsc::channel(4096);
+    let router_cfg = RouterConfig {
+        peer_timeout: settings.mavlink.peer_timeout,
+        tlog: Some(TlogConfig {
+            dir: settings.data_dir.join("tlogs"),
+            max_bytes: settings.mavlink.tlog_max_bytes,
+            total_bytes: settings.mavlink.tlog_total_bytes,
+        }),
+    };
+    let endpoints = &settings.mavlink.endpoints;
+    let specs = endpoints.iter().map(|u| u.spec.clone()).collect();
+    let trusted: Vec<bool> = endpoints.iter().map(|u| u.trusted).collect();
+    // Without a writable tlog folder the router runs without a tlog (it
+    // says so); the vehicle shows it as a storage problem.
+    let router = Router::start(specs, router_cfg, in_tx).await?;
+    if let Some(e) = router.tlog_error() {
+        storage_problems.push(format!("telemetry log: {e}"));
+    }
+    for (i, spec) in endpoints.iter().enumerate() {
+        tracing::info!(endpoint = %spec, local = ?router.local_addr(i), "MAVLink endpoint");
+    }
+
+    let (link, link_events) = link::spawn(settings.link.clone());
+    // Profiles are checked before anything moves: a bad file is a clear error at start.
+    let profiles = match &settings.profiles_dir {
+        Some(dir) => crate::vehicle::input::Profiles::load_dir(dir)?,
+        None => crate::vehicle::input::Profiles::builtin(),
+    };
+    // HMI: one more endpoint after the MAVLink ones, for the browser sessions.
+    let hmi_ep = endpoints.len();
+    let z_centered = crate::hmi::z_centered_by(profiles.clone());
+    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
+        .with_profiles(profiles)
+        .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max);
+    let (event_log, log_problem) =
+        EventLog::start_or_degraded(EventLogConfig::new(settings.data_dir.join("events")));
+    if let Some(e) = log_problem {
+        tracing::error!(
+            "event log: {e} — events are lost until it can be written (retried at every event)"
+        );
+        storage_problems.push(format!("event log: {e}"));
+    }
+    let (signing, must_sign) = LinkSigning::start(&settings.data_dir);
+    vehicle.set_signing_active(must_sign);
+    if let Some(problem) = storage_problems.summary() {
+        vehicle.set_storage_problem(Some(problem));
+    }
+    let t0 = Instant::now();
+    // The camera: its picture follows the vehicle (the synthetic source draws it).
+    let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
+    let camera = crate::camera::Camera::start(settings.camera.clone(), scene_rx);
+    let hmi = crate::hmi::Hmi::start(
+        &settings.hmi,
+        hmi_ep,
+        vehicle.sysid(),
+        z_centered,
+        settings.data_dir.clone(),
+        Some(camera.routes()),
+    )
+    .await?;
+    let (saved_tx, saved) = mpsc::unbounded_channel();
+    let io = Io::new(
+        hmi.outlet(),
+        router.clone(),
+        link,
+        ParamSaver::spawn(param_file, saved_tx),
+        event_log.clone(),
+        signing,
+        settings.simulator.clone(),
+    );
+    let mut tick = tokio::time::interval(Duration::from_millis(10));
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let report = tokio::time::interval_at(
+        Instant::now() + Duration::from_secs(1),
+        Duration::from_secs(5),
+    );
+    // On the emulator, its ground truth is published too (marked as such).
+    let truth = board.as_ref().map(|b| b.control().subscribe());
+    let tasks = Tasks {
+        tick,
+        report,
+        hmi,
+        saved,
+        link_events,
+        inbound,
+        truth,
+        camera,
+        router,
+        event_log,
+        board,
+    };
+    Ok((tasks, VehicleTask::new(vehicle, io, t0, scene_tx, trusted)))
+}
+
+/// The emulator's next ground truth; never, without an emulator (or once it
+/// has gone).
+pub(super) async fn board_truth(truth: &mut Option<watch::Receiver<BoardSnapshot>>) -> SimSnapshot {
+    loop {
+        let Some(rx) = truth.as_mut() else {
+            return std::future::pending().await;
+        };
+        if rx.changed().await.is_ok() {
+            return rx.borrow_and_update().sim;
+        }
+        *truth = None;
+    }
+}
+
+impl Tasks {
+    /// Thrusters to neutral, unsaved parameters saved, then every task
+    /// stopped in order.
+    pub(super) async fn shutdown(self, mut vehicle_task: VehicleTask) {
+        tracing::info!("shutting down: thrusters to neutral");
+        vehicle_task.io.neutral();
+        // Changes acknowledged but not yet on disk (the debounce, a save in
+        // flight, a failing disk) get one last try.
+        let vehicle = &vehicle_task.vehicle;
+        let unsaved = vehicle.params_unsaved().then(|| vehicle.params().clone());
+        let saver = std::mem::replace(&mut vehicle_task.io.params, ParamSaver::stopped());
+        let _ = tokio::task::spawn_blocking(move || saver.finish(unsaved)).await;
+        // Give the link a moment to put the neutral command on the wire.
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        self.hmi.shutdown().await;
+        self.camera.shutdown().await;
+        self.router.shutdown().await;
+        vehicle_task.io.signing.persist();
+        let event_log = self.event_log;
+        let _ = tokio::task::spawn_blocking(move || event_log.shutdown()).await;
+        if let Some(board) = self.board {
+            board.shutdown().await;
+        }
+    }
+}

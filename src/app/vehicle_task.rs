@@ -1,0 +1,214 @@
+//! The task that owns the vehicle: every input reaches the core with the
+//! time it is handled at (not when the wait began: a tick or a datagram must
+//! not carry a time up to a tick period old), and the core's outputs go to
+//! [`Io`]. The 5-s log line is built from the core's own state.
+
+use std::time::Duration;
+
+use tokio::sync::watch;
+use tokio::time::Instant;
+
+use super::io::Io;
+use crate::dialect::neptunus::MavMessage;
+use crate::firmware::codec::Event;
+use crate::firmware::emulator::SimSnapshot;
+use crate::firmware::link::LinkEvent;
+use crate::firmware::loopback::sim_truth;
+use crate::mavlink::endpoint::Inbound;
+use crate::mavlink::frame::{Frame, Undecodable};
+use crate::vehicle::machine::{Input, Now, Output, RunMode, Sender, Vehicle};
+
+/// The camera's scene follows the vehicle at most this often.
+const SCENE_PERIOD: Duration = Duration::from_millis(50);
+
+pub(super) struct VehicleTask {
+    pub(super) vehicle: Vehicle,
+    pub(super) io: Io,
+    outputs: Vec<Output>,
+    t0: Instant,
+    sim_events: Vec<Event>,
+    scene: watch::Sender<crate::camera::Scene>,
+    last_scene: Option<Duration>,
+    /// Per MAVLink endpoint: its stations are trusted (configuration).
+    trusted: Vec<bool>,
+}
+
+impl VehicleTask {
+    pub(super) fn new(
+        vehicle: Vehicle,
+        io: Io,
+        t0: Instant,
+        scene: watch::Sender<crate::camera::Scene>,
+        trusted: Vec<bool>,
+    ) -> Self {
+        Self {
+            vehicle,
+            io,
+            outputs: Vec::with_capacity(64),
+            t0,
+            sim_events: Vec::new(),
+            scene,
+            last_scene: None,
+            trusted,
+        }
+    }
+
+    fn clock(&self) -> Now {
+        Now {
+            mono: self.t0.elapsed(),
+            unix_us: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_micros() as u64),
+        }
+    }
+
+    pub(super) fn handle(&mut self, input: Input) {
+        let now = self.clock();
+        self.vehicle.handle(input, now, &mut self.outputs);
+    }
+
+    /// The 10-ms tick: the built-in simulator (run mode SIMULATOR) steps on
+    /// it, then the core; the camera's scene follows.
+    pub(super) fn tick(&mut self) {
+        let now = self.clock();
+        if let Some(sim) = self.io.simulator.as_mut() {
+            sim.step(now.mono, &mut self.sim_events);
+            let truth = sim.truth();
+            for ev in self.sim_events.drain(..) {
+                self.vehicle
+                    .handle(Input::SimBoard(ev), now, &mut self.outputs);
+            }
+            self.vehicle
+                .handle(Input::SimTruth(truth), now, &mut self.outputs);
+        }
+        self.vehicle.handle(Input::Tick, now, &mut self.outputs);
+        if self
+            .last_scene
+            .is_none_or(|t| now.mono.saturating_sub(t) >= SCENE_PERIOD)
+        {
+            self.last_scene = Some(now.mono);
+            self.scene.send_replace(scene(&self.vehicle, now));
+        }
+    }
+
+    pub(super) fn link_event(&mut self, ev: LinkEvent) {
+        match ev {
+            LinkEvent::State { state, reason } => self.handle(Input::Link { state, reason }),
+            LinkEvent::Telemetry(ev) => self.handle(Input::Board(ev)),
+        }
+    }
+
+    /// A frame from a station: signature checked, then to the core.
+    pub(super) fn inbound(&mut self, inbound: Inbound) {
+        let Inbound {
+            endpoint,
+            peer,
+            frame,
+            standing,
+        } = inbound;
+        let now = self.clock();
+        let Some(signed) = self.io.signing.check(&frame, now, &self.io.events) else {
+            return;
+        };
+        let from = Sender {
+            signed,
+            trusted: self.trusted.get(endpoint).copied().unwrap_or(false),
+            ..Sender::new(endpoint, peer, frame.sysid, frame.compid)
+        };
+        let Some(input) = input_of(frame, from) else {
+            return;
+        };
+        self.vehicle.handle(input, now, &mut self.outputs);
+        // The router keeps a slot (and the tlog) for peers that carry a
+        // station that may control. Sticky for the peer's life: frames
+        // spoofed from its address must not get it evicted.
+        if !standing.may_control()
+            && self.vehicle.may_control(from)
+            && standing.set_may_control(true)
+        {
+            tracing::debug!(
+                endpoint,
+                peer,
+                sysid = from.sysid,
+                "peer carries a station that may control"
+            );
+        }
+    }
+
+    /// The board emulator's ground truth (`--sim`). In SIMULATOR run mode
+    /// the built-in simulator's truth counts instead.
+    pub(super) fn board_truth(&mut self, s: &SimSnapshot) {
+        if self.io.simulator.is_none() {
+            self.handle(Input::SimTruth(sim_truth(s)));
+        }
+    }
+
+    /// The 5-s log line.
+    pub(super) fn report(&self) {
+        let s = self.io.link.stats();
+        let v = &self.vehicle;
+        tracing::info!(
+            link = ?s.state,
+            armed = v.armed(),
+            mode = crate::vehicle::machine::mode_name(v.mode()),
+            heading_deg = v.raw_heading_deg().unwrap_or(f64::NAN),
+            depth_m = v.raw_depth_m().unwrap_or(f64::NAN),
+            voltage_v = v.battery_v().unwrap_or(f64::NAN),
+            telemetry_age_ms = s.telemetry_age_ms.unwrap_or(u64::MAX),
+            rejected = s.decode.rejected_total(),
+            crc_fail = s.crc_failures_echoed,
+            "telemetry"
+        );
+    }
+
+    /// The outputs of what was just handled, carried out.
+    pub(super) fn flush(&mut self) {
+        let now = self.clock();
+        self.io.apply(&mut self.outputs, &self.vehicle, now);
+    }
+}
+
+/// The core's input for a frame; None for a placeholder (never handed on
+/// as a real message).
+fn input_of(frame: Frame, from: Sender) -> Option<Input> {
+    Some(match (frame.undecodable, &frame.msg) {
+        (None, _) => Input::Mavlink {
+            from,
+            msg: frame.msg,
+        },
+        (Some(Undecodable::Command(command)), MavMessage::COMMAND_LONG(c)) => {
+            Input::UnknownCommand {
+                from,
+                command,
+                target_system: c.target_system,
+                target_component: c.target_component,
+            }
+        }
+        (Some(Undecodable::ParamType(param_type)), MavMessage::PARAM_SET(p)) => {
+            Input::BadParamSet {
+                from,
+                target_system: p.target_system,
+                target_component: p.target_component,
+                param_id: p.param_id.into(),
+                param_type,
+            }
+        }
+        (Some(_), _) => return None,
+    })
+}
+
+/// What the camera shows: the vehicle as it knows itself.
+fn scene(v: &Vehicle, now: Now) -> crate::camera::Scene {
+    let e = v.estimate(now);
+    let (roll_deg, pitch_deg) = v.attitude_deg();
+    crate::camera::Scene {
+        depth_m: e.depth_m,
+        heading_deg: e.heading_deg,
+        roll_deg,
+        pitch_deg,
+        // 1000..2000 µs spans ±90° (DO_MOUNT_CONTROL's mapping).
+        tilt_deg: (f64::from(v.tilt_us()) - 1500.0) / 500.0 * 90.0,
+        simulated: v.run_mode() == RunMode::Simulator,
+        armed: v.armed(),
+    }
+}
