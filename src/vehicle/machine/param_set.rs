@@ -54,15 +54,7 @@ impl Vehicle {
         out: &mut Vec<Output>,
     ) {
         let asked = char_str(&p.param_id);
-        let Some(index) = params::index_of(&asked) else {
-            self.reply_text(
-                from,
-                ReplyKind::UnknownParam,
-                MavSeverity::MAV_SEVERITY_WARNING,
-                &format!("Param {asked}: no such parameter"),
-                now,
-                out,
-            );
+        let Some(index) = self.known_param(from, &asked, now, out) else {
             return;
         };
         let def: &'static ParamDef = &params::definitions()[index];
@@ -158,15 +150,7 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        let Some(index) = params::index_of(asked) else {
-            self.reply_text(
-                from,
-                ReplyKind::UnknownParam,
-                MavSeverity::MAV_SEVERITY_WARNING,
-                &format!("Param {asked}: no such parameter"),
-                now,
-                out,
-            );
+        let Some(index) = self.known_param(from, asked, now, out) else {
             return;
         };
         self.bad_param_types += 1;
@@ -179,6 +163,29 @@ impl Vehicle {
             out,
         );
         self.send_param(index, from.reply(), out);
+    }
+
+    /// The index of parameter `asked`, or a (rate-limited) reply to the
+    /// sender alone that there is no such parameter.
+    fn known_param(
+        &mut self,
+        from: Sender,
+        asked: &str,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> Option<usize> {
+        let index = params::index_of(asked);
+        if index.is_none() {
+            self.reply_text(
+                from,
+                ReplyKind::UnknownParam,
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &format!("Param {asked}: no such parameter"),
+                now,
+                out,
+            );
+        }
+        index
     }
 
     fn send_param(&self, index: usize, to: To, out: &mut Vec<Output>) {
