@@ -42,7 +42,7 @@ pub(super) fn write_line(
     Ok(())
 }
 
-/// The JSON line [`EventLog`] writes for this event (newline included).
+/// The JSON line [`EventLog`](super::EventLog) writes for this event (newline included).
 pub fn format_line(unix_us: u64, mono: Duration, event: &LogEvent) -> String {
     let mut out = Vec::with_capacity(128);
     if write_line(&mut out, unix_us, mono, event).is_err() {
