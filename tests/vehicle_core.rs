@@ -245,7 +245,7 @@ fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason()
         "{:?}",
         statustexts(&out)
     );
-    assert_eq!(r.v.mode(), 19);
+    assert_eq!(r.v.mode().number(), 19);
     // SET_MODE message: acknowledged with command 11.
     let out = r.msg(
         QGC,

@@ -150,7 +150,7 @@ impl VehicleTask {
         tracing::info!(
             link = ?s.state,
             armed = v.armed(),
-            mode = crate::vehicle::machine::mode_name(v.mode()),
+            mode = v.mode().name(),
             heading_deg = v.raw_heading_deg().unwrap_or(f64::NAN),
             depth_m = v.raw_depth_m().unwrap_or(f64::NAN),
             voltage_v = v.battery_v().unwrap_or(f64::NAN),

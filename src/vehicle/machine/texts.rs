@@ -50,17 +50,20 @@ struct Key {
     kind: ReplyKind,
 }
 
-/// Per-sender, per-kind rate limits of replies.
+/// Per-sender, per-kind rate limits of replies, and the id of the last
+/// text sent in chunks.
 #[derive(Debug, Clone, Default)]
-pub(super) struct Replies {
+pub(super) struct Texts {
     last: HashMap<Key, Duration>,
+    /// MAVLink 2 STATUSTEXT id of the last long text (its chunks share it).
+    pub chunk_id: u16,
     /// Replies sent.
     pub sent: u64,
     /// Replies suppressed by the rate limit (counted, not sent).
     pub suppressed: u64,
 }
 
-impl Replies {
+impl Texts {
     /// Whether a reply of `kind` to `from` may go out now; counts it either way.
     fn allow(&mut self, from: Sender, kind: ReplyKind, every: Duration, now: Duration) -> bool {
         let key = Key {
@@ -145,7 +148,7 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) -> bool {
-        if !self.replies.allow(from, kind, every, now.mono) {
+        if !self.texts.allow(from, kind, every, now.mono) {
             return false;
         }
         self.statustext_to(from.reply(), severity, text, out);
@@ -169,7 +172,7 @@ impl Vehicle {
             });
             return;
         }
-        self.statustext_id = self.statustext_id.wrapping_add(1).max(1);
+        self.texts.chunk_id = self.texts.chunk_id.wrapping_add(1).max(1);
         for (i, chunk) in bytes.chunks(50).enumerate() {
             let mut arr = [0u8; 50];
             arr[..chunk.len()].copy_from_slice(chunk);
@@ -178,7 +181,7 @@ impl Vehicle {
                 msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                     severity,
                     text: CharArray::from(arr),
-                    id: self.statustext_id,
+                    id: self.texts.chunk_id,
                     chunk_seq: i as u8,
                 }),
             });
@@ -187,6 +190,6 @@ impl Vehicle {
 
     /// Replies sent to single stations, and those suppressed by the rate limit.
     pub fn reply_counts(&self) -> (u64, u64) {
-        (self.replies.sent, self.replies.suppressed)
+        (self.texts.sent, self.texts.suppressed)
     }
 }
