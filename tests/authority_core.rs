@@ -475,7 +475,7 @@ fn the_primary_takes_over_without_asking_after_warning_the_owner() {
     );
     assert_eq!(r.v.owner(), Some(255));
     let warn = pos(&out, |o| {
-        matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(s), .. }
+        matches!(o, Output::Text { msg: MavMessage::STATUSTEXT(s), .. }
             if s.severity == MavSeverity::MAV_SEVERITY_WARNING
             && String::from_utf8_lossy(s.text.as_ref()).contains("taken over by primary GCS 255 from GCS 254"))
     });

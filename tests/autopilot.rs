@@ -243,7 +243,7 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
         }
     )));
     assert!(out.iter().any(
-        |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
+        |o| matches!(o, Output::Text { msg: MavMessage::STATUSTEXT(t), .. }
         if String::from_utf8_lossy(t.text.as_ref()).contains("simulated"))
     ));
     assert_eq!(r.v.motors_us(), [1500; 3]);
@@ -359,7 +359,7 @@ fn hold_modes_need_fresh_estimates() {
         );
         assert_eq!(result, Some(MavResult::MAV_RESULT_FAILED), "mode {mode}");
         assert!(out.iter().any(
-            |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
+            |o| matches!(o, Output::Text { msg: MavMessage::STATUSTEXT(t), .. }
             if String::from_utf8_lossy(t.text.as_ref()).contains("estimate"))
         ));
     }

@@ -30,6 +30,9 @@ pub const COMMAND_QUEUE_SLOTS: usize = 5;
 pub const MAX_ARGS: usize = 10;
 /// `rcap()` answer: lights, lasers, camera mount, compass, orientation, depth (bits 1..=6).
 pub const CAPABILITIES: u32 = 0b111_1110;
+/// The board firmware's neutral pulse width: the emulator plays the board,
+/// so it keeps its own constant apart from the vehicle's
+/// `mixer::NEUTRAL_US` on purpose (an independent check).
 const NEUTRAL_US: i32 = 1500;
 const SIM_STEP: Duration = Duration::from_millis(10);
 /// The board works through one queued command per loop iteration.

@@ -1,6 +1,7 @@
 //! Arming and disarming, and the pre-arm checks: arming starts from
 //! neutral, disarming is always possible, and every refusal says why.
 
+use super::texts::Topic;
 use super::{Now, Output, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::firmware::link::LinkState;
@@ -61,6 +62,7 @@ impl Vehicle {
                 .prearm_failure(now)
                 .unwrap_or_else(|| "board link down".into());
             self.statustext(
+                Topic::Stop,
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!("Arm: {why}"),
                 out,
@@ -69,6 +71,7 @@ impl Vehicle {
         }
         if !force && let Some(why) = self.prearm_failure(now) {
             self.statustext(
+                Topic::Stop,
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!("PreArm: {why}"),
                 out,
@@ -82,7 +85,7 @@ impl Vehicle {
         self.stop_pilot();
         self.holds_reset();
         self.send_neutral(out);
-        self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Armed", out);
+        self.statustext(Topic::Stop, MavSeverity::MAV_SEVERITY_INFO, "Armed", out);
         self.log(
             "armed",
             by,
@@ -103,6 +106,7 @@ impl Vehicle {
         if self.armed {
             self.armed = false;
             self.statustext(
+                Topic::Stop,
                 MavSeverity::MAV_SEVERITY_INFO,
                 &format!("Disarmed ({why})"),
                 out,

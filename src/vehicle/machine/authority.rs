@@ -10,6 +10,7 @@
 use std::time::Duration;
 
 use super::texts::ReplyKind;
+use super::texts::Topic;
 use super::{Now, Output, Sender, To, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::eventlog::LogEvent;
@@ -307,6 +308,7 @@ impl Vehicle {
             self.auth.pickup = false;
             if let Some(o) = self.owner() {
                 self.statustext(
+                    Topic::Control,
                     MavSeverity::MAV_SEVERITY_INFO,
                     &format!("GCS {o}: sticks centred, driving"),
                     out,
@@ -316,6 +318,7 @@ impl Vehicle {
         }
         if self.auth.pickup_notes.hit(now.mono, INPUT_REPORT) {
             self.statustext(
+                Topic::Control,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 "Centre the sticks to take control",
                 out,
@@ -360,6 +363,7 @@ impl Vehicle {
             Grant::PrimaryTakeover => ("control_takeover", "primary takeover"),
         };
         self.statustext(
+            Topic::Control,
             MavSeverity::MAV_SEVERITY_INFO,
             &format!("GCS {} in control (was {was})", to.sysid),
             out,
@@ -393,6 +397,7 @@ impl Vehicle {
         self.auth.pickup = false;
         self.safety_stop(false, out);
         self.statustext(
+            Topic::Control,
             MavSeverity::MAV_SEVERITY_WARNING,
             &format!("GCS {} no longer in control: {why}", old.sysid),
             out,
@@ -418,7 +423,12 @@ impl Vehicle {
                 "Control request from GCS {} timed out: {keeper} keeps control",
                 p.from.sysid
             );
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            self.statustext(
+                Topic::Control,
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &text,
+                out,
+            );
             self.log("control_refused", Some(p.from.sysid), text, out);
         }
         if self.auth.owner.is_some() && !self.owner_alive(now, self.gcs_timeout()) {

@@ -5,6 +5,7 @@
 
 use std::time::Duration;
 
+use super::texts::Topic;
 use super::{FRESH, Now, Output, SimTruth, Vehicle, holds};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::{Event, NavSample};
@@ -77,10 +78,16 @@ impl Vehicle {
             // Whatever the board had, it gets what we decide now.
             self.send_neutral(out);
             self.payload_to_board(out);
-            self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Board link up", out);
+            self.statustext(
+                Topic::BoardLink,
+                MavSeverity::MAV_SEVERITY_INFO,
+                "Board link up",
+                out,
+            );
         } else if state == LinkState::Down && was != LinkState::Down {
             let why = reason.unwrap_or_else(|| "unknown".into());
             self.statustext(
+                Topic::BoardLink,
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!("Board link down: {why}"),
                 out,

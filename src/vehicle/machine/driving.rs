@@ -9,6 +9,7 @@
 
 use std::time::Duration;
 
+use super::texts::Topic;
 use super::{Mode, Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
@@ -182,6 +183,7 @@ impl Vehicle {
     pub(super) fn motor_test(&mut self, p: [f32; 7], now: Now, out: &mut Vec<Output>) -> MavResult {
         if !self.armed {
             self.statustext(
+                Topic::General,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 "Motor test: arm first",
                 out,
@@ -195,6 +197,7 @@ impl Vehicle {
             3 => 1,
             _ => {
                 self.statustext(
+                    Topic::General,
                     MavSeverity::MAV_SEVERITY_WARNING,
                     &format!("Motor test: no motor {motor}"),
                     out,
@@ -479,14 +482,14 @@ impl Vehicle {
                     _ => (gain - step).max(lo),
                 };
                 let pct = (self.pilot.gain * 100.0).round();
-                self.statustext(sev, &format!("#Gain is {pct:.0}%"), out);
+                self.statustext(Topic::Gain, sev, &format!("#Gain is {pct:.0}%"), out);
             }
             B::InputHoldSet => {
                 if self.pilot.hold.take().is_some() {
-                    self.statustext(sev, "#Input Hold Disabled", out);
+                    self.statustext(Topic::Gain, sev, "#Input Hold Disabled", out);
                 } else {
                     self.pilot.hold = Some(self.pilot.sticks);
-                    self.statustext(sev, "#Input Hold Set", out);
+                    self.statustext(Topic::Gain, sev, "#Input Hold Set", out);
                 }
             }
             B::LaserToggle => self.set_laser(self.payload.laser == 0, out),

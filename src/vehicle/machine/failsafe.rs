@@ -7,6 +7,7 @@
 
 use std::time::Duration;
 
+use super::texts::Topic;
 use super::{Mode, Now, Output, Vehicle};
 use crate::dialect::neptunus::{MavResult, MavSeverity};
 use crate::firmware::link::LinkState;
@@ -185,6 +186,7 @@ impl Vehicle {
                 self.failsafes.active[i] = true;
                 let text = (rule.text)(self);
                 self.statustext(
+                    Topic::Failsafe,
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     &format!("Failsafe: {text}"),
                     out,
@@ -200,6 +202,7 @@ impl Vehicle {
                 self.failsafes.active[i] = false;
                 let text = (rule.text)(self);
                 self.statustext(
+                    Topic::Failsafe,
                     MavSeverity::MAV_SEVERITY_INFO,
                     &format!("Failsafe cleared: {text}"),
                     out,
@@ -246,6 +249,7 @@ impl Vehicle {
             self.failsafes.mode = Some(mode);
         } else {
             self.statustext(
+                Topic::Failsafe,
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!(
                     "Failsafe {name}: {} is {}, disarming instead",

@@ -7,6 +7,7 @@ use std::time::Duration;
 
 use super::authority::{DEFAULT_REQUEST_TIMEOUT_S, Grant, Pending, Refusal, Station};
 use super::texts::ReplyKind;
+use super::texts::Topic;
 use super::{Now, Output, Sender, Vehicle, given};
 use crate::dialect::neptunus::*;
 
@@ -110,6 +111,7 @@ impl Vehicle {
                         // DNV practice: the main station takes control without
                         // acknowledgement, after a warning.
                         self.statustext(
+                            Topic::Control,
                             MavSeverity::MAV_SEVERITY_WARNING,
                             &format!(
                                 "Control taken over by primary GCS {} from GCS {}",
@@ -142,6 +144,7 @@ impl Vehicle {
                             }),
                         });
                         self.statustext(
+                Topic::Control,
                             MavSeverity::MAV_SEVERITY_WARNING,
                             &format!(
                                 "GCS {} requests control from GCS {} (answer within {timeout_s:.0} s)",
@@ -194,7 +197,12 @@ impl Vehicle {
                     "Control request from GCS {} refused by GCS {}",
                     p.from.sysid, from.sysid
                 );
-                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+                self.statustext(
+                    Topic::Control,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &text,
+                    out,
+                );
                 self.log("control_refused", Some(p.from.sysid), text, out);
             }
             _ => {}

@@ -13,6 +13,7 @@ use std::time::Duration;
 use mavlink_core::MessageData;
 
 use super::authority::Control;
+use super::texts::Topic;
 use super::{Mode, Now, Output, RunMode, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::vehicle::autopilot::{DepthHold, HeadingHold, Measured};
@@ -125,7 +126,12 @@ impl Vehicle {
                 let surfaced_at_m = -f64::from(self.params.surface_depth_m());
                 if !self.holds.surfaced && m.depth_m <= surfaced_at_m {
                     self.holds.surfaced = true;
-                    self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Surfaced", out);
+                    self.statustext(
+                        Topic::ApDepth,
+                        MavSeverity::MAV_SEVERITY_INFO,
+                        "Surfaced",
+                        out,
+                    );
                     self.log("surfaced", None, format!("depth {:.2} m", m.depth_m), out);
                 }
                 if self.holds.surfaced {
@@ -271,7 +277,13 @@ impl Vehicle {
             .is_none_or(|t| now.mono.saturating_sub(t) >= TARGET_REPORT)
         {
             self.holds.ignored_target_report = Some(now.mono);
+            let topic = if depth_m.is_some() {
+                Topic::ApDepth
+            } else {
+                Topic::ApHeading
+            };
             self.statustext(
+                topic,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!("{what} ignored in {}: depth targets need ALT_HOLD, heading targets STABILIZE or ALT_HOLD", self.mode),
                 out,
@@ -300,7 +312,13 @@ impl Vehicle {
         if (depth.is_some() && self.mode != Mode::AltHold)
             || (heading.is_some() && !self.mode.holds_heading())
         {
+            let topic = if depth.is_some() {
+                Topic::ApDepth
+            } else {
+                Topic::ApHeading
+            };
             self.statustext(
+                topic,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!(
                     "Autopilot target refused in {}: depth needs ALT_HOLD, heading STABILIZE or ALT_HOLD",

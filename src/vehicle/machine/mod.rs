@@ -65,7 +65,7 @@ mod texts;
 
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 pub use run_mode::RunMode;
-pub use texts::ascii_text;
+pub use texts::{Topic, ascii_text};
 
 use super::input::Profiles;
 pub use super::mode::Mode;
@@ -220,6 +220,14 @@ pub enum Output {
         to: To,
         msg: MavMessage,
     },
+    /// A STATUSTEXT (or one chunk of a long one), sent like
+    /// [`Output::Send`], with what it is about (the browser HMI files it
+    /// under that category).
+    Text {
+        to: To,
+        topic: Topic,
+        msg: MavMessage,
+    },
     Board(Command),
     /// A command for the built-in simulator's board (run mode SIMULATOR).
     SimBoard(Command),
@@ -254,6 +262,17 @@ pub enum Output {
         target_system: u8,
         target_component: u8,
     },
+}
+
+impl Output {
+    /// The MAVLink message this output sends, and where ([`Output::Send`]
+    /// and [`Output::Text`]).
+    pub fn message(&self) -> Option<(To, &MavMessage)> {
+        match self {
+            Output::Send { to, msg } | Output::Text { to, msg, .. } => Some((*to, msg)),
+            _ => None,
+        }
+    }
 }
 
 /// How the vehicle presents itself.

@@ -5,6 +5,7 @@
 //! (`driving.rs`, `holds.rs`).
 
 use super::authority::Control;
+use super::texts::Topic;
 use super::{Mode, Now, Output, Sender, Vehicle, chars};
 use crate::dialect::neptunus::*;
 
@@ -32,6 +33,7 @@ impl Vehicle {
     ) -> MavResult {
         let Some(m) = Mode::from_number(mode) else {
             self.statustext(
+                Topic::Stop,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!("Mode {mode} does not exist"),
                 out,
@@ -40,6 +42,7 @@ impl Vehicle {
         };
         if let Some(why) = m.refused() {
             self.statustext(
+                Topic::Stop,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!("Mode {m} refused: {why}"),
                 out,
@@ -49,6 +52,7 @@ impl Vehicle {
         if self.mode != m {
             if let Some(why) = self.hold_unavailable(m, now) {
                 self.statustext(
+                    Topic::Stop,
                     MavSeverity::MAV_SEVERITY_WARNING,
                     &format!("Mode {m} refused: {why}"),
                     out,
@@ -61,7 +65,12 @@ impl Vehicle {
             self.stop_pilot();
             self.holds_reset();
             self.send_neutral(out);
-            self.statustext(MavSeverity::MAV_SEVERITY_INFO, &format!("Mode {m}"), out);
+            self.statustext(
+                Topic::Stop,
+                MavSeverity::MAV_SEVERITY_INFO,
+                &format!("Mode {m}"),
+                out,
+            );
             self.log("mode", by, format!("{old} -> {m}"), out);
         }
         MavResult::MAV_RESULT_ACCEPTED

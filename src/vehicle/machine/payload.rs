@@ -2,6 +2,7 @@
 //! DO_MOUNT_CONTROL, the illuminator commands), buttons and RC override —
 //! and what the board is told when its link comes up.
 
+use super::texts::Topic;
 use super::{Output, Vehicle, given};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
@@ -134,6 +135,7 @@ impl Vehicle {
         let pwm = f64::from(pwm);
         if !SERVO_PWM_RANGE.contains(&pwm) {
             self.statustext(
+                Topic::General,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!("Servo {servo}: {pwm} µs out of range"),
                 out,
@@ -159,6 +161,7 @@ impl Vehicle {
             }
             Some(ServoFunction::Motor(_)) => {
                 self.statustext(
+                    Topic::General,
                     MavSeverity::MAV_SEVERITY_WARNING,
                     &format!("Servo {servo} is a thruster: use MAV_CMD_DO_MOTOR_TEST"),
                     out,

@@ -12,6 +12,7 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
+use super::texts::Topic;
 use super::{Now, Output, Vehicle};
 use crate::dialect::neptunus::*;
 
@@ -122,6 +123,7 @@ impl Vehicle {
                 }
                 if failures > 0 {
                     self.statustext(
+                        Topic::General,
                         MavSeverity::MAV_SEVERITY_INFO,
                         &format!("Parameters saved (after {failures} failed attempts)"),
                         out,
@@ -159,7 +161,12 @@ impl Vehicle {
                     "NOT SAVED: {list} (in use until restart): {why}; retry in {} s",
                     delay.as_secs()
                 );
-                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+                self.statustext(
+                    Topic::General,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &text,
+                    out,
+                );
                 if new_reason || attempt.is_power_of_two() {
                     self.log(
                         "params_not_saved",

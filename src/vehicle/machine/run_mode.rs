@@ -2,6 +2,7 @@
 //! it (the board then stays stopped). A switch is a safety-mode stop.
 
 use super::authority::Control;
+use super::texts::Topic;
 use super::{Now, Output, Sender, Vehicle, given};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
@@ -66,6 +67,7 @@ impl Vehicle {
                     start_heading_deg: e.heading_deg,
                 });
                 self.statustext(
+                    Topic::Stop,
                     MavSeverity::MAV_SEVERITY_WARNING,
                     "Run mode SIMULATOR: telemetry is simulated, the thrusters are stopped",
                     out,
@@ -78,6 +80,7 @@ impl Vehicle {
                     start_heading_deg: e.heading_deg,
                 });
                 self.statustext(
+                    Topic::Stop,
                     MavSeverity::MAV_SEVERITY_WARNING,
                     "Run mode NORMAL: real vehicle",
                     out,

@@ -2,6 +2,7 @@
 //! once signing is on, only a signed request). The app persists the key.
 
 use super::texts::ReplyKind;
+use super::texts::Topic;
 use super::{Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 
@@ -47,7 +48,7 @@ impl Vehicle {
         } else {
             ("signing_key_set", "Signing on: key set")
         };
-        self.statustext(MavSeverity::MAV_SEVERITY_INFO, text, out);
+        self.statustext(Topic::General, MavSeverity::MAV_SEVERITY_INFO, text, out);
         self.log(
             kind,
             Some(from.sysid),

@@ -257,24 +257,7 @@ impl Vehicle {
         };
         match id {
             HEARTBEAT_DATA::ID => vec![self.heartbeat()],
-            SYS_STATUS_DATA::ID => {
-                let (present, enabled, health) = self.sensors(now);
-                let s = &self.board.status.value;
-                vec![MavMessage::SYS_STATUS(SYS_STATUS_DATA {
-                    onboard_control_sensors_present: present,
-                    onboard_control_sensors_enabled: enabled,
-                    onboard_control_sensors_health: health,
-                    load: 0,
-                    voltage_battery: s.vout_v.map_or(u16::MAX, |v| {
-                        (v * 1000.0).round().clamp(0.0, 65534.0) as u16
-                    }),
-                    current_battery: s
-                        .btti_a
-                        .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
-                    battery_remaining: self.battery_remaining(),
-                    ..Default::default()
-                })]
-            }
+            SYS_STATUS_DATA::ID => vec![self.sys_status(now)],
             SYSTEM_TIME_DATA::ID => vec![MavMessage::SYSTEM_TIME(SYSTEM_TIME_DATA {
                 time_unix_usec: now.unix_us,
                 time_boot_ms: boot_ms,
@@ -308,23 +291,7 @@ impl Vehicle {
                     },
                 })]
             }
-            SERVO_OUTPUT_RAW_DATA::ID => {
-                let [port, vert, star] = self.motors_us;
-                let laser_pwm = if self.payload.laser > 0 { 1900 } else { 1100 };
-                let lights_pwm = (1100 + (u32::from(self.payload.lights) * 800) / 255) as u16;
-                vec![MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
-                    time_usec: (now.mono.saturating_sub(self.clock.booted).as_micros()
-                        & 0xffff_ffff) as u32,
-                    // MOT_1 starboard, MOT_2 port, MOT_3 vertical (ArduSub SimpleROV-3 numbering).
-                    servo1_raw: star,
-                    servo2_raw: port,
-                    servo3_raw: vert,
-                    servo6_raw: laser_pwm,
-                    servo7_raw: lights_pwm,
-                    servo8_raw: self.payload.tilt_us,
-                    ..Default::default()
-                })]
-            }
+            SERVO_OUTPUT_RAW_DATA::ID => vec![self.servo_output_raw(now)],
             VFR_HUD_DATA::ID
                 if self.fresh(&self.board.heading_deg, now)
                     || self.fresh(&self.board.depth_m, now) =>
@@ -354,55 +321,8 @@ impl Vehicle {
                     temperature_press_diff: 0,
                 })]
             }
-            BATTERY_STATUS_DATA::ID => {
-                let s = &self.board.status.value;
-                let mut voltages = [u16::MAX; 10];
-                voltages[0] = s.vout_v.map_or(u16::MAX, |v| {
-                    (v * 1000.0).round().clamp(0.0, 65534.0) as u16
-                });
-                vec![MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
-                    current_consumed: self.board.consumed_mah.round() as i32,
-                    energy_consumed: -1,
-                    temperature: i16::MAX,
-                    voltages,
-                    current_battery: s
-                        .btti_a
-                        .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
-                    id: 0,
-                    battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
-                    mavtype: MavBatteryType::MAV_BATTERY_TYPE_UNKNOWN,
-                    battery_remaining: self.battery_remaining(),
-                    ..Default::default()
-                })]
-            }
-            NAMED_VALUE_FLOAT_DATA::ID => {
-                let tilt_min = f64::from(self.params.tilt_min_us());
-                let tilt_max = f64::from(self.params.tilt_max_us());
-                let tilt = if tilt_max > tilt_min {
-                    (f64::from(self.payload.tilt_us) - tilt_min) / (tilt_max - tilt_min)
-                } else {
-                    0.5
-                };
-                [
-                    ("Lights1", f64::from(self.payload.lights) / 255.0),
-                    ("PilotGain", self.pilot.gain),
-                    ("CamTilt", tilt),
-                    ("Laser", f64::from(self.payload.laser) / 255.0),
-                    (
-                        "InputHold",
-                        if self.pilot.hold.is_some() { 1.0 } else { 0.0 },
-                    ),
-                ]
-                .iter()
-                .map(|(name, v)| {
-                    MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
-                        time_boot_ms: boot_ms,
-                        value: *v as f32,
-                        name: chars(name),
-                    })
-                })
-                .collect()
-            }
+            BATTERY_STATUS_DATA::ID => vec![self.battery_status()],
+            NAMED_VALUE_FLOAT_DATA::ID => self.named_values(boot_ms),
             AUTOPILOT_VERSION_DATA::ID => vec![self.autopilot_version()],
             CONTROL_STATUS_DATA::ID => vec![self.control_status()],
             NEPTUNUS_SIM_STATE_DATA::ID if self.board.sim_truth.recent(now) => {
@@ -423,6 +343,95 @@ impl Vehicle {
             }
             _ => self.build_holds(id, now).into_iter().collect(),
         }
+    }
+
+    fn sys_status(&self, now: Now) -> MavMessage {
+        let (present, enabled, health) = self.sensors(now);
+        let s = &self.board.status.value;
+        MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+            onboard_control_sensors_present: present,
+            onboard_control_sensors_enabled: enabled,
+            onboard_control_sensors_health: health,
+            load: 0,
+            voltage_battery: s.vout_v.map_or(u16::MAX, |v| {
+                (v * 1000.0).round().clamp(0.0, 65534.0) as u16
+            }),
+            current_battery: s
+                .btti_a
+                .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+            battery_remaining: self.battery_remaining(),
+            ..Default::default()
+        })
+    }
+
+    fn servo_output_raw(&self, now: Now) -> MavMessage {
+        let [port, vert, star] = self.motors_us;
+        let laser_pwm = if self.payload.laser > 0 { 1900 } else { 1100 };
+        let lights_pwm = (1100 + (u32::from(self.payload.lights) * 800) / 255) as u16;
+        MavMessage::SERVO_OUTPUT_RAW(SERVO_OUTPUT_RAW_DATA {
+            time_usec: (now.mono.saturating_sub(self.clock.booted).as_micros() & 0xffff_ffff)
+                as u32,
+            // MOT_1 starboard, MOT_2 port, MOT_3 vertical (ArduSub SimpleROV-3 numbering).
+            servo1_raw: star,
+            servo2_raw: port,
+            servo3_raw: vert,
+            servo6_raw: laser_pwm,
+            servo7_raw: lights_pwm,
+            servo8_raw: self.payload.tilt_us,
+            ..Default::default()
+        })
+    }
+
+    fn battery_status(&self) -> MavMessage {
+        let s = &self.board.status.value;
+        let mut voltages = [u16::MAX; 10];
+        voltages[0] = s.vout_v.map_or(u16::MAX, |v| {
+            (v * 1000.0).round().clamp(0.0, 65534.0) as u16
+        });
+        MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
+            current_consumed: self.board.consumed_mah.round() as i32,
+            energy_consumed: -1,
+            temperature: i16::MAX,
+            voltages,
+            current_battery: s
+                .btti_a
+                .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+            id: 0,
+            battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
+            mavtype: MavBatteryType::MAV_BATTERY_TYPE_UNKNOWN,
+            battery_remaining: self.battery_remaining(),
+            ..Default::default()
+        })
+    }
+
+    /// ArduSub's NAMED_VALUE_FLOATs: lights, gain, tilt, laser, input hold.
+    fn named_values(&self, boot_ms: u32) -> Vec<MavMessage> {
+        let tilt_min = f64::from(self.params.tilt_min_us());
+        let tilt_max = f64::from(self.params.tilt_max_us());
+        let tilt = if tilt_max > tilt_min {
+            (f64::from(self.payload.tilt_us) - tilt_min) / (tilt_max - tilt_min)
+        } else {
+            0.5
+        };
+        [
+            ("Lights1", f64::from(self.payload.lights) / 255.0),
+            ("PilotGain", self.pilot.gain),
+            ("CamTilt", tilt),
+            ("Laser", f64::from(self.payload.laser) / 255.0),
+            (
+                "InputHold",
+                if self.pilot.hold.is_some() { 1.0 } else { 0.0 },
+            ),
+        ]
+        .iter()
+        .map(|(name, v)| {
+            MavMessage::NAMED_VALUE_FLOAT(NAMED_VALUE_FLOAT_DATA {
+                time_boot_ms: boot_ms,
+                value: *v as f32,
+                name: chars(name),
+            })
+        })
+        .collect()
     }
 
     pub(super) fn autopilot_version(&self) -> MavMessage {

@@ -42,6 +42,42 @@ pub(super) enum ReplyKind {
     Note,
 }
 
+impl ReplyKind {
+    /// What a reply of this kind is about.
+    fn topic(self) -> Topic {
+        match self {
+            Self::Refused | Self::Input | Self::Control => Topic::Control,
+            Self::UnknownParam | Self::ParamRefused | Self::Rates | Self::Signing | Self::Note => {
+                Topic::General
+            }
+        }
+    }
+}
+
+/// What a text is about, chosen where it is written: the browser HMI files
+/// it under the developer logger's category of the same name (thesis 7.2);
+/// `general` texts appear only in the message list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Topic {
+    /// Safety-mode stops: arming, disarming, mode and run-mode changes.
+    Stop,
+    /// Who controls the vehicle: transfers, requests, refusals.
+    Control,
+    /// The pilot gain and input hold.
+    Gain,
+    /// The depth autopilot and its setpoints.
+    ApDepth,
+    /// The heading autopilot and its setpoints.
+    ApHeading,
+    /// Failsafes raised and cleared.
+    Failsafe,
+    /// The board link.
+    BoardLink,
+    /// Anything else (parameters, signing, payload, telemetry rates).
+    General,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 struct Key {
     endpoint: usize,
@@ -119,8 +155,14 @@ pub fn ascii_text(text: &str) -> String {
 impl Vehicle {
     /// A vehicle event every station must see (failsafes, arming, modes,
     /// saving trouble).
-    pub(super) fn statustext(&mut self, severity: MavSeverity, text: &str, out: &mut Vec<Output>) {
-        self.statustext_to(To::All, severity, text, out);
+    pub(super) fn statustext(
+        &mut self,
+        topic: Topic,
+        severity: MavSeverity,
+        text: &str,
+        out: &mut Vec<Output>,
+    ) {
+        self.statustext_to(To::All, topic, severity, text, out);
     }
 
     /// A reply to `from` alone, at most one per [`REPLY_EVERY`] of its kind;
@@ -151,18 +193,26 @@ impl Vehicle {
         if !self.texts.allow(from, kind, every, now.mono) {
             return false;
         }
-        self.statustext_to(from.reply(), severity, text, out);
+        self.statustext_to(from.reply(), kind.topic(), severity, text, out);
         true
     }
 
-    fn statustext_to(&mut self, to: To, severity: MavSeverity, text: &str, out: &mut Vec<Output>) {
+    fn statustext_to(
+        &mut self,
+        to: To,
+        topic: Topic,
+        severity: MavSeverity,
+        text: &str,
+        out: &mut Vec<Output>,
+    ) {
         let text = ascii_text(text);
         tracing::info!(severity = ?severity, to = ?to, "{text}");
         // Long texts go in 50-byte chunks sharing an id, as MAVLink 2 allows.
         let bytes = text.as_bytes();
         if bytes.len() <= 50 {
-            out.push(Output::Send {
+            out.push(Output::Text {
                 to,
+                topic,
                 msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                     severity,
                     text: CharArray::from(text.as_str()),
@@ -176,8 +226,9 @@ impl Vehicle {
         for (i, chunk) in bytes.chunks(50).enumerate() {
             let mut arr = [0u8; 50];
             arr[..chunk.len()].copy_from_slice(chunk);
-            out.push(Output::Send {
+            out.push(Output::Text {
                 to,
+                topic,
                 msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                     severity,
                     text: CharArray::from(arr),
