@@ -929,6 +929,9 @@ async fn rest_api_and_assets() {
     assert!(body.contains("<html"), "{body}");
     for (path, mime) in [
         ("/js/main.js", "javascript"),
+        ("/js/session.js", "javascript"),
+        ("/js/view.js", "javascript"),
+        ("/js/controls.js", "javascript"),
         ("/css/style.css", "text/css"),
         ("/vendor/uPlot.esm.js", "javascript"),
         ("/vendor/uPlot.min.css", "text/css"),
