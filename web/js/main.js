@@ -5,7 +5,7 @@
 // and routes each server message to whoever shows it. Read this file first;
 // docs/ARCHITECTURE.md is the map of the whole program.
 import { Input } from '/js/input.js';
-import { Recorder, Plots, Logger } from '/js/dev.js';
+import { Recorder, Plots, Logger, CATEGORIES } from '/js/dev.js';
 import { Session } from '/js/session.js';
 import { View } from '/js/view.js';
 import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
@@ -13,16 +13,11 @@ import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
 
-/** The logger categories a status text goes under. Today guessed from its
- * wording (a text may match several); when the server sends the category
- * with the status text, this becomes that one field. */
-function categoriesOf(m) {
-  const text = m.text.toLowerCase();
-  const categories = [];
-  if (text.includes('failsafe') || m.severity <= 2) categories.push('failsafe');
-  if (text.includes('board link')) categories.push('board_link');
-  if (text.includes('in control') || text.includes('requests control') || text.includes('refused by')) categories.push('control');
-  return categories;
+/** The logger category a status text goes under: the one the vehicle core
+ * chose where it wrote the text (`general` texts only reach the message list). */
+const LOGGED = new Set(CATEGORIES.map(([key]) => key));
+function categoryOf(m) {
+  return LOGGED.has(m.category) ? m.category : null;
 }
 
 const wsUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`;
@@ -49,7 +44,8 @@ session.on('telemetry', (t, prev) => {
 });
 session.on('statustext', (m) => {
   view.message(m.severity, m.text);
-  for (const c of categoriesOf(m)) logger.log(c, m.text);
+  const category = categoryOf(m);
+  if (category) logger.log(category, m.text);
 });
 session.on('ack', (m) => view.ack(m));
 session.on('control', (m) => view.control(m));
