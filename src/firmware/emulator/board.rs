@@ -18,7 +18,7 @@ use std::fmt::Write as _;
 use std::time::Duration;
 
 use super::faults::FaultInjector;
-use super::{BoardRecord, BoardSnapshot, EmulatorOptions, SimSnapshot};
+use super::{BoardRecord, BoardSnapshot, EmulatorOptions, SimSnapshot, print};
 use crate::firmware::codec::{Framing, crc8};
 use crate::sim::{Plant, Readings, SimError, SimState};
 
@@ -532,8 +532,3 @@ fn atoi(s: &str) -> i32 {
     v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
 }
 
-/// Prints one line as the board does, ending in `\r\n`.
-pub(super) fn print(line: &str, out: &mut Vec<u8>) {
-    out.extend_from_slice(line.as_bytes());
-    out.extend_from_slice(b"\r\n");
-}
