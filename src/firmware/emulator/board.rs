@@ -531,4 +531,3 @@ fn atoi(s: &str) -> i32 {
     let v = if neg { -v } else { v };
     v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
 }
-
