@@ -1,0 +1,211 @@
+//! The command line: the vehicle's flags, the subcommands and their options.
+//!
+//! Owns the clap types ([`Cli`], [`RunArgs`], [`CliCommand`] …) and the small
+//! flag values that parse themselves ([`HttpAddr`], [`TlsModeName`]). Only
+//! parsing here: merging with the file and the defaults is in `resolve`.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+use serde::{Deserialize, Serialize};
+
+use crate::firmware::codec::Framing;
+use crate::mavlink::endpoint::EndpointUrl;
+use crate::vehicle::machine::Identity;
+
+/// Neptunus: onboard software for an OpenROV-based ROV.
+#[derive(Debug, Parser)]
+#[command(name = "neptunus", version, about, long_about = None)]
+pub struct Cli {
+    #[command(flatten)]
+    pub run: RunArgs,
+    #[command(subcommand)]
+    pub command: Option<CliCommand>,
+}
+
+/// Options of the vehicle (the default command).
+#[derive(Debug, Args, Default)]
+pub struct RunArgs {
+    /// Run with no hardware: the board emulator and simulator behind an
+    /// internal pseudo-terminal (the real serial code path runs).
+    #[arg(long, conflicts_with = "serial")]
+    pub sim: bool,
+    /// Serial device of the OpenROV board [default: /dev/ttyO1].
+    #[arg(long, value_name = "PATH")]
+    pub serial: Option<PathBuf>,
+    /// Baud rate of the board's serial line [default: 115200].
+    #[arg(long)]
+    pub baud: Option<u32>,
+    /// Command framing: crc8 (2015+ firmware) or plain (December 2014 firmware) [default: crc8].
+    #[arg(long, value_name = "crc8|plain")]
+    pub framing: Option<Framing>,
+    /// TOML configuration file.
+    #[arg(long, value_name = "FILE", global = true)]
+    pub config: Option<PathBuf>,
+    /// Where logs, parameters and telemetry logs go [default: the user's data directory].
+    #[arg(long, value_name = "DIR", global = true)]
+    pub data_dir: Option<PathBuf>,
+    /// MAVLink endpoint, repeatable: udpin:HOST:PORT, udpout:HOST:PORT,
+    /// tcpin:HOST:PORT, tcpout:HOST:PORT, serial:PATH:BAUD; add ?trusted
+    /// to accept SETUP_SIGNING (the signing key) over it
+    /// [default: udpout:127.0.0.1:14550 and tcpin:0.0.0.0:5760].
+    #[arg(long = "mavlink", value_name = "URL")]
+    pub mavlink: Vec<EndpointUrl>,
+    /// How the vehicle presents itself: ardupilot (ArduSub-compatible) or generic.
+    #[arg(long, value_name = "ardupilot|generic")]
+    pub identity: Option<Identity>,
+    /// Ground-station profiles directory (*.toml) replacing the built-in ones;
+    /// checked at start.
+    #[arg(long, value_name = "DIR")]
+    pub profiles: Option<PathBuf>,
+    /// Browser HMI address, or `off` [default: 0.0.0.0:8080]; port 0 picks a
+    /// free port (logged, and written to DATA_DIR/http.addr).
+    #[arg(long, value_name = "ADDR|off")]
+    pub http: Option<HttpAddr>,
+    /// TLS for the browser HMI: off, self-signed (made in DATA_DIR/tls/ on
+    /// first use) or files ([hmi] tls_cert and tls_key) [default: off].
+    #[allow(
+        rustdoc::broken_intra_doc_links,
+        reason = "clap prints this comment as --help verbatim: [hmi] is the file's section, not a link"
+    )]
+    #[arg(long, value_name = "off|self-signed|files")]
+    pub tls: Option<TlsModeName>,
+}
+
+/// `--tls` and `[hmi] tls`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TlsModeName {
+    Off,
+    SelfSigned,
+    Files,
+}
+
+impl std::str::FromStr for TlsModeName {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "off" => Ok(Self::Off),
+            "self-signed" => Ok(Self::SelfSigned),
+            "files" => Ok(Self::Files),
+            _ => Err(format!(
+                "\"{s}\" is not a TLS mode — use off, self-signed or files"
+            )),
+        }
+    }
+}
+
+/// `--http`: an address to listen on, or `off`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HttpAddr {
+    Off,
+    At(std::net::SocketAddr),
+}
+
+impl std::str::FromStr for HttpAddr {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s.eq_ignore_ascii_case("off") {
+            return Ok(Self::Off);
+        }
+        s.parse().map(Self::At).map_err(|_| {
+            format!(
+                "\"{s}\" is not an HTTP listen address — use HOST:PORT (e.g. 0.0.0.0:8080) or off"
+            )
+        })
+    }
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CliCommand {
+    /// Run the OpenROV board emulator on a new pseudo-terminal and print its path.
+    EmulateBoard(EmulateArgs),
+    /// Ground-station profiles (conventions per sender).
+    Profiles {
+        #[command(subcommand)]
+        command: ProfilesCommand,
+    },
+    /// The MAVLink 2 signing key in the data directory.
+    Signing {
+        #[command(subcommand)]
+        command: SigningCommand,
+    },
+    /// The browser HMI: pilot password (stored hashed) and TLS certificate.
+    Hmi {
+        #[command(subcommand)]
+        command: HmiCommand,
+    },
+    /// Run the autopilot step-response scenarios on the simulator (simulated
+    /// time, fixed seeds) and write a CSV and a PNG plot per scenario to DIR.
+    SimReport {
+        /// Output directory (created if missing).
+        dir: PathBuf,
+    },
+}
+
+/// `neptunus signing …` (the vehicle must not be running: it reads the key at start).
+#[derive(Debug, Subcommand)]
+pub enum SigningCommand {
+    /// Set the key to SHA-256 of a passphrase, as QGroundControl and MAVProxy
+    /// derive it. Without PASSPHRASE, one line is read from standard input
+    /// (keeps it out of the shell history and the process list).
+    SetPassphrase { passphrase: Option<String> },
+    /// Remove the key: signing off.
+    Clear,
+    /// Say whether a key is set (never prints it).
+    Status,
+}
+
+/// `neptunus hmi …` (takes effect at the next start of the vehicle).
+#[derive(Debug, Subcommand)]
+pub enum HmiCommand {
+    /// Set the pilot password: asked twice on the terminal without echo,
+    /// or one line read from standard input when it is not a terminal.
+    /// Stored as an argon2 hash in DATA_DIR/hmi-password (mode 0600).
+    SetPassword,
+    /// Remove the pilot password.
+    ClearPassword,
+    /// Say whether a pilot password is set (never prints it).
+    Status,
+    /// Print the SHA-256 fingerprint of the HMI's TLS certificate (the one
+    /// `[hmi] tls` serves; the self-signed one is made if it does not exist
+    /// yet), to compare with what the browser shows.
+    TlsFingerprint,
+}
+
+/// `neptunus profiles …`
+#[derive(Debug, Subcommand)]
+pub enum ProfilesCommand {
+    /// Load and validate profiles; print each with its sysids, or the first
+    /// error as file:line:column.
+    Check {
+        /// Directory of *.toml profiles [default: the built-in set].
+        dir: Option<PathBuf>,
+    },
+}
+
+/// Options of `emulate-board`.
+#[derive(Debug, Args, Default)]
+pub struct EmulateArgs {
+    /// Also make a symlink at PATH pointing to the pseudo-terminal (stable across restarts).
+    #[arg(long, value_name = "PATH")]
+    pub link: Option<PathBuf>,
+    /// Command framing the emulated board expects.
+    #[arg(long, value_name = "crc8|plain")]
+    pub framing: Option<Framing>,
+    /// Probability per telemetry line of garbage bytes in front of it.
+    #[arg(long, value_name = "P")]
+    pub garbage: Option<f64>,
+    /// Probability per telemetry line of a torn line.
+    #[arg(long, value_name = "P")]
+    pub torn: Option<f64>,
+    /// Probability per telemetry line of a wild point (0.1×, 10×, 100×).
+    #[arg(long, value_name = "P")]
+    pub wild: Option<f64>,
+    /// Probability per telemetry line of the line being dropped.
+    #[arg(long, value_name = "P")]
+    pub dropped: Option<f64>,
+    /// Seed of the fault generator.
+    #[arg(long)]
+    pub seed: Option<u64>,
+}
