@@ -4,12 +4,15 @@
 //!
 //! Owns task lifetimes and nothing else: every decision about the vehicle
 //! lives in the vehicle core; the files here only connect channels.
-//! - [`tasks`]: start-up and shutdown, in order;
-//! - [`vehicle_task`]: the one task that owns the vehicle, its inputs and the log line;
-//! - [`io`]: the core's outputs carried out (one send path for frames);
-//! - [`signing`]: message signing and its files;
-//! - [`params`]: parameter saving off the vehicle task;
-//! - [`storage`]: the data directory's problems at start.
+//! - `tasks`: start-up and shutdown, in order;
+//! - `vehicle_task`: the one task that owns the vehicle, its inputs and the log line;
+//! - `io`: the core's outputs carried out (one send path for frames);
+//! - `signing`: message signing and its files;
+//! - `params`: parameter saving off the vehicle task;
+//! - `storage`: the data directory's problems at start.
+//!
+//! `docs/ARCHITECTURE.md` follows a stick input and a telemetry line
+//! through these files.
 
 mod io;
 mod params;

@@ -1,4 +1,4 @@
-//! The HTTP side of [`auth`](super::auth): a layer in front of every route
+//! The HTTP side of [`auth`]: a layer in front of every route
 //! (Host check, Origin check on the WebSocket and on state-changing
 //! requests, login needed for the REST API), the login and logout routes,
 //! and the one password check that the page's form, the REST API and the

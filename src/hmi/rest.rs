@@ -1,7 +1,7 @@
 //! HTTP routes: the page and its assets, the WebSocket upgrade and the REST
 //! API (`/api/status`, `/api/params`, `/api/logs`, `/api/logs/{kind}/{name}`,
 //! `/api/login`, `/api/logout`). Who may use which is decided in front of
-//! them by [`guard`](super::guard).
+//! them by [`guard`].
 //!
 //! The server's own view of the vehicle ([`ServerView`]) is built like a
 //! session's, from the messages the core sends to the HMI endpoint. The
