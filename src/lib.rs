@@ -1,7 +1,7 @@
 //! Neptunus: onboard software for an OpenROV 2.x based ROV.
 //!
-//! The crate is organised by concern (the whole picture, the data paths and
-//! where to add things are in `docs/ARCHITECTURE.md`):
+//! The crate is organised by concern; `docs/ARCHITECTURE.md` is the map
+//! (the one picture, the data paths, who owns what, where to add things):
 //! - [`firmware`]: the OpenROV board's serial protocol (sans-IO codec), the
 //!   serial link task and the board emulator.
 //! - [`sim`]: the vehicle simulator (pure physics and sensor model).
@@ -13,11 +13,9 @@
 //! - [`logfile`]: `neptunus.log`, rotated by size.
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`hmi`]: the browser HMI (HTTP, WebSocket sessions as in-process ground stations).
-//! - [`vehicle`]: the vehicle core, sans-IO: the state machine (authority,
-//!   failsafes, arming, modes, driving), mixer, ground-station input,
-//!   parameters, telemetry schedule, estimator and autopilots.
-//! - [`scenario`]: closed-loop runs of the core, the emulator and the
-//!   simulator on simulated time (tests and `neptunus sim-report`).
+//! - [`vehicle`]: the vehicle core (state machine, modes, driving, authority,
+//!   failsafes, estimator, autopilots, parameters, telemetry) — sans-IO.
+//! - [`scenario`]: closed-loop scenarios on simulated time (`sim-report`).
 //! - [`camera`]: video sources (synthetic, ffmpeg, mjpg-streamer, url) and
 //!   the MJPEG, snapshot and status routes.
 

@@ -173,7 +173,7 @@ fn a_non_owner_cannot_move_a_thruster_or_change_state_but_may_watch() {
         );
         r.t += Duration::from_secs(1); // past the report rate limit
     }
-    assert_eq!(r.v.mode(), 19);
+    assert_eq!(r.v.mode().number(), 19);
     // PARAM_SET: answered with the unchanged value.
     let out = r.msg(
         B,
@@ -475,7 +475,7 @@ fn the_primary_takes_over_without_asking_after_warning_the_owner() {
     );
     assert_eq!(r.v.owner(), Some(255));
     let warn = pos(&out, |o| {
-        matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(s), .. }
+        matches!(o, Output::Text { msg: MavMessage::STATUSTEXT(s), .. }
             if s.severity == MavSeverity::MAV_SEVERITY_WARNING
             && String::from_utf8_lossy(s.text.as_ref()).contains("taken over by primary GCS 255 from GCS 254"))
     });
@@ -727,7 +727,7 @@ fn depth_hold_action_holds_depth_and_keeps_the_dead_man_fed() {
     let out = r.run(Duration::from_secs(6));
     assert!(has_text(&out, "Failsafe"), "{:?}", texts(&out));
     assert_eq!(
-        r.v.mode(),
+        r.v.mode().number(),
         2,
         "the GCS failsafe put the vehicle in ALT_HOLD"
     );
@@ -1102,7 +1102,7 @@ mod properties {
                     // Sticks drive in MANUAL, the per-thruster message in
                     // MANUAL_THRUSTERS; each is ignored in the other mode.
                     let thrusters_msg = matches!(a, Act::Thrusters(..));
-                    let counts = is_test || thrusters_msg == (r.v.mode() == 100);
+                    let counts = is_test || thrusters_msg == (r.v.mode().number() == 100);
                     if !counts {
                         // Not this mode's input: no effect on the model.
                     } else if is_test {

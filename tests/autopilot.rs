@@ -12,10 +12,7 @@ use neptunus::dialect::neptunus::*;
 use neptunus::firmware::codec::Command;
 use neptunus::scenario::report;
 use neptunus::scenario::{Scenario, Sticks};
-use neptunus::vehicle::machine::{
-    Input, MODE_ALT_HOLD, MODE_MANUAL, MODE_STABILIZE, MODE_SURFACE, Now, Output, RunMode, Sender,
-    Vehicle,
-};
+use neptunus::vehicle::machine::{Input, Mode, Now, Output, RunMode, Sender, Vehicle};
 
 fn secs(s: u64) -> Duration {
     Duration::from_secs(s)
@@ -76,7 +73,7 @@ fn alt_hold_at(depth_m: f64) -> Scenario {
     s.run(secs(3));
     assert_eq!(s.arm(), Some(MavResult::MAV_RESULT_ACCEPTED));
     assert_eq!(
-        s.set_mode(MODE_ALT_HOLD),
+        s.set_mode(Mode::AltHold.number()),
         Some(MavResult::MAV_RESULT_ACCEPTED)
     );
     s
@@ -106,7 +103,7 @@ fn yaw_stick_turns_and_release_holds_the_heading() {
     s.run(secs(3));
     s.arm();
     assert_eq!(
-        s.set_mode(MODE_STABILIZE),
+        s.set_mode(Mode::Stabilize.number()),
         Some(MavResult::MAV_RESULT_ACCEPTED)
     );
     s.set_sticks(Sticks {
@@ -146,7 +143,7 @@ fn position_target_moves_the_held_depth_only_in_alt_hold() {
     assert!(s.sent.iter().any(|m| matches!(m, MavMessage::STATUSTEXT(t)
         if String::from_utf8_lossy(t.text.as_ref()).contains("ignored in MANUAL"))));
     assert_eq!(s.vehicle().targets().0, None);
-    s.set_mode(MODE_ALT_HOLD);
+    s.set_mode(Mode::AltHold.number());
     s.set_depth_target(2.0);
     s.run(secs(15));
     assert_eq!(s.vehicle().targets().0, Some(2.0));
@@ -219,7 +216,7 @@ fn armed_vehicle(mode: u32) -> CoreRig {
 
 #[test]
 fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
-    let mut r = armed_vehicle(MODE_MANUAL);
+    let mut r = armed_vehicle(Mode::Manual.number());
     let (result, out) = command(
         &mut r,
         GCS,
@@ -246,7 +243,7 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
         }
     )));
     assert!(out.iter().any(
-        |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
+        |o| matches!(o, Output::Text { msg: MavMessage::STATUSTEXT(t), .. }
         if String::from_utf8_lossy(t.text.as_ref()).contains("simulated"))
     ));
     assert_eq!(r.v.motors_us(), [1500; 3]);
@@ -295,7 +292,7 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
 
 #[test]
 fn only_the_owner_switches_run_mode_or_sets_targets() {
-    let mut r = armed_vehicle(MODE_ALT_HOLD);
+    let mut r = armed_vehicle(Mode::AltHold.number());
     let (result, _) = command(
         &mut r,
         STRANGER,
@@ -347,7 +344,11 @@ fn hold_modes_need_fresh_estimates() {
         neptunus::vehicle::params::ParamStore::default(),
         1,
     ));
-    for mode in [MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE] {
+    for mode in [
+        Mode::AltHold.number(),
+        Mode::Stabilize.number(),
+        Mode::Surface.number(),
+    ] {
         let (result, out) = command(
             &mut r,
             GCS,
@@ -358,7 +359,7 @@ fn hold_modes_need_fresh_estimates() {
         );
         assert_eq!(result, Some(MavResult::MAV_RESULT_FAILED), "mode {mode}");
         assert!(out.iter().any(
-            |o| matches!(o, Output::Send { msg: MavMessage::STATUSTEXT(t), .. }
+            |o| matches!(o, Output::Text { msg: MavMessage::STATUSTEXT(t), .. }
             if String::from_utf8_lossy(t.text.as_ref()).contains("estimate"))
         ));
     }

@@ -95,7 +95,7 @@ fn mixer_asymmetric_range() {
 #[test]
 fn mixer_from_params_uses_mot_directions_and_range() {
     let mut p = ParamStore::defaults();
-    let c = MixerConfig::from_params(&p, 0.5);
+    let c = p.mixer_config(0.5);
     assert_eq!(
         c.directions,
         [-1, 1, 1],
@@ -106,7 +106,7 @@ fn mixer_from_params_uses_mot_directions_and_range() {
     p.set("MOT_1_DIRECTION", -1.0).unwrap();
     p.set("MOT_3_DIRECTION", -1.0).unwrap();
     p.set("MOT_PWM_MAX", 1950.0).unwrap();
-    let c = MixerConfig::from_params(&p, 1.0);
+    let c = p.mixer_config(1.0);
     assert_eq!(c.directions, [-1, -1, -1]);
     assert_eq!(c.pwm_max_us, 1950);
 }
@@ -119,7 +119,7 @@ fn ardusub_worked_example_through_the_mixer() {
     let sticks = sticks_from_manual_control(500, 0, 500, 0, &profile);
     assert_eq!(sticks.forward, Some(0.5));
     assert_eq!(sticks.heave_down, Some(0.0));
-    let c = MixerConfig::from_params(&ParamStore::defaults(), 0.5);
+    let c = ParamStore::defaults().mixer_config(0.5);
     let out = mix(&d(sticks.forward.unwrap(), 0.0, 0.0), &c);
     // 0.25 of the 400 µs half range: starboard +100, port (reversed) −100.
     assert_eq!(out, [1400, 1500, 1600]);
@@ -193,7 +193,7 @@ proptest! {
 /// starboard (heading increases), + surge goes forward.
 #[test]
 fn mixer_signs_match_the_simulator() {
-    let c = MixerConfig::from_params(&ParamStore::defaults(), 1.0);
+    let c = ParamStore::defaults().mixer_config(1.0);
     let model = ThesisModel::new(ThesisParams::default());
     let run = |dem: Demand| {
         let seen = sim::demand_from_thrusters(mix(&dem, &c), WIRING);

@@ -854,10 +854,14 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     assert_eq!(req["requester"], 201);
     a.send(json!({"type": "answer_request", "accept": false}))
         .await;
-    b.wait("statustext", |s| {
-        s["text"].as_str().unwrap().contains("refused by GCS 200")
-    })
-    .await;
+    let refused = b
+        .wait("statustext", |s| {
+            s["text"].as_str().unwrap().contains("refused by GCS 200")
+        })
+        .await;
+    // Filed by the core under the logger's "Transfer of control", not
+    // guessed by the page from its wording.
+    assert_eq!(refused["category"], "control", "{refused}");
     b.send(json!({"type": "request_control"})).await;
     a.wait("control_request", |_| true).await;
     a.send(json!({"type": "answer_request", "accept": true}))
@@ -925,6 +929,9 @@ async fn rest_api_and_assets() {
     assert!(body.contains("<html"), "{body}");
     for (path, mime) in [
         ("/js/main.js", "javascript"),
+        ("/js/session.js", "javascript"),
+        ("/js/view.js", "javascript"),
+        ("/js/controls.js", "javascript"),
         ("/css/style.css", "text/css"),
         ("/vendor/uPlot.esm.js", "javascript"),
         ("/vendor/uPlot.min.css", "text/css"),

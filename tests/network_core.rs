@@ -368,7 +368,7 @@ mod every_text_is_ascii {
                 }
             }
             for o in &out {
-                if let Output::Send { msg: MavMessage::STATUSTEXT(s), .. } = o {
+                if let Output::Text { msg: MavMessage::STATUSTEXT(s), .. } = o {
                     let b: &[u8] = s.text.as_ref();
                     prop_assert!(b.iter().all(|&c| c == 0 || (b' '..=b'~').contains(&c)), "{:?}", statustext(s));
                 }

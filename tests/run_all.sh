@@ -22,6 +22,8 @@ ffmpeg -hide_banner -version | sed -n 1p
 echo "== formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked -- -D warnings
+# The API docs build without a warning (broken links included).
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 

@@ -245,7 +245,7 @@ fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason()
         "{:?}",
         statustexts(&out)
     );
-    assert_eq!(r.v.mode(), 19);
+    assert_eq!(r.v.mode().number(), 19);
     // SET_MODE message: acknowledged with command 11.
     let out = r.msg(
         QGC,
@@ -620,5 +620,63 @@ mod properties {
                 }
             }
         }
+    }
+}
+
+/// Every text the core writes says what it is about (the browser HMI files
+/// it by that, not by its wording): the board link's under `BoardLink`,
+/// arming's under `Stop`, and a reply to one station under its kind.
+#[test]
+fn every_text_carries_the_topic_chosen_where_it_was_written() {
+    use neptunus::vehicle::machine::Topic;
+    let topics = |out: &[Output]| -> Vec<(Topic, String)> {
+        out.iter()
+            .filter_map(|o| match o {
+                Output::Text {
+                    topic,
+                    msg: MavMessage::STATUSTEXT(s),
+                    ..
+                } => Some((*topic, common::statustext(s))),
+                _ => None,
+            })
+            .collect()
+    };
+    let mut r = CoreRig::new(Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 1));
+    let up = r.link_up();
+    assert_eq!(
+        topics(&up),
+        vec![(Topic::BoardLink, "Board link up".into())]
+    );
+    let out = r.cmd(QGC, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
+    // Arming claims control first (a control text), then fails its checks
+    // (an arming text).
+    let t = topics(&out);
+    assert!(
+        t.iter()
+            .any(|(topic, text)| *topic == Topic::Control && text.contains("in control")),
+        "{t:?}"
+    );
+    assert!(
+        t.iter()
+            .any(|(topic, text)| *topic == Topic::Stop && text.starts_with("PreArm")),
+        "{t:?}"
+    );
+    let down = r.link_down("unplugged");
+    assert!(
+        topics(&down)
+            .iter()
+            .any(|(topic, text)| *topic == Topic::BoardLink && text.contains("unplugged")),
+        "{:?}",
+        topics(&down)
+    );
+    // No STATUSTEXT leaves the core without a topic.
+    for out in [&up, &out, &down] {
+        assert!(!out.iter().any(|o| matches!(
+            o,
+            Output::Send {
+                msg: MavMessage::STATUSTEXT(_),
+                ..
+            }
+        )));
     }
 }

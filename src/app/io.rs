@@ -7,13 +7,14 @@ use std::time::Duration;
 
 use super::params::ParamSaver;
 use super::signing::LinkSigning;
+use crate::dialect::neptunus::MavMessage;
 use crate::eventlog::EventLog;
 use crate::firmware::emulator::EmulatorOptions;
 use crate::firmware::link::LinkHandle;
 use crate::firmware::loopback::BuiltinSim;
 use crate::mavlink::endpoint::{Outbound, Route, RouterHandle};
 use crate::mavlink::frame::{encode_command_ack_raw, encode_v2};
-use crate::vehicle::machine::{COMPONENT_ID, Now, Output, RunMode, To, Vehicle};
+use crate::vehicle::machine::{COMPONENT_ID, NEUTRAL_GO, Now, Output, RunMode, To, Topic, Vehicle};
 
 /// The link hears that the vehicle is healthy at most this often.
 const HEALTHY_PERIOD: Duration = Duration::from_millis(100);
@@ -56,16 +57,29 @@ impl Io {
         }
     }
 
+    /// A message to the HMI sessions it is for, and on the wire to the
+    /// endpoints it is for.
+    fn send_message(
+        &mut self,
+        to: To,
+        msg: &MavMessage,
+        topic: Option<Topic>,
+        sysid: u8,
+        now: Now,
+    ) {
+        self.hmi.deliver(to, msg, topic);
+        if !self.hmi.only_hmi(to) {
+            self.send_frame(to, now, |seq| encode_v2(sysid, COMPONENT_ID, seq, msg));
+        }
+    }
+
     pub(super) fn apply(&mut self, outputs: &mut Vec<Output>, vehicle: &Vehicle, now: Now) {
         let sysid = vehicle.sysid();
         for out in outputs.drain(..) {
             match out {
-                Output::Send { to, msg } => {
-                    self.hmi.deliver(to, &msg);
-                    if self.hmi.only_hmi(to) {
-                        continue;
-                    }
-                    self.send_frame(to, now, |seq| encode_v2(sysid, COMPONENT_ID, seq, &msg));
+                Output::Send { to, msg } => self.send_message(to, &msg, None, sysid, now),
+                Output::Text { to, topic, msg } => {
+                    self.send_message(to, &msg, Some(topic), sysid, now)
                 }
                 Output::AckUnknown {
                     to,
@@ -149,7 +163,7 @@ impl Io {
 
     /// Thrusters to neutral, first thing at shutdown.
     pub(super) fn neutral(&self) {
-        self.link.send(super::NEUTRAL);
+        self.link.send(NEUTRAL_GO);
     }
 }
 

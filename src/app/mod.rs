@@ -10,6 +10,9 @@
 //! - `signing`: message signing and its files;
 //! - `params`: parameter saving off the vehicle task;
 //! - `storage`: the data directory's problems at start.
+//!
+//! `docs/ARCHITECTURE.md` follows a stick input and a telemetry line
+//! through these files.
 
 mod io;
 mod params;
@@ -22,7 +25,6 @@ use std::future::Future;
 
 use crate::config::Settings;
 use crate::eventlog::EventLogError;
-use crate::firmware::codec::Command;
 use crate::firmware::emulator::PtyBoard;
 use crate::firmware::link::LinkError;
 use crate::mavlink::endpoint::EndpointError;
@@ -52,13 +54,6 @@ pub enum AppError {
         source: std::io::Error,
     },
 }
-
-/// Neutral for all three thrusters.
-pub const NEUTRAL: Command = Command::Go {
-    port_us: 1500,
-    vertical_us: 1500,
-    starboard_us: 1500,
-};
 
 /// Runs the vehicle until `shutdown` resolves.
 pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Result<(), AppError> {

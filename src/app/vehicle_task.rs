@@ -16,7 +16,7 @@ use crate::firmware::link::LinkEvent;
 use crate::firmware::loopback::sim_truth;
 use crate::mavlink::endpoint::Inbound;
 use crate::mavlink::frame::{Frame, Undecodable};
-use crate::vehicle::machine::{Input, Now, Output, RunMode, Sender, Vehicle};
+use crate::vehicle::machine::{Input, NEUTRAL_US, Now, Output, RunMode, Sender, Vehicle};
 
 /// The camera's scene follows the vehicle at most this often.
 const SCENE_PERIOD: Duration = Duration::from_millis(50);
@@ -150,7 +150,7 @@ impl VehicleTask {
         tracing::info!(
             link = ?s.state,
             armed = v.armed(),
-            mode = crate::vehicle::machine::mode_name(v.mode()),
+            mode = v.mode().name(),
             heading_deg = v.raw_heading_deg().unwrap_or(f64::NAN),
             depth_m = v.raw_depth_m().unwrap_or(f64::NAN),
             voltage_v = v.battery_v().unwrap_or(f64::NAN),
@@ -207,7 +207,7 @@ fn scene(v: &Vehicle, now: Now) -> crate::camera::Scene {
         roll_deg,
         pitch_deg,
         // 1000..2000 µs spans ±90° (DO_MOUNT_CONTROL's mapping).
-        tilt_deg: (f64::from(v.tilt_us()) - 1500.0) / 500.0 * 90.0,
+        tilt_deg: (f64::from(v.tilt_us()) - f64::from(NEUTRAL_US)) / 500.0 * 90.0,
         simulated: v.run_mode() == RunMode::Simulator,
         armed: v.armed(),
     }

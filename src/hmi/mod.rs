@@ -50,7 +50,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{broadcast, mpsc, watch};
 
 use crate::dialect::neptunus::MavMessage;
-use crate::vehicle::machine::{Input, Sender, To};
+use crate::vehicle::machine::{Input, Sender, To, Topic};
 
 /// MAVLink component id of every HMI session (MAV_COMP_ID_MISSIONPLANNER, a GCS).
 pub const SESSION_COMPID: u8 = 190;
@@ -145,6 +145,8 @@ pub struct Delivery {
     /// `None`: for every session; `Some(peer)`: for one session (or the server).
     pub peer: Option<u64>,
     pub msg: MavMessage,
+    /// For a STATUSTEXT: what it is about, as the core chose it.
+    pub topic: Option<Topic>,
 }
 
 /// The vehicle task's side of the hub: delivers the core's messages for the
@@ -169,7 +171,7 @@ impl Outlet {
 
     /// Hands `msg` to the sessions it is addressed to (no encoding: sessions
     /// read the message itself).
-    pub fn deliver(&self, to: To, msg: &MavMessage) {
+    pub fn deliver(&self, to: To, msg: &MavMessage, topic: Option<Topic>) {
         let peer = match to {
             To::All => None,
             To::Endpoint(e) if e == self.endpoint => None,
@@ -180,6 +182,7 @@ impl Outlet {
             let _ = self.hub.send(Arc::new(Delivery {
                 peer,
                 msg: msg.clone(),
+                topic,
             }));
         }
     }

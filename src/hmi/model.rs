@@ -8,11 +8,13 @@
 
 use std::time::{Duration, Instant};
 
+use super::Delivery;
 use super::protocol::{
     AutopilotView, ControlView, EstimateView, HealthView, ServerMsg, SimView, Telemetry,
     ThrustersUs,
 };
 use crate::dialect::neptunus::*;
+use crate::vehicle::machine::Topic;
 use crate::vehicle::mode::Mode;
 
 /// No vehicle HEARTBEAT for this long: the vehicle is "not seen".
@@ -27,8 +29,19 @@ pub struct Model {
     tel: Telemetry,
     /// This session's system id (None: watch only).
     me: Option<u8>,
-    /// The vehicle's system id: acks and requests must come for us.
-    statustext: Option<(u16, String, u8)>,
+    /// A long STATUSTEXT being put together from its chunks.
+    statustext: Option<Pending>,
+    /// What the text being delivered is about (see [`Model::on_delivery`]).
+    topic: Topic,
+}
+
+/// A long text arriving in chunks.
+#[derive(Debug)]
+struct Pending {
+    id: u16,
+    text: String,
+    severity: u8,
+    topic: Topic,
 }
 
 fn deg(rad: f32) -> f64 {
@@ -53,6 +66,7 @@ impl Model {
             tel: Telemetry::default(),
             me,
             statustext: None,
+            topic: Topic::General,
         }
     }
 
@@ -78,6 +92,14 @@ impl Model {
             .last_heartbeat
             .is_some_and(|h| now.saturating_duration_since(h) <= VEHICLE_SEEN);
         t
+    }
+
+    /// Takes in one delivery from the vehicle (a message, and for a text
+    /// what it is about); events for the browser go to `events`.
+    pub fn on_delivery(&mut self, d: &Delivery, now: Instant, events: &mut Vec<ServerMsg>) {
+        self.topic = d.topic.unwrap_or(Topic::General);
+        self.on_message(&d.msg, now, events);
+        self.topic = Topic::General;
     }
 
     /// Takes in one message from the vehicle; events for the browser go to `events`.
@@ -235,32 +257,42 @@ impl Model {
         let bytes: &[u8] = s.text.as_ref();
         let chunk = text_of(bytes);
         let severity = s.severity as u8;
+        let topic = self.topic;
         let full = !bytes.contains(&0);
+        let done = |p: Pending| ServerMsg::Statustext {
+            severity: p.severity,
+            text: p.text,
+            category: p.topic,
+        };
         if s.id == 0 {
             events.push(ServerMsg::Statustext {
                 severity,
                 text: chunk,
+                category: topic,
             });
             return;
         }
         let text = match self.statustext.take() {
-            Some((id, mut text, _)) if id == s.id => {
-                text.push_str(&chunk);
-                text
+            Some(mut p) if p.id == s.id => {
+                p.text.push_str(&chunk);
+                p.text
             }
-            Some((_, text, sev)) => {
-                events.push(ServerMsg::Statustext {
-                    severity: sev,
-                    text,
-                });
+            Some(other) => {
+                events.push(done(other));
                 chunk
             }
             None => chunk,
         };
+        let p = Pending {
+            id: s.id,
+            text,
+            severity,
+            topic,
+        };
         if full {
-            self.statustext = Some((s.id, text, severity));
+            self.statustext = Some(p);
         } else {
-            events.push(ServerMsg::Statustext { severity, text });
+            events.push(done(p));
         }
     }
 }
@@ -307,7 +339,8 @@ mod tests {
             ev,
             vec![ServerMsg::Statustext {
                 severity: 6,
-                text: long
+                text: long,
+                category: Topic::General,
             }]
         );
     }

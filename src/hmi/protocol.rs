@@ -34,7 +34,7 @@
 //! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version`, `modes` (the modes to offer: `mode`, `name`, `label`, `thrusters`, `button`), `boot_mode` |
 //! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
 //! | `telemetry` | 20 Hz | see [`Telemetry`] |
-//! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text` |
+//! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text`, `category` (what it is about, chosen where the text is written: `stop`, `control`, `gain`, `ap_depth`, `ap_heading`, `failsafe`, `board_link` — the developer logger's categories — or `general`) |
 //! | `ack` | at once | `command`, `command_name`, `result`, `result_name` |
 //! | `control` | on change | `owner` (sysid or null), `you`, `takeover_allowed` |
 //! | `control_request` | the owner is asked | `requester`, `timeout_s` |
@@ -43,6 +43,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::vehicle::machine::Topic;
 use crate::vehicle::mode::Mode;
 
 /// Largest WebSocket message the server reads (bytes).
@@ -419,6 +420,8 @@ pub enum ServerMsg {
     Statustext {
         severity: u8,
         text: String,
+        /// What it is about, as the vehicle core chose it.
+        category: Topic,
     },
     Ack {
         command: u32,
@@ -524,9 +527,13 @@ mod tests {
         let j = ServerMsg::Statustext {
             severity: 6,
             text: "hi".into(),
+            category: Topic::BoardLink,
         }
         .to_json();
-        assert_eq!(j, r#"{"type":"statustext","severity":6,"text":"hi"}"#);
+        assert_eq!(
+            j,
+            r#"{"type":"statustext","severity":6,"text":"hi","category":"board_link"}"#
+        );
         let t = ServerMsg::Telemetry(Box::default()).to_json();
         assert!(t.starts_with(r#"{"type":"telemetry","t_ms":0"#), "{t}");
     }

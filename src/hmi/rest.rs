@@ -79,7 +79,7 @@ pub(crate) async fn watch_vehicle(
             });
             continue;
         }
-        model.on_message(&d.msg, Instant::now(), &mut events);
+        model.on_delivery(&d, Instant::now(), &mut events);
         events.clear();
         // The REST status needs no more than a few updates a second.
         if last_publish.elapsed() >= Duration::from_millis(200) {

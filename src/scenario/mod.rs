@@ -141,7 +141,7 @@ impl Scenario {
             match out {
                 Output::Board(cmd) => self.sim.command(&cmd, self.now),
                 Output::Healthy => self.sim.healthy(self.now),
-                Output::Send { msg, .. } => self.sent.push(msg),
+                Output::Send { msg, .. } | Output::Text { msg, .. } => self.sent.push(msg),
                 _ => {}
             }
         }

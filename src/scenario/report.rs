@@ -14,7 +14,7 @@ use plotters::prelude::*;
 
 use super::{Sample, Scenario, Sticks};
 use crate::firmware::emulator::EmulatorOptions;
-use crate::vehicle::machine::{MODE_ALT_HOLD, MODE_STABILIZE, MODE_SURFACE};
+use crate::vehicle::mode::Mode;
 
 /// Errors writing the report.
 #[derive(Debug, thiserror::Error)]
@@ -60,13 +60,13 @@ pub fn options(seed: u64) -> EmulatorOptions {
     o
 }
 
-fn armed_in(mode: u32, opts: EmulatorOptions, depth_m: f64, heading_deg: f64) -> Scenario {
+fn armed_in(mode: Mode, opts: EmulatorOptions, depth_m: f64, heading_deg: f64) -> Scenario {
     let mut s = Scenario::new(opts);
     s.place(depth_m, heading_deg);
     // Telemetry first: the pre-arm checks want fresh depth and heading.
     s.run(Duration::from_secs(3));
     s.arm();
-    s.set_mode(mode);
+    s.set_mode(mode.number());
     s
 }
 
@@ -96,7 +96,7 @@ fn angle_diff(a: f64, b: f64) -> f64 {
 
 /// Depth step 0 → 2 m in ALT_HOLD.
 pub fn depth_step() -> Outcome {
-    let mut s = armed_in(MODE_ALT_HOLD, options(1), 0.0, 45.0);
+    let mut s = armed_in(Mode::AltHold, options(1), 0.0, 45.0);
     s.run(Duration::from_secs(2));
     let start = s.now().as_secs_f64();
     s.set_depth_target(2.0);
@@ -128,7 +128,7 @@ pub fn depth_step() -> Outcome {
 pub fn heading_step() -> Outcome {
     let opts = options(2);
     let bias = opts.sim.noise.heading_bias_deg;
-    let mut s = armed_in(MODE_STABILIZE, opts, 1.0, 30.0);
+    let mut s = armed_in(Mode::Stabilize, opts, 1.0, 30.0);
     s.run(Duration::from_secs(2));
     let start = s.now().as_secs_f64();
     s.set_heading_target(120.0);
@@ -160,7 +160,7 @@ pub fn heading_step() -> Outcome {
 pub fn depth_hold_in_current() -> Outcome {
     let mut opts = options(3);
     set_current(&mut opts, 0.2);
-    let mut s = armed_in(MODE_ALT_HOLD, opts, 2.0, 45.0);
+    let mut s = armed_in(Mode::AltHold, opts, 2.0, 45.0);
     s.set_depth_target(2.0);
     // The vehicle drifts with the current while the pilot drives forward a little.
     s.set_sticks(Sticks {
@@ -189,7 +189,7 @@ pub fn depth_hold_in_current() -> Outcome {
 pub fn wild_points() -> Outcome {
     let mut opts = options(4);
     set_wild_rate(&mut opts, 0.05);
-    let mut s = armed_in(MODE_ALT_HOLD, opts, 2.0, 30.0);
+    let mut s = armed_in(Mode::AltHold, opts, 2.0, 30.0);
     s.set_depth_target(2.0);
     s.run(Duration::from_secs(5));
     // A turn, then a climb, so the estimates move while wild points arrive.
@@ -242,7 +242,7 @@ pub fn wild_points() -> Outcome {
 
 /// SURFACE from 3 m.
 pub fn surface() -> Outcome {
-    let mut s = armed_in(MODE_SURFACE, options(5), 3.0, 45.0);
+    let mut s = armed_in(Mode::Surface, options(5), 3.0, 45.0);
     let start = s.now().as_secs_f64();
     s.run(Duration::from_secs(25));
     let samples = s.samples().to_vec();

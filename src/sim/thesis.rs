@@ -36,7 +36,10 @@ use nalgebra::{Cholesky, Matrix4, Vector3, Vector4};
 
 use super::environment::Environment;
 
-/// Pulse width that stops a thruster (µs).
+/// Pulse width that stops a thruster (µs). The simulator keeps its own
+/// constant on purpose, apart from the vehicle's `mixer::NEUTRAL_US`: it
+/// models the ESC as the thesis measured it, an independent check of what
+/// the vehicle commands.
 pub const PWM_NEUTRAL_US: u16 = 1500;
 /// Pulse width swing from neutral to full thrust either way (µs).
 pub const PWM_HALF_RANGE_US: u16 = 500;

@@ -34,7 +34,8 @@
 //! also turned round would be the other way, and no record says which
 //! Neptunus has.
 
-/// Pulse width that stops a thruster (µs).
+/// Pulse width that stops a thruster (µs): the ESC's own, kept apart from
+/// the vehicle's `mixer::NEUTRAL_US` on purpose (an independent check).
 const NEUTRAL_US: f64 = 1500.0;
 /// Pulse width swing from neutral to full either way (µs).
 const HALF_RANGE_US: f64 = 500.0;

@@ -283,7 +283,7 @@ impl AxisFilter {
     pub fn rejected(&self) -> u64 {
         self.rejected_total
     }
-    /// Has fused a measurement within the last `STALE` (2.5 s).
+    /// Has fused a measurement within the last `STALE`.
     pub fn valid(&self, now: Duration) -> bool {
         self.initialised
             && self

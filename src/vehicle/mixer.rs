@@ -23,8 +23,6 @@
 
 use serde::Serialize;
 
-use super::params::ParamStore;
-
 /// Pulse width that stops a thruster (µs).
 pub const NEUTRAL_US: u16 = 1500;
 
@@ -54,16 +52,6 @@ pub struct MixerConfig {
 }
 
 impl MixerConfig {
-    /// Directions and PWM range from the parameters, with the given pilot gain.
-    pub fn from_params(p: &ParamStore, gain: f64) -> Self {
-        Self {
-            gain,
-            directions: [p.mot_direction(2), p.mot_direction(3), p.mot_direction(1)],
-            pwm_min_us: p.mot_pwm_min(),
-            pwm_max_us: p.mot_pwm_max(),
-        }
-    }
-
     /// The gain actually applied: clamped to `[0, 1]`, NaN → 0.
     fn gain(&self) -> f64 {
         clean(self.gain).max(0.0)
@@ -103,6 +91,29 @@ pub fn mix(d: &Demand, cfg: &MixerConfig) -> [u16; 3] {
         *o = to_us(u, dir, cfg);
     }
     out
+}
+
+/// The mixer inverted: the demand three pulse widths really produce (after
+/// direction, before the gain), with a thruster within `deadzone_us` of
+/// neutral (the board's ESC deadzone) giving nothing. The estimator's
+/// model input.
+pub fn unmix(us: [u16; 3], cfg: &MixerConfig, deadzone_us: f64) -> Demand {
+    let (lo, neutral, hi) = cfg.range();
+    let u = |i: usize| {
+        let d = f64::from(us[i]) - neutral;
+        if d.abs() <= deadzone_us {
+            return 0.0;
+        }
+        let span = if d > 0.0 { hi - neutral } else { neutral - lo };
+        let v = if span > 0.0 { d / span } else { 0.0 };
+        v.clamp(-1.0, 1.0) * f64::from(cfg.directions[i].signum())
+    };
+    let (port, vertical, starboard) = (u(0), u(1), u(2));
+    Demand {
+        surge: (port + starboard) / 2.0,
+        heave: vertical,
+        yaw: (port - starboard) / 2.0,
+    }
 }
 
 /// One thruster driven directly: `u ∈ [-1, 1]` times the gain, then the

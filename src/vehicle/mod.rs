@@ -1,4 +1,4 @@
-//! The vehicle core (see `docs/ARCHITECTURE.md`): pure code that owns all vehicle state
+//! The vehicle core (map: `docs/ARCHITECTURE.md`): pure code that owns all vehicle state
 //! and decides every byte sent to the board and to ground stations.
 //!
 //! - [`machine`]: the state machine, `Vehicle::handle(input, now) -> outputs`.

@@ -153,6 +153,9 @@ test('logger category filters', () => withVehicle(async (v) => {
   await page.evaluate(() => window.dispatchEvent(new Event('blur')));
   await page.click('[data-testid=request-control]');
   await until(() => page.locator('#log li[data-category=control]').count(), 10000, 'a control entry');
+  // The vehicle's own text about it, filed under the category the core gave it.
+  await until(() => page.locator('#log li[data-category=control]').filter({ hasText: 'in control (was' }).count(),
+    10000, "the core's control text in the control category");
   assert.equal(await page.locator('#log li[data-category=stop]').count(), 0);
   await page.check('#categories input[data-category=stop]');
   assert.ok(await page.locator('#log li[data-category=stop]').count() > 0);

@@ -265,10 +265,7 @@ pub fn manual_control(x: i16, z: i16, r: i16, buttons: u16) -> MavMessage {
 /// Every MAVLink message sent, with where it went.
 pub fn sent(out: &[Output]) -> Vec<(To, MavMessage)> {
     out.iter()
-        .filter_map(|o| match o {
-            Output::Send { to, msg } => Some((*to, msg.clone())),
-            _ => None,
-        })
+        .filter_map(|o| o.message().map(|(to, msg)| (to, msg.clone())))
         .collect()
 }
 

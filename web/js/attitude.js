@@ -1,4 +1,5 @@
 // Attitude indicator: artificial horizon (roll, pitch), heading tape and depth.
+// docs/ARCHITECTURE.md is the map of the whole program.
 
 export function drawAttitude(canvas, t) {
   const ctx = canvas.getContext('2d');

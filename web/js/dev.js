@@ -1,6 +1,7 @@
 // Developer interface: recorder of every plottable signal from connection
 // on, up to 10 live plots (uPlot), CSV export, and the logger with
-// selectable categories (thesis 7.2).
+// selectable categories (thesis 7.2). docs/ARCHITECTURE.md is the map of
+// the whole program.
 import uPlot from '/vendor/uPlot.esm.js';
 
 export const MAX_PLOTS = 10;

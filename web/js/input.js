@@ -1,6 +1,7 @@
 // Operator input: keyboard (thesis table 7.1), touch press-and-hold,
 // gamepad (table 7.2, polled every animation frame), head tracking.
-// Produces one command at a time; main.js sends it at 20 Hz.
+// Produces one command at a time; controls.js sends it at 20 Hz.
+// docs/ARCHITECTURE.md is the map of the whole program.
 
 export const DEADBAND = 0.1;
 

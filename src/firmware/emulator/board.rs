@@ -18,7 +18,7 @@ use std::fmt::Write as _;
 use std::time::Duration;
 
 use super::faults::FaultInjector;
-use super::{BoardRecord, BoardSnapshot, EmulatorOptions, SimSnapshot};
+use super::{BoardRecord, BoardSnapshot, EmulatorOptions, SimSnapshot, print};
 use crate::firmware::codec::{Framing, crc8};
 use crate::sim::{Plant, Readings, SimError, SimState};
 
@@ -30,6 +30,9 @@ pub const COMMAND_QUEUE_SLOTS: usize = 5;
 pub const MAX_ARGS: usize = 10;
 /// `rcap()` answer: lights, lasers, camera mount, compass, orientation, depth (bits 1..=6).
 pub const CAPABILITIES: u32 = 0b111_1110;
+/// The board firmware's neutral pulse width: the emulator plays the board,
+/// so it keeps its own constant apart from the vehicle's
+/// `mixer::NEUTRAL_US` on purpose (an independent check).
 const NEUTRAL_US: i32 = 1500;
 const SIM_STEP: Duration = Duration::from_millis(10);
 /// The board works through one queued command per loop iteration.
@@ -527,10 +530,4 @@ fn atoi(s: &str) -> i32 {
     }
     let v = if neg { -v } else { v };
     v.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32
-}
-
-/// Prints one line as the board does, ending in `\r\n`.
-pub(super) fn print(line: &str, out: &mut Vec<u8>) {
-    out.extend_from_slice(line.as_bytes());
-    out.extend_from_slice(b"\r\n");
 }

@@ -10,8 +10,7 @@
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
-use super::board::print;
-use super::{FaultOptions, FaultStats};
+use super::{FaultOptions, FaultStats, print};
 use crate::firmware::codec::physical_range;
 
 /// Injects the faults [`FaultOptions`] asks for into telemetry lines.

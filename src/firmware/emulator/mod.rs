@@ -254,3 +254,10 @@ impl From<&Truth> for SimSnapshot {
         }
     }
 }
+
+/// Prints one line as the board does, ending in `\r\n` (the board and the
+/// fault injector both write lines).
+fn print(line: &str, out: &mut Vec<u8>) {
+    out.extend_from_slice(line.as_bytes());
+    out.extend_from_slice(b"\r\n");
+}

@@ -79,10 +79,11 @@ impl LinkConfig {
 }
 
 /// Whether the board can be commanded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LinkState {
     /// No device, or no telemetry.
+    #[default]
     Down,
     /// Device open, handshake under way.
     Handshaking,

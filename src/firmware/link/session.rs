@@ -390,6 +390,7 @@ mod tests {
     //! loop would write and report, decision by decision.
 
     use super::*;
+    use crate::vehicle::mixer::NEUTRAL_US;
 
     /// What a handshake writes, in order.
     const HANDSHAKE: [Command; 3] = [
@@ -403,8 +404,8 @@ mod tests {
     fn go(us: u16) -> Command {
         Command::Go {
             port_us: us,
-            vertical_us: 1500,
-            starboard_us: 1500,
+            vertical_us: NEUTRAL_US,
+            starboard_us: NEUTRAL_US,
         }
     }
 

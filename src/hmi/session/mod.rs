@@ -170,7 +170,7 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
                         if d.peer.is_some_and(|p| p != s.id) {
                             continue;
                         }
-                        s.model.on_message(&d.msg, Instant::now(), &mut events);
+                        s.model.on_delivery(&d, Instant::now(), &mut events);
                         for ev in events.drain(..) {
                             if send(&mut tx, &ev).await.is_err() {
                                 break 'session End::SendFailed;

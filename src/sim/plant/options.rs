@@ -14,11 +14,11 @@ use crate::sim::thesis::ParamsError;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ModelKind {
-    /// [`six_dof`](crate::sim::six_dof): roll and pitch free, restoring moments, thruster
+    /// [`crate::sim::six_dof`]: roll and pitch free, restoring moments, thruster
     /// couplings.
     #[default]
     SixDof,
-    /// [`thesis`](crate::sim::thesis): the thesis' 4-DOF model, roll and pitch 0.
+    /// [`crate::sim::thesis`]: the thesis' 4-DOF model, roll and pitch 0.
     #[serde(rename = "thesis-4dof")]
     Thesis4Dof,
 }

@@ -10,13 +10,14 @@
 use std::time::Duration;
 
 use super::texts::ReplyKind;
-use super::{Now, Output, Sender, To, Vehicle, given};
+use super::texts::Topic;
+use super::{Now, Output, Sender, To, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::eventlog::LogEvent;
 use crate::vehicle::params::ControlClaim;
 
 /// How long a control request waits for the owner when p3 does not say.
-const DEFAULT_REQUEST_TIMEOUT_S: f32 = 10.0;
+pub(super) const DEFAULT_REQUEST_TIMEOUT_S: f32 = 10.0;
 /// The board's dead-man is fed only while the owner showed life this recently
 /// (heartbeats come at 1 Hz; half a period of slack).
 pub(super) const LIFE_FEEDS_DEADMAN: Duration = Duration::from_millis(1500);
@@ -83,6 +84,8 @@ pub(super) struct Authority {
     pub command_refusals: RateLimit,
     pub input_refusals: RateLimit,
     pub pickup_notes: RateLimit,
+    /// The last station that owned the vehicle (for failsafe texts).
+    pub last_owner: Option<u8>,
 }
 
 /// What kind of state-changing traffic is being checked.
@@ -166,7 +169,7 @@ impl Vehicle {
 
     /// May `from` control the vehicle at all: SYSID_MYGCS, a NEPT_GCS_ALLOWn
     /// station, or an HMI pilot session.
-    fn allowed(&self, from: Sender) -> bool {
+    pub(super) fn allowed(&self, from: Sender) -> bool {
         from.pilot || self.params.gcs_allowed(from.sysid)
     }
 
@@ -305,6 +308,7 @@ impl Vehicle {
             self.auth.pickup = false;
             if let Some(o) = self.owner() {
                 self.statustext(
+                    Topic::Control,
                     MavSeverity::MAV_SEVERITY_INFO,
                     &format!("GCS {o}: sticks centred, driving"),
                     out,
@@ -314,6 +318,7 @@ impl Vehicle {
         }
         if self.auth.pickup_notes.hit(now.mono, INPUT_REPORT) {
             self.statustext(
+                Topic::Control,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 "Centre the sticks to take control",
                 out,
@@ -344,7 +349,7 @@ impl Vehicle {
             previous.is_some() || matches!(how, Grant::Handover | Grant::PrimaryTakeover);
         self.safety_stop(transfer || self.armed, out);
         self.auth.owner = Some(to);
-        self.last_owner = Some(to.sysid);
+        self.auth.last_owner = Some(to.sysid);
         self.auth.takeover_allowed = takeover_allowed;
         self.auth.last_life = Some(now.mono);
         if self.auth.pending.is_some_and(|p| p.from.sysid == to.sysid) {
@@ -358,6 +363,7 @@ impl Vehicle {
             Grant::PrimaryTakeover => ("control_takeover", "primary takeover"),
         };
         self.statustext(
+            Topic::Control,
             MavSeverity::MAV_SEVERITY_INFO,
             &format!("GCS {} in control (was {was})", to.sysid),
             out,
@@ -391,6 +397,7 @@ impl Vehicle {
         self.auth.pickup = false;
         self.safety_stop(false, out);
         self.statustext(
+            Topic::Control,
             MavSeverity::MAV_SEVERITY_WARNING,
             &format!("GCS {} no longer in control: {why}", old.sysid),
             out,
@@ -400,196 +407,6 @@ impl Vehicle {
             self.grant(p.from, Grant::Handover, false, now, out);
         } else {
             self.send_control_status(out);
-        }
-    }
-
-    /// MAV_CMD_REQUEST_OPERATOR_CONTROL (32100): p1 0 release / 1 request,
-    /// p2 allow takeover, p3 request timeout s (3..60), p4 requesting sysid.
-    pub(super) fn operator_control(
-        &mut self,
-        from: Sender,
-        p: [f32; 7],
-        now: Now,
-        out: &mut Vec<Output>,
-    ) -> MavResult {
-        if self.signing_active && !from.signed {
-            return self.refuse_command(from, "control request", Refusal::Unsigned, now, out);
-        }
-        if let Some(id) = given(p[3])
-            && id != 0.0
-            && (id.round() - f32::from(from.sysid)).abs() > 0.5
-        {
-            self.reply_text(
-                from,
-                ReplyKind::Control,
-                MavSeverity::MAV_SEVERITY_WARNING,
-                &format!(
-                    "Control request from sysid {} names sysid {id}: a station requests for itself",
-                    from.sysid
-                ),
-                now,
-                out,
-            );
-            return MavResult::MAV_RESULT_DENIED;
-        }
-        let takeover = given(p[1]).is_some_and(|v| v >= 0.5);
-        let timeout_s = given(p[2])
-            .filter(|t| t.is_finite() && *t > 0.0)
-            .map_or(DEFAULT_REQUEST_TIMEOUT_S, |t| t.clamp(3.0, 60.0));
-        let me = Station::of(from);
-        match given(p[0]).map(|a| a.round() as i64) {
-            Some(0) => {
-                if self.owner() == Some(from.sysid) {
-                    self.drop_owner("control_released", "released", now, out);
-                } else if self
-                    .auth
-                    .pending
-                    .is_some_and(|p| p.from.sysid == from.sysid)
-                {
-                    self.auth.pending = None;
-                    self.log(
-                        "control_refused",
-                        Some(from.sysid),
-                        "request withdrawn by the requester".into(),
-                        out,
-                    );
-                }
-                MavResult::MAV_RESULT_ACCEPTED
-            }
-            Some(1) => {
-                if !self.allowed(from) {
-                    let text = format!(
-                        "Control request from sysid {} refused: {}",
-                        from.sysid,
-                        Refusal::NotAllowed.reason()
-                    );
-                    if self.reply_text(
-                        from,
-                        ReplyKind::Control,
-                        MavSeverity::MAV_SEVERITY_WARNING,
-                        &text,
-                        now,
-                        out,
-                    ) {
-                        self.log("control_refused", Some(from.sysid), text, out);
-                    }
-                    return MavResult::MAV_RESULT_DENIED;
-                }
-                self.log(
-                    "control_requested",
-                    Some(from.sysid),
-                    format!("takeover allowed {takeover}, timeout {timeout_s} s"),
-                    out,
-                );
-                match self.auth.owner {
-                    None => {
-                        self.grant(me, Grant::Request, takeover, now, out);
-                        MavResult::MAV_RESULT_ACCEPTED
-                    }
-                    Some(o) if o.sysid == from.sysid => {
-                        self.set_takeover_allowed(takeover, out);
-                        // Re-requesting with takeover allowed is the owner's yes.
-                        if takeover && let Some(p) = self.auth.pending.take() {
-                            self.grant(p.from, Grant::Handover, false, now, out);
-                        }
-                        MavResult::MAV_RESULT_ACCEPTED
-                    }
-                    Some(_) if self.auth.takeover_allowed => {
-                        self.grant(me, Grant::Request, takeover, now, out);
-                        MavResult::MAV_RESULT_ACCEPTED
-                    }
-                    Some(o) if from.sysid == self.params.sysid_mygcs() => {
-                        // DNV practice: the main station takes control without
-                        // acknowledgement, after a warning.
-                        self.statustext(
-                            MavSeverity::MAV_SEVERITY_WARNING,
-                            &format!(
-                                "Control taken over by primary GCS {} from GCS {}",
-                                from.sysid, o.sysid
-                            ),
-                            out,
-                        );
-                        self.grant(me, Grant::PrimaryTakeover, takeover, now, out);
-                        MavResult::MAV_RESULT_ACCEPTED
-                    }
-                    Some(o) => {
-                        self.auth.pending = Some(Pending {
-                            from: me,
-                            deadline: now.mono + Duration::from_secs_f32(timeout_s),
-                        });
-                        out.push(Output::Send {
-                            to: o.reply,
-                            msg: MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
-                                param1: 1.0,
-                                param2: 0.0,
-                                param3: timeout_s,
-                                param4: f32::from(from.sysid),
-                                param5: 0.0,
-                                param6: 0.0,
-                                param7: 0.0,
-                                command: MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL,
-                                target_system: o.sysid,
-                                target_component: o.compid,
-                                confirmation: 0,
-                            }),
-                        });
-                        self.statustext(
-                            MavSeverity::MAV_SEVERITY_WARNING,
-                            &format!(
-                                "GCS {} requests control from GCS {} (answer within {timeout_s:.0} s)",
-                                from.sysid, o.sysid
-                            ),
-                            out,
-                        );
-                        self.log(
-                            "control_forwarded",
-                            Some(from.sysid),
-                            format!("asked GCS {}", o.sysid),
-                            out,
-                        );
-                        MavResult::MAV_RESULT_FAILED
-                    }
-                }
-            }
-            _ => MavResult::MAV_RESULT_DENIED,
-        }
-    }
-
-    fn set_takeover_allowed(&mut self, allowed: bool, out: &mut Vec<Output>) {
-        if self.auth.takeover_allowed != allowed {
-            self.auth.takeover_allowed = allowed;
-            self.send_control_status(out);
-        }
-    }
-
-    /// A COMMAND_ACK from a ground station: the owner's answer to a forwarded request.
-    pub(super) fn on_gcs_ack(
-        &mut self,
-        from: Sender,
-        ack: &COMMAND_ACK_DATA,
-        out: &mut Vec<Output>,
-    ) {
-        if ack.command != MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL
-            || self.owner() != Some(from.sysid)
-            || (self.signing_active && !from.signed)
-        {
-            return;
-        }
-        let Some(p) = self.auth.pending else {
-            return;
-        };
-        use MavResult as R;
-        match ack.result {
-            R::MAV_RESULT_DENIED | R::MAV_RESULT_FAILED | R::MAV_RESULT_TEMPORARILY_REJECTED => {
-                self.auth.pending = None;
-                let text = format!(
-                    "Control request from GCS {} refused by GCS {}",
-                    p.from.sysid, from.sysid
-                );
-                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
-                self.log("control_refused", Some(p.from.sysid), text, out);
-            }
-            _ => {}
         }
     }
 
@@ -606,7 +423,12 @@ impl Vehicle {
                 "Control request from GCS {} timed out: {keeper} keeps control",
                 p.from.sysid
             );
-            self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+            self.statustext(
+                Topic::Control,
+                MavSeverity::MAV_SEVERITY_WARNING,
+                &text,
+                out,
+            );
             self.log("control_refused", Some(p.from.sysid), text, out);
         }
         if self.auth.owner.is_some() && !self.owner_alive(now, self.gcs_timeout()) {

@@ -9,14 +9,14 @@
 
 use std::time::Duration;
 
-use super::authority::Control;
+use super::texts::Topic;
 use super::{Mode, Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 use crate::firmware::codec::Command;
 use crate::firmware::link::LinkState;
 use crate::vehicle::input::{self, RcAxis, Sticks};
 use crate::vehicle::mixer::{self, Demand, MixerConfig, NEUTRAL_US};
-use crate::vehicle::params::{BTN_DEFAULTS, BTN_FUNCTION_LASER_TOGGLE};
+use crate::vehicle::params::{BTN_DEFAULTS, ButtonFunction};
 
 /// A thruster command that has not changed is re-sent this often, so a board
 /// that lost it (dead-man trip, reset) gets it back.
@@ -58,6 +58,8 @@ pub(super) struct Pilot {
     /// Camera tilt rate from an RC override, −1..1.
     pub tilt_rate: f64,
     pub last_go: Option<Duration>,
+    /// The pilot gain (JS_GAIN_DEFAULT at start, then the gain buttons).
+    pub gain: f64,
 }
 
 impl Vehicle {
@@ -68,14 +70,6 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if m.target != self.sysid() {
-            return;
-        }
-        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
-            self.refuse_input(from, "MANUAL_CONTROL", why, now, out);
-            return;
-        }
-        self.note_life(from, now);
         // A cheap handle: no profile is copied per message on the 25 Hz path.
         let profiles = std::sync::Arc::clone(&self.profiles);
         let profile = profiles.for_sysid(from.sysid);
@@ -109,14 +103,6 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if r.target_system != self.sysid() {
-            return;
-        }
-        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
-            self.refuse_input(from, "RC override", why, now, out);
-            return;
-        }
-        self.note_life(from, now);
         // A cheap handle: no profile is copied per message on the 25 Hz path.
         let profiles = std::sync::Arc::clone(&self.profiles);
         let profile = profiles.for_sysid(from.sysid);
@@ -158,7 +144,7 @@ impl Vehicle {
         if let Some(RcAxis::Set(level)) = u.lights {
             let max = f64::from(self.params.lights_max());
             let level = (level * max).round().clamp(0.0, 255.0) as u8;
-            if level != self.lights {
+            if level != self.payload.lights {
                 self.set_lights(level, out);
             }
         }
@@ -170,21 +156,10 @@ impl Vehicle {
 
     pub(super) fn on_thrusters_message(
         &mut self,
-        from: Sender,
         t: &NEPTUNUS_THRUSTERS_DATA,
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if t.target_system != self.sysid()
-            || (t.target_component != 0 && t.target_component != super::COMPONENT_ID)
-        {
-            return;
-        }
-        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
-            self.refuse_input(from, "NEPTUNUS_THRUSTERS", why, now, out);
-            return;
-        }
-        self.note_life(from, now);
         if self.mode != Mode::ManualThrusters {
             // Not this mode's input: it neither drives nor keeps other input fresh.
             return;
@@ -208,6 +183,7 @@ impl Vehicle {
     pub(super) fn motor_test(&mut self, p: [f32; 7], now: Now, out: &mut Vec<Output>) -> MavResult {
         if !self.armed {
             self.statustext(
+                Topic::General,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 "Motor test: arm first",
                 out,
@@ -221,6 +197,7 @@ impl Vehicle {
             3 => 1,
             _ => {
                 self.statustext(
+                    Topic::General,
                     MavSeverity::MAV_SEVERITY_WARNING,
                     &format!("Motor test: no motor {motor}"),
                     out,
@@ -276,7 +253,7 @@ impl Vehicle {
     }
 
     pub(super) fn mixer(&self) -> MixerConfig {
-        MixerConfig::from_params(&self.params, self.gain)
+        self.params.mixer_config(self.pilot.gain)
     }
 
     /// The one place that decides what the thrusters get.
@@ -286,7 +263,7 @@ impl Vehicle {
         {
             self.pilot.motor_test = None;
         }
-        let target = if !self.armed || self.link != LinkState::Up {
+        let target = if !self.armed || self.board.link != LinkState::Up {
             [NEUTRAL_US; 3]
         } else if let Some(t) = self.pilot.motor_test {
             let mut us = [NEUTRAL_US; 3];
@@ -360,15 +337,34 @@ impl Vehicle {
             // Full stick slews the camera over its whole range in about 2 s.
             let span = f64::from(self.params.tilt_max_us()) - f64::from(self.params.tilt_min_us());
             let step = self.pilot.tilt_rate * span / 2.0 * dt.as_secs_f64();
-            self.tilt_accum += step;
-            if self.tilt_accum.abs() >= 1.0 {
-                let delta = self.tilt_accum.trunc();
-                self.tilt_accum -= delta;
-                self.set_tilt_us(f64::from(self.tilt_us) + delta, out);
+            self.payload.tilt_accum += step;
+            if self.payload.tilt_accum.abs() >= 1.0 {
+                let delta = self.payload.tilt_accum.trunc();
+                self.payload.tilt_accum -= delta;
+                self.set_tilt_us(f64::from(self.payload.tilt_us) + delta, out);
             }
         }
         self.holds_step(now, dt, out);
         self.update_thrusters(now, out);
+    }
+
+    /// Thrusters to neutral and pilot state cleared (the thesis' safety-mode
+    /// stop). With `pickup`, the owner's sticks are ignored until centred.
+    pub(super) fn safety_stop(&mut self, pickup: bool, out: &mut Vec<Output>) {
+        self.stop_pilot();
+        self.pilot.hold = None;
+        // An autopilot mode stops where it is: the held depth and heading are
+        // taken again from the vehicle's state.
+        self.holds_reset();
+        // After a transfer the next button mask is a baseline: buttons the new
+        // owner holds were not pressed now. Otherwise buttons start released.
+        self.pilot.buttons_stale = pickup;
+        if pickup {
+            self.auth.pickup = true;
+        } else {
+            self.pilot.buttons = 0;
+        }
+        self.send_neutral(out);
     }
 
     /// Clears pilot state at a safety-mode stop (mode change, disarm, transfer).
@@ -401,7 +397,7 @@ impl Vehicle {
                 self.button_press(from, f, now, out);
             } else if released & bit != 0 {
                 let f = self.button_function(i, false, profile);
-                if f == 1 {
+                if ButtonFunction::from_code(f) == Some(ButtonFunction::Shift) {
                     self.pilot.shift = false;
                 }
             }
@@ -422,90 +418,84 @@ impl Vehicle {
         }
     }
 
-    fn button_press(&mut self, from: Sender, function: u8, now: Now, out: &mut Vec<Output>) {
+    fn button_press(&mut self, from: Sender, code: u8, now: Now, out: &mut Vec<Output>) {
+        use ButtonFunction as B;
         let sev = MavSeverity::MAV_SEVERITY_INFO;
+        let Some(function) = ButtonFunction::from_code(code) else {
+            return;
+        };
         match function {
-            0 => {}
-            1 => self.pilot.shift = true,
-            2 => {
+            B::None => {}
+            B::Shift => self.pilot.shift = true,
+            B::ArmToggle => {
                 if self.armed {
                     self.disarm("button", Some(from.sysid), out);
                 } else {
                     self.arm(false, Some(from.sysid), now, out);
                 }
             }
-            3 => {
+            B::Arm => {
                 self.arm(false, Some(from.sysid), now, out);
             }
-            4 => {
+            B::Disarm => {
                 self.disarm("button", Some(from.sysid), out);
             }
-            5..=13 => {
-                // ArduSub's mode_* button functions.
-                let mode = match function {
-                    5 => Mode::Manual,
-                    6 => Mode::Stabilize,
-                    7 => Mode::AltHold,
-                    8 => Mode::PosHold,
-                    9 => Mode::Auto,
-                    10 => Mode::Circle,
-                    11 => Mode::Guided,
-                    12 => Mode::Acro,
-                    _ => Mode::SurfTrak,
-                };
+            B::Mode(mode) => {
                 self.set_mode(mode.number(), Some(from.sysid), now, out);
             }
-            21 => self.set_tilt_us(1500.0, out),
-            22 | 23 => {
+            B::MountCenter => self.set_tilt_us(f64::from(NEUTRAL_US), out),
+            B::MountTiltUp | B::MountTiltDown => {
                 let step = (f64::from(self.params.tilt_max_us())
                     - f64::from(self.params.tilt_min_us()))
                     / 10.0;
-                let sign = if function == 22 { 1.0 } else { -1.0 };
-                self.set_tilt_us(f64::from(self.tilt_us) + sign * step, out);
+                let sign = if function == B::MountTiltUp {
+                    1.0
+                } else {
+                    -1.0
+                };
+                self.set_tilt_us(f64::from(self.payload.tilt_us) + sign * step, out);
             }
-            31..=33 => {
+            B::LightsCycle | B::LightsBrighter | B::LightsDimmer => {
                 let max = u16::from(self.params.lights_max());
                 let steps = self.params.js_lights_steps().max(1);
                 let step = (max / steps).max(1);
-                let level = u16::from(self.lights);
+                let level = u16::from(self.payload.lights);
                 let level = match function {
-                    31 if level >= max => 0,
-                    31 | 32 => (level + step).min(max),
+                    B::LightsCycle if level >= max => 0,
+                    B::LightsCycle | B::LightsBrighter => (level + step).min(max),
                     _ => level.saturating_sub(step),
                 };
                 self.set_lights(level.min(255) as u8, out);
             }
-            41..=43 => {
+            B::GainToggle | B::GainInc | B::GainDec => {
                 let (lo, hi) = (
                     f64::from(self.params.js_gain_min()),
                     f64::from(self.params.js_gain_max()),
                 );
                 let steps = f64::from(self.params.js_gain_steps().max(2) - 1);
                 let step = (hi - lo) / steps;
-                self.gain = match function {
-                    41 if (self.gain - hi).abs() < 1e-6 => lo,
-                    41 => hi,
-                    42 => (self.gain + step).min(hi),
-                    _ => (self.gain - step).max(lo),
+                let gain = self.pilot.gain;
+                self.pilot.gain = match function {
+                    B::GainToggle if (gain - hi).abs() < 1e-6 => lo,
+                    B::GainToggle => hi,
+                    B::GainInc => (gain + step).min(hi),
+                    _ => (gain - step).max(lo),
                 };
-                let pct = (self.gain * 100.0).round();
-                self.statustext(sev, &format!("#Gain is {pct:.0}%"), out);
+                let pct = (self.pilot.gain * 100.0).round();
+                self.statustext(Topic::Gain, sev, &format!("#Gain is {pct:.0}%"), out);
             }
-            48 => {
+            B::InputHoldSet => {
                 if self.pilot.hold.take().is_some() {
-                    self.statustext(sev, "#Input Hold Disabled", out);
+                    self.statustext(Topic::Gain, sev, "#Input Hold Disabled", out);
                 } else {
                     self.pilot.hold = Some(self.pilot.sticks);
-                    self.statustext(sev, "#Input Hold Set", out);
+                    self.statustext(Topic::Gain, sev, "#Input Hold Set", out);
                 }
             }
-            f if f == BTN_FUNCTION_LASER_TOGGLE => {
-                self.laser = if self.laser > 0 { 0 } else { 255 };
-                out.push(Output::Board(Command::Laser(self.laser)));
-            }
-            other => {
+            B::LaserToggle => self.set_laser(self.payload.laser == 0, out),
+            B::Unsupported(code) => {
                 tracing::debug!(
-                    function = other,
+                    function = code,
                     sysid = from.sysid,
                     "button function not implemented on this vehicle"
                 );

@@ -7,6 +7,7 @@
 
 use std::time::Duration;
 
+use super::texts::Topic;
 use super::{Mode, Now, Output, Vehicle};
 use crate::dialect::neptunus::{MavResult, MavSeverity};
 use crate::firmware::link::LinkState;
@@ -31,7 +32,10 @@ pub(super) struct Rule {
 pub(super) const GCS: usize = 0;
 pub(super) const PILOT: usize = 1;
 
-pub(super) const RULES: [Rule; 5] = [
+/// How many failsafes there are.
+const RULE_COUNT: usize = 5;
+
+pub(super) const RULES: [Rule; RULE_COUNT] = [
     Rule {
         name: "gcs",
         // Armed, and neither the owner nor anyone else showed life for FS_GCS_TIMEOUT.
@@ -43,7 +47,7 @@ pub(super) const RULES: [Rule; 5] = [
         },
         clear: |v, now| v.owner_alive(now, v.gcs_timeout()),
         action: ParamStore::fs_gcs_enable,
-        text: |v| match v.last_owner {
+        text: |v| match v.auth.last_owner {
             Some(o) => format!("GCS {o} heartbeat lost"),
             None => "no GCS in control".into(),
         },
@@ -57,32 +61,37 @@ pub(super) const RULES: [Rule; 5] = [
     },
     Rule {
         name: "board_link",
-        raise: |v, _| v.link_seen_up && v.link != LinkState::Up,
-        clear: |v, _| v.link == LinkState::Up,
+        raise: |v, _| v.board.link_seen_up && v.board.link != LinkState::Up,
+        clear: |v, _| v.board.link == LinkState::Up,
         action: |_| FailsafeAction::Disarm,
         text: |v| {
             format!(
                 "board link lost ({})",
-                v.link_reason.as_deref().unwrap_or("no telemetry")
+                v.board.link_reason.as_deref().unwrap_or("no telemetry")
             )
         },
     },
     Rule {
         name: "battery_low",
-        raise: |v, now| v.battery[0].held_below(now),
-        clear: |v, now| v.battery[0].held_above(now),
+        raise: |v, now| v.failsafes.battery[0].held_below(now),
+        clear: |v, now| v.failsafes.battery[0].held_above(now),
         action: ParamStore::batt_fs_low_act,
-        text: |v| format!("battery low {:.1} V", v.status.value.vout_v.unwrap_or(0.0)),
+        text: |v| {
+            format!(
+                "battery low {:.1} V",
+                v.board.status.value.vout_v.unwrap_or(0.0)
+            )
+        },
     },
     Rule {
         name: "battery_critical",
-        raise: |v, now| v.battery[1].held_below(now),
-        clear: |v, now| v.battery[1].held_above(now),
+        raise: |v, now| v.failsafes.battery[1].held_below(now),
+        clear: |v, now| v.failsafes.battery[1].held_above(now),
         action: ParamStore::batt_fs_crt_act,
         text: |v| {
             format!(
                 "battery critical {:.1} V",
-                v.status.value.vout_v.unwrap_or(0.0)
+                v.board.status.value.vout_v.unwrap_or(0.0)
             )
         },
     },
@@ -91,8 +100,10 @@ pub(super) const RULES: [Rule; 5] = [
 /// Which failsafes are active, and the mode one of them put the vehicle in.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub(super) struct Failsafes {
-    pub active: [bool; RULES.len()],
+    pub active: [bool; RULE_COUNT],
     pub mode: Option<Mode>,
+    /// Low and critical battery thresholds.
+    pub battery: [BatteryWatch; 2],
 }
 
 /// How long a battery voltage has been below / above one threshold.
@@ -175,13 +186,14 @@ impl Vehicle {
                 self.failsafes.active[i] = true;
                 let text = (rule.text)(self);
                 self.statustext(
+                    Topic::Failsafe,
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     &format!("Failsafe: {text}"),
                     out,
                 );
                 self.log(
                     "failsafe_raised",
-                    self.last_owner,
+                    self.auth.last_owner,
                     format!("{}: {text} (action {action:?})", rule.name),
                     out,
                 );
@@ -190,6 +202,7 @@ impl Vehicle {
                 self.failsafes.active[i] = false;
                 let text = (rule.text)(self);
                 self.statustext(
+                    Topic::Failsafe,
                     MavSeverity::MAV_SEVERITY_INFO,
                     &format!("Failsafe cleared: {text}"),
                     out,
@@ -225,7 +238,7 @@ impl Vehicle {
         };
         let why = if mode.refused().is_some() {
             Some("not available on this vehicle")
-        } else if !self.armed || self.link != LinkState::Up {
+        } else if !self.armed || self.board.link != LinkState::Up {
             Some("not possible without the board link")
         } else {
             self.hold_unavailable(mode, now)
@@ -236,6 +249,7 @@ impl Vehicle {
             self.failsafes.mode = Some(mode);
         } else {
             self.statustext(
+                Topic::Failsafe,
                 MavSeverity::MAV_SEVERITY_CRITICAL,
                 &format!(
                     "Failsafe {name}: {} is {}, disarming instead",

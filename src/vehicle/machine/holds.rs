@@ -1,36 +1,24 @@
 //! Estimation and the autopilot modes inside the vehicle core: STABILIZE
 //! (heading hold), ALT_HOLD (depth and heading hold), SURFACE; setpoints
 //! from SET_POSITION_TARGET_GLOBAL_INT, SET_ATTITUDE_TARGET and
-//! MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET; the run mode (real board or the
-//! built-in simulator).
+//! MAV_CMD_NEPTUNUS_SET_AUTOPILOT_TARGET.
 //!
 //! The controllers themselves live in [`crate::vehicle::autopilot`], the
 //! filters in [`crate::vehicle::estimator`]; this module decides when they
-//! run and what they see. Every setpoint comes through the authority check.
+//! run and what they see. Every setpoint has passed the control-input check
+//! (`inbound.rs`) before it reaches this file.
 
 use std::time::Duration;
 
 use mavlink_core::MessageData;
 
 use super::authority::Control;
-use super::{Mode, Now, Output, Sender, Vehicle};
+use super::texts::Topic;
+use super::{Mode, Now, Output, RunMode, Sender, Vehicle};
 use crate::dialect::neptunus::*;
-use crate::firmware::codec::Command;
 use crate::vehicle::autopilot::{DepthHold, HeadingHold, Measured};
 use crate::vehicle::estimator::{Estimate, Estimator, Fused};
-use crate::vehicle::mixer::Demand;
-
-/// Where thruster commands go and telemetry comes from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum RunMode {
-    /// The board drives the thrusters and reports the vehicle.
-    #[default]
-    Normal,
-    /// The board is stopped; the built-in simulator gets the thruster
-    /// commands and its telemetry stands in for the board's.
-    Simulator,
-}
+use crate::vehicle::mixer::{self, Demand};
 
 /// A depth or heading reading: which filter, and what became of it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,7 +40,6 @@ pub(super) struct Holds {
     /// Autopilot outputs of the last step (None: that axis is the pilot's).
     pub heave_out: Option<f64>,
     pub yaw_out: Option<f64>,
-    pub run_mode: RunMode,
     /// Setpoint messages in a mode that cannot use them, reported at most every 5 s.
     pub ignored_target_report: Option<Duration>,
 }
@@ -68,10 +55,6 @@ impl Vehicle {
     /// The estimates now.
     pub fn estimate(&self, now: Now) -> Estimate {
         self.holds.est.estimate(now.mono)
-    }
-
-    pub fn run_mode(&self) -> RunMode {
-        self.holds.run_mode
     }
 
     /// The held depth (m) and heading (deg), where held.
@@ -143,7 +126,12 @@ impl Vehicle {
                 let surfaced_at_m = -f64::from(self.params.surface_depth_m());
                 if !self.holds.surfaced && m.depth_m <= surfaced_at_m {
                     self.holds.surfaced = true;
-                    self.statustext(MavSeverity::MAV_SEVERITY_INFO, "Surfaced", out);
+                    self.statustext(
+                        Topic::ApDepth,
+                        MavSeverity::MAV_SEVERITY_INFO,
+                        "Surfaced",
+                        out,
+                    );
                     self.log("surfaced", None, format!("depth {:.2} m", m.depth_m), out);
                 }
                 if self.holds.surfaced {
@@ -181,7 +169,7 @@ impl Vehicle {
     /// The final demand in an autopilot mode: the pilot's axes scaled by the
     /// gain, the controllers' axes as they are.
     pub(super) fn hold_demand(&self, sticks: Demand) -> Demand {
-        let gain = self.gain.clamp(0.0, 1.0);
+        let gain = self.pilot.gain.clamp(0.0, 1.0);
         let thr = f64::from(self.params.js_thr_gain());
         Demand {
             surge: sticks.surge * gain,
@@ -190,27 +178,10 @@ impl Vehicle {
         }
     }
 
-    /// The demand three pulse widths really produce: the mixer inverted,
-    /// with a thruster inside the board's ESC deadzone giving nothing.
+    /// The demand three pulse widths really produce (the estimator's input).
     pub(super) fn effective_demand(&self, us: [u16; 3]) -> Demand {
-        let cfg = self.mixer();
         let deadzone = f64::from(self.params.esc_deadzone_us());
-        let (lo, hi) = (f64::from(cfg.pwm_min_us), f64::from(cfg.pwm_max_us));
-        let u = |i: usize| {
-            let d = f64::from(us[i]) - 1500.0;
-            if d.abs() <= deadzone {
-                return 0.0;
-            }
-            let span = if d > 0.0 { hi - 1500.0 } else { 1500.0 - lo };
-            let v = if span > 0.0 { d / span } else { 0.0 };
-            v.clamp(-1.0, 1.0) * f64::from(cfg.directions[i].signum())
-        };
-        let (port, vertical, starboard) = (u(0), u(1), u(2));
-        Demand {
-            surge: (port + starboard) / 2.0,
-            heave: vertical,
-            yaw: (port - starboard) / 2.0,
-        }
+        mixer::unmix(us, &self.mixer(), deadzone)
     }
 
     /// SET_POSITION_TARGET_GLOBAL_INT: only `alt` (depth, negative below the
@@ -223,9 +194,6 @@ impl Vehicle {
         out: &mut Vec<Output>,
     ) {
         let what = "SET_POSITION_TARGET_GLOBAL_INT";
-        if !self.accept_setpoint(from, (t.target_system, t.target_component), what, now, out) {
-            return;
-        }
         use MavFrame as F;
         let relative = matches!(
             t.coordinate_frame,
@@ -249,10 +217,7 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        let target = (t.target_system, t.target_component);
-        if !self.accept_setpoint(from, target, "SET_ATTITUDE_TARGET", now, out)
-            || t.type_mask.bits() & ATTITUDE_IGNORE != 0
-        {
+        if t.type_mask.bits() & ATTITUDE_IGNORE != 0 {
             return;
         }
         let [w, x, y, z] = t.q.map(f64::from);
@@ -265,28 +230,6 @@ impl Vehicle {
             now,
             out,
         );
-    }
-
-    /// A setpoint message addressed to us from the station in control (a
-    /// refusal is counted and reported like refused stick input); it is a
-    /// sign of the owner's life.
-    fn accept_setpoint(
-        &mut self,
-        from: Sender,
-        (system, component): (u8, u8),
-        what: &str,
-        now: Now,
-        out: &mut Vec<Output>,
-    ) -> bool {
-        if !self.for_us(system, component) {
-            return false;
-        }
-        if let Err(why) = self.check_control(from, Control::Drive, now, out) {
-            self.refuse_input(from, what, why, now, out);
-            return false;
-        }
-        self.note_life(from, now);
-        true
     }
 
     /// Depth (m, down positive) and heading (rad) targets from the owner.
@@ -334,7 +277,13 @@ impl Vehicle {
             .is_none_or(|t| now.mono.saturating_sub(t) >= TARGET_REPORT)
         {
             self.holds.ignored_target_report = Some(now.mono);
+            let topic = if depth_m.is_some() {
+                Topic::ApDepth
+            } else {
+                Topic::ApHeading
+            };
             self.statustext(
+                topic,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!("{what} ignored in {}: depth targets need ALT_HOLD, heading targets STABILIZE or ALT_HOLD", self.mode),
                 out,
@@ -363,7 +312,13 @@ impl Vehicle {
         if (depth.is_some() && self.mode != Mode::AltHold)
             || (heading.is_some() && !self.mode.holds_heading())
         {
+            let topic = if depth.is_some() {
+                Topic::ApDepth
+            } else {
+                Topic::ApHeading
+            };
             self.statustext(
+                topic,
                 MavSeverity::MAV_SEVERITY_WARNING,
                 &format!(
                     "Autopilot target refused in {}: depth needs ALT_HOLD, heading STABILIZE or ALT_HOLD",
@@ -392,76 +347,6 @@ impl Vehicle {
             );
         }
         MavResult::MAV_RESULT_ACCEPTED
-    }
-
-    /// MAV_CMD_NEPTUNUS_SET_RUN_MODE: a safety-mode stop, then the switch.
-    pub(super) fn run_mode_command(
-        &mut self,
-        from: Sender,
-        p: [f32; 7],
-        now: Now,
-        out: &mut Vec<Output>,
-    ) -> MavResult {
-        if let Err(why) = self.check_control(from, Control::Command, now, out) {
-            return self.refuse_command(from, "run mode change", why, now, out);
-        }
-        let mode = match super::given(p[0]).map(|v| v.round() as i64) {
-            Some(0) => RunMode::Normal,
-            Some(1) => RunMode::Simulator,
-            _ => return MavResult::MAV_RESULT_DENIED,
-        };
-        self.set_run_mode(mode, Some(from.sysid), now, out);
-        MavResult::MAV_RESULT_ACCEPTED
-    }
-
-    pub(super) fn set_run_mode(
-        &mut self,
-        mode: RunMode,
-        by: Option<u8>,
-        now: Now,
-        out: &mut Vec<Output>,
-    ) {
-        if mode == self.holds.run_mode {
-            return;
-        }
-        let old = self.holds.run_mode;
-        // Both the board and the simulator get neutral before anything moves on.
-        self.safety_stop(true, out);
-        out.push(Output::SimBoard(super::NEUTRAL_GO));
-        self.holds.run_mode = mode;
-        let e = self.holds.est.estimate(now.mono);
-        match mode {
-            RunMode::Simulator => {
-                // The real thrusters stay stopped while the simulator flies.
-                out.push(Output::Board(Command::Stop));
-                out.push(Output::RunMode {
-                    mode,
-                    start_depth_m: e.depth_m.max(0.0),
-                    start_heading_deg: e.heading_deg,
-                });
-                self.statustext(
-                    MavSeverity::MAV_SEVERITY_WARNING,
-                    "Run mode SIMULATOR: telemetry is simulated, the thrusters are stopped",
-                    out,
-                );
-            }
-            RunMode::Normal => {
-                out.push(Output::RunMode {
-                    mode,
-                    start_depth_m: e.depth_m,
-                    start_heading_deg: e.heading_deg,
-                });
-                self.statustext(
-                    MavSeverity::MAV_SEVERITY_WARNING,
-                    "Run mode NORMAL: real vehicle",
-                    out,
-                );
-            }
-        }
-        // The other source's estimates are not this one's.
-        self.holds.est = Estimator::default();
-        self.holds_reset();
-        self.log("run_mode", by, format!("{old:?} -> {mode:?}"), out);
     }
 
     /// NAV_CONTROLLER_OUTPUT, NEPTUNUS_ESTIMATE or NEPTUNUS_AUTOPILOT.
@@ -493,7 +378,7 @@ impl Vehicle {
                     || self.holds.est.heading_filter().initialised() =>
             {
                 let mut flags = NeptunusEstimateFlags::empty();
-                if self.holds.run_mode == RunMode::Simulator {
+                if self.run_mode == RunMode::Simulator {
                     flags |= NeptunusEstimateFlags::NEPTUNUS_ESTIMATE_FLAGS_SIMULATED;
                 }
                 if e.depth_valid {
@@ -558,16 +443,6 @@ impl Vehicle {
     /// The normalised demand the thrusters were last given.
     pub fn applied_demand(&self) -> Demand {
         self.holds.applied
-    }
-
-    /// Roll and pitch the board reported last (deg).
-    pub fn attitude_deg(&self) -> (f64, f64) {
-        (self.roll_deg.value, self.pitch_deg.value)
-    }
-
-    /// Camera tilt servo pulse width (µs).
-    pub fn tilt_us(&self) -> u16 {
-        self.tilt_us
     }
 
     /// The last depth the board reported (m).

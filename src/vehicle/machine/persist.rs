@@ -12,6 +12,7 @@
 use std::collections::BTreeSet;
 use std::time::Duration;
 
+use super::texts::Topic;
 use super::{Now, Output, Vehicle};
 use crate::dialect::neptunus::*;
 
@@ -41,6 +42,8 @@ pub(super) struct Persist {
     pub requested: u64,
     /// When each parameter's change was last logged.
     logged: std::collections::HashMap<&'static str, Duration>,
+    /// Why the data directory is unusable, if it is (from the app at start).
+    pub storage_problem: Option<String>,
 }
 
 impl Persist {
@@ -110,7 +113,7 @@ impl Vehicle {
                 let failures = std::mem::take(&mut p.failures);
                 p.last_error = None;
                 // A save went through: the data directory works (again).
-                if let Some(was) = self.storage_problem.take() {
+                if let Some(was) = self.persist.storage_problem.take() {
                     self.log(
                         "storage_ok",
                         None,
@@ -120,6 +123,7 @@ impl Vehicle {
                 }
                 if failures > 0 {
                     self.statustext(
+                        Topic::General,
                         MavSeverity::MAV_SEVERITY_INFO,
                         &format!("Parameters saved (after {failures} failed attempts)"),
                         out,
@@ -157,7 +161,12 @@ impl Vehicle {
                     "NOT SAVED: {list} (in use until restart): {why}; retry in {} s",
                     delay.as_secs()
                 );
-                self.statustext(MavSeverity::MAV_SEVERITY_WARNING, &text, out);
+                self.statustext(
+                    Topic::General,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &text,
+                    out,
+                );
                 if new_reason || attempt.is_power_of_two() {
                     self.log(
                         "params_not_saved",
@@ -188,17 +197,17 @@ impl Vehicle {
     /// Storage is healthy: parameters save, and nothing at start said the
     /// data directory is unusable.
     pub(super) fn storage_healthy(&self) -> bool {
-        self.persist.last_error.is_none() && self.storage_problem.is_none()
+        self.persist.last_error.is_none() && self.persist.storage_problem.is_none()
     }
 
     /// At start: the data directory is unusable (read-only, missing, full),
     /// so parameters live in memory and logs may be lost. Shown in
     /// SYS_STATUS until a parameter save succeeds.
     pub fn set_storage_problem(&mut self, problem: Option<String>) {
-        self.storage_problem = problem;
+        self.persist.storage_problem = problem;
     }
 
     pub fn storage_problem(&self) -> Option<&str> {
-        self.storage_problem.as_deref()
+        self.persist.storage_problem.as_deref()
     }
 }

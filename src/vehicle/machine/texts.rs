@@ -42,6 +42,42 @@ pub(super) enum ReplyKind {
     Note,
 }
 
+impl ReplyKind {
+    /// What a reply of this kind is about.
+    fn topic(self) -> Topic {
+        match self {
+            Self::Refused | Self::Input | Self::Control => Topic::Control,
+            Self::UnknownParam | Self::ParamRefused | Self::Rates | Self::Signing | Self::Note => {
+                Topic::General
+            }
+        }
+    }
+}
+
+/// What a text is about, chosen where it is written: the browser HMI files
+/// it under the developer logger's category of the same name (thesis 7.2);
+/// `general` texts appear only in the message list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Topic {
+    /// Safety-mode stops: arming, disarming, mode and run-mode changes.
+    Stop,
+    /// Who controls the vehicle: transfers, requests, refusals.
+    Control,
+    /// The pilot gain and input hold.
+    Gain,
+    /// The depth autopilot and its setpoints.
+    ApDepth,
+    /// The heading autopilot and its setpoints.
+    ApHeading,
+    /// Failsafes raised and cleared.
+    Failsafe,
+    /// The board link.
+    BoardLink,
+    /// Anything else (parameters, signing, payload, telemetry rates).
+    General,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 struct Key {
     endpoint: usize,
@@ -50,17 +86,20 @@ struct Key {
     kind: ReplyKind,
 }
 
-/// Per-sender, per-kind rate limits of replies.
+/// Per-sender, per-kind rate limits of replies, and the id of the last
+/// text sent in chunks.
 #[derive(Debug, Clone, Default)]
-pub(super) struct Replies {
+pub(super) struct Texts {
     last: HashMap<Key, Duration>,
+    /// MAVLink 2 STATUSTEXT id of the last long text (its chunks share it).
+    pub chunk_id: u16,
     /// Replies sent.
     pub sent: u64,
     /// Replies suppressed by the rate limit (counted, not sent).
     pub suppressed: u64,
 }
 
-impl Replies {
+impl Texts {
     /// Whether a reply of `kind` to `from` may go out now; counts it either way.
     fn allow(&mut self, from: Sender, kind: ReplyKind, every: Duration, now: Duration) -> bool {
         let key = Key {
@@ -116,8 +155,14 @@ pub fn ascii_text(text: &str) -> String {
 impl Vehicle {
     /// A vehicle event every station must see (failsafes, arming, modes,
     /// saving trouble).
-    pub(super) fn statustext(&mut self, severity: MavSeverity, text: &str, out: &mut Vec<Output>) {
-        self.statustext_to(To::All, severity, text, out);
+    pub(super) fn statustext(
+        &mut self,
+        topic: Topic,
+        severity: MavSeverity,
+        text: &str,
+        out: &mut Vec<Output>,
+    ) {
+        self.statustext_to(To::All, topic, severity, text, out);
     }
 
     /// A reply to `from` alone, at most one per [`REPLY_EVERY`] of its kind;
@@ -145,21 +190,29 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) -> bool {
-        if !self.replies.allow(from, kind, every, now.mono) {
+        if !self.texts.allow(from, kind, every, now.mono) {
             return false;
         }
-        self.statustext_to(from.reply(), severity, text, out);
+        self.statustext_to(from.reply(), kind.topic(), severity, text, out);
         true
     }
 
-    fn statustext_to(&mut self, to: To, severity: MavSeverity, text: &str, out: &mut Vec<Output>) {
+    fn statustext_to(
+        &mut self,
+        to: To,
+        topic: Topic,
+        severity: MavSeverity,
+        text: &str,
+        out: &mut Vec<Output>,
+    ) {
         let text = ascii_text(text);
         tracing::info!(severity = ?severity, to = ?to, "{text}");
         // Long texts go in 50-byte chunks sharing an id, as MAVLink 2 allows.
         let bytes = text.as_bytes();
         if bytes.len() <= 50 {
-            out.push(Output::Send {
+            out.push(Output::Text {
                 to,
+                topic,
                 msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                     severity,
                     text: CharArray::from(text.as_str()),
@@ -169,16 +222,17 @@ impl Vehicle {
             });
             return;
         }
-        self.statustext_id = self.statustext_id.wrapping_add(1).max(1);
+        self.texts.chunk_id = self.texts.chunk_id.wrapping_add(1).max(1);
         for (i, chunk) in bytes.chunks(50).enumerate() {
             let mut arr = [0u8; 50];
             arr[..chunk.len()].copy_from_slice(chunk);
-            out.push(Output::Send {
+            out.push(Output::Text {
                 to,
+                topic,
                 msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                     severity,
                     text: CharArray::from(arr),
-                    id: self.statustext_id,
+                    id: self.texts.chunk_id,
                     chunk_seq: i as u8,
                 }),
             });
@@ -187,6 +241,6 @@ impl Vehicle {
 
     /// Replies sent to single stations, and those suppressed by the rate limit.
     pub fn reply_counts(&self) -> (u64, u64) {
-        (self.replies.sent, self.replies.suppressed)
+        (self.texts.sent, self.texts.suppressed)
     }
 }

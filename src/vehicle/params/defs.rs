@@ -127,21 +127,9 @@ const fn def(
     }
 }
 
+use super::functions::BTN_FUNCTION_LASER_TOGGLE;
 use ParamType::{Int8, Int16, Int32, Real32};
 use Use::{Compat, Neptunus};
-
-/// Button function code of Neptunus' own "toggle the laser" (not in ArduSub).
-pub const BTN_FUNCTION_LASER_TOGGLE: u8 = 101;
-/// ArduSub's button function "disarm".
-pub const BTN_FUNCTION_DISARM: u8 = 4;
-/// ArduSub's button function "arm_toggle".
-pub const BTN_FUNCTION_ARM_TOGGLE: u8 = 2;
-
-/// Whether `code` is a button function ArduSub knows (or our laser toggle).
-pub fn is_button_function(code: u8) -> bool {
-    matches!(code, 0..=13 | 21..=27 | 31..=36 | 41..=49 | 51..=59 | 61..=87 | 91..=96)
-        || code == BTN_FUNCTION_LASER_TOGGLE
-}
 
 /// Number of joystick buttons with a BTNn_FUNCTION/SFUNCTION pair.
 pub const BUTTONS: usize = 32;

@@ -19,18 +19,21 @@
 //!
 //! The pieces: `defs` is the table of definitions (and the wire types),
 //! `store` the values with their validation and typed accessors, `file`
-//! `params.toml` and its TOML text, `doc` the table README.md embeds.
+//! `params.toml` and its TOML text, `doc` the table README.md embeds, `functions` what the
+//! button and servo-output function codes mean.
 //! Everything is re-exported here, so users name `vehicle::params::X`.
 
 mod defs;
 mod doc;
 mod file;
+mod functions;
 mod store;
 
-pub use defs::{
-    BTN_DEFAULTS, BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, BTN_FUNCTION_LASER_TOGGLE, BUTTONS,
-    ParamDef, ParamType, Use, definitions, index_of, is_button_function,
-};
+pub use defs::{BTN_DEFAULTS, BUTTONS, ParamDef, ParamType, Use, definitions, index_of};
 pub use doc::markdown_table;
 pub use file::{ParamFile, StoreError};
-pub use store::{ControlClaim, FailsafeAction, PWM_NEUTRAL_US, ParamError, ParamStore, PidGains};
+pub use functions::{
+    BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, BTN_FUNCTION_LASER_TOGGLE, ButtonFunction,
+    ServoFunction, is_button_function,
+};
+pub use store::{ControlClaim, FailsafeAction, ParamError, ParamStore, PidGains};

@@ -5,10 +5,11 @@
 //! Pure: it never touches a file, a socket or a clock (`params.toml` is
 //! [`super::file`]'s).
 
-use super::defs::{
-    BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, BTN_NAMES, BUTTONS, ParamDef, ParamType,
-    definitions, index_of, is_button_function, wire_value,
+use super::defs::{BTN_NAMES, BUTTONS, ParamDef, ParamType, definitions, index_of, wire_value};
+use super::functions::{
+    BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, ServoFunction, is_button_function,
 };
+use crate::vehicle::mixer::{MixerConfig, NEUTRAL_US};
 
 /// Rejected parameter writes.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -60,7 +61,7 @@ pub struct PidGains {
 }
 
 /// Neutral thruster pulse width; MOT_PWM_MIN/MAX must bracket it.
-pub const PWM_NEUTRAL_US: f64 = 1500.0;
+const PWM_NEUTRAL_US: f64 = NEUTRAL_US as f64;
 
 /// The values of every parameter, aligned with [`definitions`].
 #[derive(Debug, Clone, PartialEq)]
@@ -417,6 +418,29 @@ impl ParamStore {
     /// (negative below the surface, -0.1 by default).
     pub fn surface_depth_m(&self) -> f32 {
         self.f32_of("SURFACE_DEPTH") / 100.0
+    }
+
+    /// The mixer's directions and PWM range, with the given pilot gain.
+    pub fn mixer_config(&self, gain: f64) -> MixerConfig {
+        MixerConfig {
+            gain,
+            directions: [
+                self.mot_direction(2),
+                self.mot_direction(3),
+                self.mot_direction(1),
+            ],
+            pwm_min_us: self.mot_pwm_min(),
+            pwm_max_us: self.mot_pwm_max(),
+        }
+    }
+
+    /// What virtual output `n` (SERVOn_FUNCTION, 1..=16) drives; `None`
+    /// for an output that does not exist.
+    pub fn servo_function(&self, n: u32) -> Option<ServoFunction> {
+        let i = index_of(&format!("SERVO{n}_FUNCTION"))?;
+        Some(ServoFunction::from_code(
+            self.values[i].clamp(0.0, 65535.0) as u16
+        ))
     }
 
     pub fn tilt_min_us(&self) -> u16 {

@@ -1,15 +1,19 @@
-//! PARAM_SET: who may set, which `param_type` is accepted, the values no
-//! parameter may take (a ground station's system id for the vehicle), and
-//! how it is answered (accepted: PARAM_VALUE to everyone; refused: the old
-//! value and a rate-limited reason to the sender alone).
+//! The parameter protocol: PARAM_REQUEST_LIST (streamed a few per tick),
+//! PARAM_REQUEST_READ, and PARAM_SET — who may set, which `param_type` is
+//! accepted, the values no parameter may take here (a system id the
+//! running vehicle or the browser HMI uses), and how it is answered
+//! (accepted: PARAM_VALUE to everyone; refused: the old value and a
+//! rate-limited reason to the sender alone). The rules a value must keep
+//! wherever it comes from live in [`ParamStore::set`](crate::vehicle::params::ParamStore::set).
 
 use super::texts::ReplyKind;
-use super::{Now, Output, Sender, To, Vehicle, authority, char_str};
+use super::{Identity, Now, Output, Sender, To, Vehicle, authority, char_str, chars};
 use crate::dialect::neptunus::*;
 use crate::vehicle::params::{self, ParamDef, ParamType};
 
-/// The id QGroundControl, MAVProxy and pymavlink use by default.
-const DEFAULT_GCS_SYSID: u8 = 255;
+/// Parameters sent per tick while a list is being streamed (a burst of
+/// hundreds of datagrams can overflow a ground station's socket buffer).
+const PARAMS_PER_TICK: usize = 20;
 
 /// Whether a PARAM_SET's `param_type` may set a parameter of type `ty`
 /// holding `value`: its own type; REAL32 (pymavlink's `param_set_send`
@@ -46,6 +50,65 @@ fn type_name(t: MavParamType) -> String {
 }
 
 impl Vehicle {
+    /// PARAM_REQUEST_LIST: the whole list to the asker, a few per tick; a
+    /// repeated request restarts the list for that peer.
+    pub(super) fn param_request_list(&mut self, from: Sender) {
+        let to = from.reply();
+        self.streams.param_queue.retain(|(t, _)| *t != to);
+        self.streams
+            .param_queue
+            .extend((0..self.params.len()).map(|i| (to, i)));
+    }
+
+    /// PARAM_REQUEST_READ by index, or by name when the index is negative.
+    pub(super) fn param_request_read(
+        &mut self,
+        from: Sender,
+        p: &PARAM_REQUEST_READ_DATA,
+        out: &mut Vec<Output>,
+    ) {
+        let index = if p.param_index >= 0 {
+            Some(p.param_index as usize)
+        } else {
+            params::index_of(&char_str(&p.param_id))
+        };
+        if let Some(i) = index {
+            self.send_param(i, from.reply(), out);
+        }
+    }
+
+    /// The next few parameters of the lists being streamed.
+    pub(super) fn param_stream_tick(&mut self, out: &mut Vec<Output>) {
+        let n = self.streams.param_queue.len().min(PARAMS_PER_TICK);
+        let batch: Vec<(To, usize)> = self.streams.param_queue.drain(..n).collect();
+        for (to, idx) in batch {
+            self.send_param(idx, to, out);
+        }
+    }
+
+    /// PARAM_VALUE for the parameter at `index`, typed as the identity says.
+    pub(super) fn param_value(&self, index: usize) -> Option<MavMessage> {
+        let (def, value) = self.params.get_index(index)?;
+        let param_type = match self.identity {
+            Identity::Ardupilot => def.ty.mav_type(),
+            Identity::Generic => MavParamType::MAV_PARAM_TYPE_REAL32,
+        };
+        Some(MavMessage::PARAM_VALUE(PARAM_VALUE_DATA {
+            param_value: value as f32,
+            param_count: self.params.len() as u16,
+            param_index: index as u16,
+            param_id: chars(def.name),
+            param_type,
+        }))
+    }
+
+    /// State that follows a parameter at once.
+    fn on_param_changed(&mut self, name: &str) {
+        if name == "JS_GAIN_DEFAULT" {
+            self.pilot.gain = f64::from(self.params.js_gain_default());
+        }
+    }
+
     pub(super) fn param_set(
         &mut self,
         from: Sender,
@@ -67,7 +130,7 @@ impl Vehicle {
         }
         let value = f64::from(p.param_value);
         if !type_accepts(def.ty, p.param_type, value) {
-            self.bad_param_types += 1;
+            self.counters.bad_param_types += 1;
             self.reply_text(
                 from,
                 ReplyKind::ParamRefused,
@@ -153,7 +216,7 @@ impl Vehicle {
         let Some(index) = self.known_param(from, asked, now, out) else {
             return;
         };
-        self.bad_param_types += 1;
+        self.counters.bad_param_types += 1;
         self.reply_text(
             from,
             ReplyKind::ParamRefused,
@@ -194,31 +257,22 @@ impl Vehicle {
         }
     }
 
-    /// Values that would make the vehicle share a ground station's system
-    /// id (or a ground station the vehicle's): refused whatever the range.
+    /// Values the parameter store cannot judge alone: a system id the
+    /// running vehicle or the browser HMI's sessions use. (The store keeps
+    /// the rest: SYSID_THISMAV is never 255, SYSID_MYGCS or NEPT_GCS_ALLOWn.)
     fn id_conflict(&self, name: &str, value: f64) -> Option<String> {
         if !value.is_finite() || !(0.0..=255.0).contains(&value) {
             return None; // the range check says why
         }
         let id = value.trunc() as u8;
-        if name == "SYSID_THISMAV" {
-            let (lo, hi) = self.hmi_sysids;
-            if id == DEFAULT_GCS_SYSID {
-                Some("255 is the ground stations' id (QGroundControl, MAVProxy, pymavlink)".into())
-            } else if id == self.params.sysid_mygcs() {
-                Some("that is SYSID_MYGCS, the primary ground station".into())
-            } else if self.params.gcs_allowed_extra().contains(&id) {
-                Some("that is an allowed ground station (NEPT_GCS_ALLOWn)".into())
-            } else if (lo..=hi).contains(&id) {
-                Some(format!(
-                    "{lo}..{hi} are lent to browser HMI sessions (ground stations)"
-                ))
-            } else {
-                None
-            }
+        let (lo, hi) = self.hmi_sysids;
+        if name == "SYSID_THISMAV" && (lo..=hi).contains(&id) {
+            Some(format!(
+                "{lo}..{hi} are lent to browser HMI sessions (ground stations)"
+            ))
         } else if (name == "SYSID_MYGCS" || name.starts_with("NEPT_GCS_ALLOW"))
             && id != 0
-            && (id == self.sysid || id == self.params.sysid_thismav())
+            && id == self.sysid
         {
             Some("that is this vehicle's own system id (SYSID_THISMAV)".into())
         } else {
@@ -229,7 +283,7 @@ impl Vehicle {
     /// A telemetry-rate request from a station that may not control:
     /// nothing changes for the others on its endpoint.
     pub(super) fn refuse_rates(&mut self, from: Sender, now: Now, out: &mut Vec<Output>) {
-        self.refused_rate_requests += 1;
+        self.counters.refused_rate_requests += 1;
         let why = if self.signing_active && !from.signed {
             "unsigned, and signing is on"
         } else {

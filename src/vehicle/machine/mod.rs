@@ -1,0 +1,553 @@
+//! The vehicle core: one state machine that owns everything the vehicle
+//! knows and decides, driven by [`Vehicle::handle`].
+//!
+//! Sans-IO: inputs are decoded MAVLink messages, board events and ticks,
+//! each with the time as an argument; outputs are messages to send, board
+//! commands and requests to persist parameters. Nothing here reads a clock,
+//! sleeps or touches a socket — so every rule is testable with synthetic time.
+//!
+//! It must never let a thruster move while disarmed: every `go()` it emits
+//! while disarmed is neutral.
+//!
+//! One file per concern, as ArduSub keeps them; `docs/ARCHITECTURE.md` is
+//! the map (data paths, rules, where to add a message, a mode or a
+//! parameter):
+//!
+//! | file | concern |
+//! |---|---|
+//! | `mod.rs` | [`Vehicle`] and its grouped state, [`Input`]/[`Output`], [`Vehicle::handle`], the tick |
+//! | `inbound.rs` | MAVLink dispatch, the one addressing check, the one control-input check, HMI events |
+//! | `command.rs` | COMMAND_LONG/INT → handler, COMMAND_ACK |
+//! | `param_proto.rs` | PARAM_REQUEST_LIST/READ, PARAM_SET |
+//! | `telemetry.rs` | what each outgoing message says, the streams |
+//! | `arming.rs` | arm, disarm, pre-arm checks |
+//! | `board.rs` | board link and readings |
+//! | `payload.rs` | lights, laser, camera tilt, servo outputs |
+//! | `modes.rs` | flight mode changes, AVAILABLE_MODES |
+//! | `run_mode.rs` | real board or built-in simulator |
+//! | `driving.rs` | sticks, buttons, motor test → one `go()` |
+//! | `holds.rs` | estimator and autopilot modes, setpoints |
+//! | `authority.rs` | who controls: the authority check, owner changes, pick-up, CONTROL_STATUS |
+//! | `handover.rs` | REQUEST_OPERATOR_CONTROL and the owner's answer |
+//! | `failsafe.rs` | GCS, pilot-input, board-link and battery failsafes |
+//! | `persist.rs` | parameter saving (asked of the app) |
+//! | `signing.rs` | SETUP_SIGNING |
+//! | `stubs.rs` | missions, FTP, TIMESYNC, PING answered without implementing them |
+//! | `texts.rs` | STATUSTEXT to all or to one asker, with a topic |
+
+// Ground stations still send the legacy messages and commands MAVLink has
+// deprecated (SET_MODE, REQUEST_DATA_STREAM, PING, GET_MESSAGE_INTERVAL …);
+// an ArduSub-compatible vehicle must answer them.
+#![allow(deprecated)]
+
+use std::time::Duration;
+
+use mavlink_core::types::CharArray;
+
+mod arming;
+mod authority;
+mod board;
+mod command;
+mod driving;
+mod failsafe;
+mod handover;
+mod holds;
+mod inbound;
+mod modes;
+mod param_proto;
+mod payload;
+mod persist;
+mod run_mode;
+mod signing;
+mod stubs;
+mod telemetry;
+mod texts;
+
+pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
+pub use run_mode::RunMode;
+pub use texts::{Topic, ascii_text};
+
+use super::input::Profiles;
+pub use super::mode::Mode;
+use super::params::ParamStore;
+use crate::dialect::neptunus::*;
+pub use crate::eventlog::LogEvent;
+use crate::firmware::codec::{Command, Event};
+use crate::firmware::link::LinkState;
+pub use crate::vehicle::mixer::NEUTRAL_US;
+
+/// Our MAVLink component id (the autopilot).
+pub const COMPONENT_ID: u8 = 1;
+/// Telemetry older than this is not re-sent as if fresh.
+pub const FRESH: Duration = Duration::from_millis(1500);
+
+/// Where an output message goes (the app maps this onto its endpoints).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum To {
+    /// Every peer on every endpoint.
+    All,
+    /// Every peer on one endpoint.
+    Endpoint(usize),
+    /// One peer.
+    Peer(usize, u64),
+}
+
+/// Who sent a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sender {
+    pub endpoint: usize,
+    pub peer: u64,
+    pub sysid: u8,
+    pub compid: u8,
+    /// The frame carried a valid MAVLink 2 signature with our key.
+    pub signed: bool,
+    /// It came over an endpoint marked trusted (SETUP_SIGNING is accepted there).
+    pub trusted: bool,
+    /// A browser HMI session whose operator is a pilot (gave the pilot
+    /// password, or none is configured): allowed to request and take control
+    /// whatever its system id, like a station in the NEPT_GCS_ALLOWn list.
+    pub pilot: bool,
+}
+
+impl Sender {
+    /// An unsigned sender on an untrusted endpoint.
+    pub const fn new(endpoint: usize, peer: u64, sysid: u8, compid: u8) -> Self {
+        Self {
+            endpoint,
+            peer,
+            sysid,
+            compid,
+            signed: false,
+            trusted: false,
+            pilot: false,
+        }
+    }
+
+    fn reply(&self) -> To {
+        To::Peer(self.endpoint, self.peer)
+    }
+}
+
+/// Time as the core sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Now {
+    /// Monotonic time since the vehicle started.
+    pub mono: Duration,
+    /// Wall clock, µs since the Unix epoch.
+    pub unix_us: u64,
+}
+
+/// What the core reacts to.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Input {
+    Mavlink {
+        from: Sender,
+        msg: MavMessage,
+    },
+    Board(Event),
+    /// Telemetry of the built-in simulator (run mode SIMULATOR).
+    SimBoard(Event),
+    Link {
+        state: LinkState,
+        reason: Option<String>,
+    },
+    /// Periodic (the app ticks at 100 Hz): telemetry, timeouts.
+    Tick,
+    /// Ground truth from the simulator (only when running on it).
+    SimTruth(SimTruth),
+    /// Something happened to a browser HMI session (the HMI sends these; the
+    /// core acts on them like on any ground station's).
+    Hmi {
+        sysid: u8,
+        event: HmiEvent,
+    },
+    /// The answer to [`Output::SaveParams`]: the parameters reached the disk,
+    /// or why not.
+    ParamsSaved(Result<(), String>),
+    /// A PARAM_SET whose `param_type` is not a MAV_PARAM_TYPE value (the
+    /// frame decoder cannot represent it as a message): answered with the
+    /// parameter's current value.
+    BadParamSet {
+        from: Sender,
+        target_system: u8,
+        target_component: u8,
+        param_id: [u8; 16],
+        param_type: u8,
+    },
+    /// A COMMAND_LONG/COMMAND_INT whose number our dialect does not define.
+    UnknownCommand {
+        from: Sender,
+        command: u16,
+        target_system: u8,
+        target_component: u8,
+    },
+}
+
+/// Events of a browser HMI session that matter for safety.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HmiEvent {
+    /// The window lost focus (the operator is looking elsewhere).
+    FocusLost,
+    /// The operator switched input device (keyboard, touch, gamepad).
+    InputModeChanged,
+    /// The session's WebSocket closed.
+    Disconnected,
+}
+
+/// The simulated vehicle's true state, in plain units.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SimTruth {
+    pub north_m: f64,
+    pub east_m: f64,
+    pub depth_m: f64,
+    pub heading_rad: f64,
+    pub surge_mps: f64,
+    pub sway_mps: f64,
+    pub heave_mps: f64,
+    pub yaw_rate_rps: f64,
+    /// Roll and pitch (0 in the 4-DOF model).
+    pub roll_rad: f64,
+    pub pitch_rad: f64,
+}
+
+/// What the core asks the I/O around it to do.
+// Outputs live briefly in a reused Vec; boxing every message would cost an
+// allocation per send for no gain.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, PartialEq)]
+pub enum Output {
+    Send {
+        to: To,
+        msg: MavMessage,
+    },
+    /// A STATUSTEXT (or one chunk of a long one), sent like
+    /// [`Output::Send`], with what it is about (the browser HMI files it
+    /// under that category).
+    Text {
+        to: To,
+        topic: Topic,
+        msg: MavMessage,
+    },
+    Board(Command),
+    /// A command for the built-in simulator's board (run mode SIMULATOR).
+    SimBoard(Command),
+    /// The run mode changed: route thruster commands and telemetry
+    /// accordingly; a new simulator starts at the given depth and heading.
+    RunMode {
+        mode: RunMode,
+        start_depth_m: f64,
+        start_heading_deg: f64,
+    },
+    /// Parameters changed: write `Vehicle::params()` to disk off the
+    /// vehicle task, and answer with [`Input::ParamsSaved`]. Never asked
+    /// again before that answer.
+    SaveParams,
+    /// The board's dead-man switch may be fed now: the core is alive and
+    /// the owner showed life recently (or the vehicle is disarmed, or a
+    /// failsafe action needs thrust).
+    Healthy,
+    /// A line for the event log.
+    Log(LogEvent),
+    /// A trusted SETUP_SIGNING: persist this key (all zero = signing off)
+    /// and never let our signing timestamp fall below `initial_timestamp`.
+    SetSigningKey {
+        key: [u8; 32],
+        initial_timestamp: u64,
+    },
+    /// COMMAND_ACK for a command number the dialect cannot represent.
+    AckUnknown {
+        to: To,
+        command: u16,
+        result: MavResult,
+        target_system: u8,
+        target_component: u8,
+    },
+}
+
+impl Output {
+    /// The MAVLink message this output sends, and where ([`Output::Send`]
+    /// and [`Output::Text`]).
+    pub fn message(&self) -> Option<(To, &MavMessage)> {
+        match self {
+            Output::Send { to, msg } | Output::Text { to, msg, .. } => Some((*to, msg)),
+            _ => None,
+        }
+    }
+}
+
+/// How the vehicle presents itself.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Identity {
+    /// ArduSub-compatible (autopilot ARDUPILOTMEGA): QGC's Sub plugin, pymavlink's mode map.
+    #[default]
+    Ardupilot,
+    /// MAV_AUTOPILOT_GENERIC: generic ground-station plugins, REAL32 parameters.
+    Generic,
+}
+
+/// All thrusters neutral.
+pub const NEUTRAL_GO: Command = Command::Go {
+    port_us: NEUTRAL_US,
+    vertical_us: NEUTRAL_US,
+    starboard_us: NEUTRAL_US,
+};
+
+/// Everything the vehicle knows and decides, grouped by the file that
+/// owns each part.
+#[derive(Debug)]
+pub struct Vehicle {
+    identity: Identity,
+    params: ParamStore,
+    /// Ground-station conventions (sticks, buttons) per system id.
+    profiles: std::sync::Arc<Profiles>,
+    /// The system id in use; SYSID_THISMAV changes apply at the next start.
+    sysid: u8,
+    /// System ids the browser HMI lends to its sessions (ground stations).
+    hmi_sysids: (u8, u8),
+    clock: Clock,
+    mode: Mode,
+    run_mode: RunMode,
+    armed: bool,
+    armed_at: Option<Duration>,
+    /// The thruster pulse widths last commanded [port, vertical, starboard].
+    motors_us: [u16; 3],
+    board: board::BoardState,
+    payload: payload::Payload,
+    pilot: driving::Pilot,
+    auth: authority::Authority,
+    failsafes: failsafe::Failsafes,
+    holds: holds::Holds,
+    streams: telemetry::Streams,
+    texts: texts::Texts,
+    persist: persist::Persist,
+    signing_active: bool,
+    counters: Counters,
+}
+
+/// When the core started and last ticked.
+#[derive(Debug, Default)]
+struct Clock {
+    started: bool,
+    booted: Duration,
+    last_tick: Option<Duration>,
+}
+
+/// Requests refused and only counted (the app reports them).
+#[derive(Debug, Default)]
+struct Counters {
+    /// Telemetry-rate requests refused (stations that may not control).
+    refused_rate_requests: u64,
+    /// PARAM_SETs whose param_type was not acceptable.
+    bad_param_types: u64,
+}
+
+fn chars<const N: usize>(s: &str) -> CharArray<N> {
+    CharArray::from(s)
+}
+
+fn char_str<const N: usize>(c: &CharArray<N>) -> String {
+    let bytes: &[u8] = c.as_ref();
+    let end = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
+    String::from_utf8_lossy(&bytes[..end]).into_owned()
+}
+
+/// NaN means "not given" (MAVSDK sends unused params as NaN).
+fn given(v: f32) -> Option<f32> {
+    (!v.is_nan()).then_some(v)
+}
+
+impl Vehicle {
+    pub fn new(identity: Identity, params: ParamStore, endpoints: usize) -> Self {
+        let pilot = driving::Pilot {
+            gain: f64::from(params.js_gain_default()),
+            ..Default::default()
+        };
+        let sysid = params.sysid_thismav();
+        Self {
+            identity,
+            params,
+            profiles: std::sync::Arc::new(Profiles::builtin()),
+            sysid,
+            hmi_sysids: (200, 209),
+            clock: Clock::default(),
+            mode: Mode::BOOT,
+            run_mode: RunMode::Normal,
+            armed: false,
+            armed_at: None,
+            motors_us: [NEUTRAL_US; 3],
+            board: board::BoardState::default(),
+            payload: payload::Payload::default(),
+            pilot,
+            auth: authority::Authority::default(),
+            failsafes: failsafe::Failsafes::default(),
+            holds: holds::Holds::default(),
+            streams: telemetry::Streams::new(endpoints),
+            texts: texts::Texts::default(),
+            persist: persist::Persist::default(),
+            signing_active: false,
+            counters: Counters::default(),
+        }
+    }
+
+    /// Ground-station conventions (default: the profiles built into the binary).
+    pub fn with_profiles(mut self, profiles: Profiles) -> Self {
+        self.profiles = std::sync::Arc::new(profiles);
+        self
+    }
+
+    /// The system ids the browser HMI lends its sessions (default 200..=209):
+    /// SYSID_THISMAV may not take one of them.
+    pub fn with_hmi_sysids(mut self, lo: u8, hi: u8) -> Self {
+        self.hmi_sysids = (lo.min(hi), hi.max(lo));
+        self
+    }
+
+    /// Telemetry-rate requests refused because the sender may not control.
+    pub fn refused_rate_requests(&self) -> u64 {
+        self.counters.refused_rate_requests
+    }
+
+    /// PARAM_SETs answered with the current value because of their param_type.
+    pub fn bad_param_types(&self) -> u64 {
+        self.counters.bad_param_types
+    }
+
+    /// Pilot input refused because it came from a station not in control.
+    pub fn refused_inputs(&self) -> u64 {
+        self.auth.input_refusals.count
+    }
+
+    /// Signing is on (a key is set): control traffic must be signed.
+    pub fn set_signing_active(&mut self, active: bool) {
+        self.signing_active = active;
+    }
+    pub fn signing_active(&self) -> bool {
+        self.signing_active
+    }
+
+    pub fn params(&self) -> &ParamStore {
+        &self.params
+    }
+    pub fn armed(&self) -> bool {
+        self.armed
+    }
+    /// The flight mode.
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+    /// The system id in use (SYSID_THISMAV as it was at start).
+    pub fn sysid(&self) -> u8 {
+        self.sysid
+    }
+    pub fn motors_us(&self) -> [u16; 3] {
+        self.motors_us
+    }
+
+    /// Reacts to one input at `now`, appending what must happen to `out`.
+    pub fn handle(&mut self, input: Input, now: Now, out: &mut Vec<Output>) {
+        if !self.clock.started {
+            self.clock.started = true;
+            self.clock.booted = now.mono;
+            self.streams.start(now.mono);
+        }
+        match input {
+            Input::Tick => self.tick(now, out),
+            Input::Link { state, reason } => self.on_link(state, reason, now, out),
+            Input::Board(ev) => {
+                // In SIMULATOR run mode the board's navigation and power
+                // telemetry is not the vehicle's (the simulator's is).
+                let simulated = self.run_mode == RunMode::Simulator;
+                if !(simulated && matches!(ev, Event::Nav(_) | Event::Status(_))) {
+                    self.on_board(ev, now, out);
+                }
+            }
+            Input::SimBoard(ev) => {
+                if self.run_mode == RunMode::Simulator {
+                    self.on_board(ev, now, out);
+                }
+            }
+            Input::SimTruth(t) => self.board.on_sim_truth(t, now),
+            Input::ParamsSaved(result) => self.on_params_saved(result, now, out),
+            Input::Mavlink { from, msg } => self.on_mavlink(from, msg, now, out),
+            Input::Hmi { sysid, event } => self.on_hmi(sysid, event, now, out),
+            Input::BadParamSet {
+                from,
+                target_system,
+                target_component,
+                param_id,
+                param_type,
+            } => {
+                if self.for_us(target_system, target_component) {
+                    let name = char_str(&CharArray::<16>::from(param_id));
+                    self.bad_param_type(from, &name, param_type, now, out);
+                }
+            }
+            Input::UnknownCommand {
+                from,
+                command,
+                target_system,
+                target_component,
+            } => {
+                if self.for_us(target_system, target_component) {
+                    out.push(command::ack_unknown(from, command));
+                }
+            }
+        }
+    }
+
+    fn boot_ms(&self, now: Now) -> u32 {
+        (now.mono.saturating_sub(self.clock.booted)).as_millis() as u32
+    }
+
+    fn send_neutral(&mut self, out: &mut Vec<Output>) {
+        self.motors_us = [NEUTRAL_US; 3];
+        self.holds.applied = driving::NO_DEMAND;
+        self.send_go(NEUTRAL_GO, out);
+    }
+
+    /// A thruster command, to the board or, in SIMULATOR run mode, to the
+    /// simulator (the board then stays stopped).
+    fn send_go(&mut self, go: Command, out: &mut Vec<Output>) {
+        match self.run_mode {
+            RunMode::Normal => out.push(Output::Board(go)),
+            RunMode::Simulator => out.push(Output::SimBoard(go)),
+        }
+    }
+
+    /// Periodic work: driving and autopilots, failsafes, authority timeouts,
+    /// saving, the dead-man feed, telemetry streams.
+    fn tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        let dt = self
+            .clock
+            .last_tick
+            .map_or(Duration::ZERO, |t| now.mono.saturating_sub(t));
+        self.clock.last_tick = Some(now.mono);
+        self.drive_tick(now, dt, out);
+        // Failsafes act before the owner is dropped for silence, so a pending
+        // request is granted only after the GCS failsafe has acted.
+        self.failsafe_tick(now, out);
+        self.authority_tick(now, out);
+        self.persist_tick(now, out);
+        // The board's dead-man is fed by the owner's life, not by ours alone:
+        // a dead owner link reaches the board even if this loop runs on.
+        if !self.armed
+            || self.owner_alive(now, authority::LIFE_FEEDS_DEADMAN)
+            || self.failsafe_needs_thrust()
+        {
+            out.push(Output::Healthy);
+        }
+        self.stream_tick(now, out);
+        self.param_stream_tick(out);
+    }
+}

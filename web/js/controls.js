@@ -1,0 +1,271 @@
+// The operator page's controls: turns what the operator does into messages
+// to the vehicle — the control buttons and the request prompt's answer,
+// login and logout, the input, control and run modes, the autopilot
+// setpoints, the gain/lights/tilt sliders and the laser, the keyboard and
+// touch buttons, the developer panel's buttons — and sends the sticks (or
+// thrusters) from input.js at 20 Hz. Keeps the thesis' safety rule: stop on
+// blur, hidden tab, and input-, control- and run-mode change. Writes the
+// feedback next to its own inputs (login note, input note, slider values
+// while dragged); everything the server says is rendered by the view
+// (view.js). docs/ARCHITECTURE.md is the map of the whole program.
+import { SIGNALS } from '/js/dev.js';
+
+const $ = (id) => document.getElementById(id);
+export const SEND_PERIOD_MS = 50; // sticks at 20 Hz
+
+export class Controls {
+  /** `session` (session.js) sends; `view` (view.js) shows; `input`
+   * (input.js) is the operator's sticks; `logger`, `recorder`, `plots` are
+   * the developer interface's (dev.js). */
+  constructor({ session, view, input, logger, recorder, plots }) {
+    this.session = session;
+    this.view = view;
+    this.input = input;
+    this.logger = logger;
+    this.recorder = recorder;
+    this.plots = plots;
+    this.lastCmd = {}; // latest command sent (for plots and the logger)
+    this.wasActive = false;
+    this.lastTilt = null;
+  }
+
+  bind() {
+    this.bindButtons();
+    this.bindKeys();
+    this.bindTouch();
+    this.bindSafety();
+  }
+
+  /** Once per welcome: tell the vehicle which input mode is in use (a stop, harmless at start). */
+  welcomed() {
+    this.session.send({ type: 'input_mode', mode: this.input.mode });
+  }
+
+  /** The operator picked control mode `mode` (a number from the server's list). */
+  pickMode(mode) {
+    this.safetyStop(null);
+    this.session.send({ type: 'mode', mode });
+    this.view.labelTouchpad(mode);
+  }
+
+  /** Sends the current command at 20 Hz: always while in control (the vehicle's
+   * pilot-input failsafe expects a steady stream), otherwise only while input is
+   * held, and one neutral command on release. */
+  tick() {
+    const { session, input } = this;
+    if (!session.mayPilot()) return;
+    const manual = session.drivesThrusters(session.currentMode());
+    const cmd = input.command(manual);
+    const active = Object.values(cmd).some((v) => v !== 0);
+    if (session.inControl() || active || this.wasActive) {
+      session.send(manual ? { type: 'thrusters', ...cmd } : { type: 'sticks', ...cmd });
+      const changed = JSON.stringify(cmd) !== JSON.stringify(this.lastCmd);
+      if (changed) this.logger.log('thrust_client', Object.entries(cmd).map(([k, v]) => `${k} ${v.toFixed(2)}`).join(', '));
+      this.lastCmd = cmd;
+    }
+    this.wasActive = active;
+    const tilt = input.headTilt();
+    if (tilt != null && (this.lastTilt == null || Math.abs(tilt - this.lastTilt) >= 2)) {
+      this.lastTilt = tilt;
+      session.send({ type: 'tilt', deg: Math.round(tilt) });
+    }
+    session.keepAlive();
+  }
+
+  /** The thesis' safety mode: stop now; the server tells the vehicle why. */
+  safetyStop(kind) {
+    this.input.releaseAll();
+    document.querySelectorAll('#touchpad .tp.held').forEach((b) => b.classList.remove('held'));
+    this.lastCmd = {};
+    this.wasActive = false;
+    if (kind === 'focus') this.session.send({ type: 'focus_lost' });
+    else if (kind) this.session.send({ type: 'stop' });
+    this.logger.log('stop', kind === 'focus' ? 'window lost focus: stop' : 'stop');
+  }
+
+  // ---- login ------------------------------------------------------------------
+
+  /** The login form: POST /api/login sets the login cookie; the WebSocket is
+   * then opened again so the new session carries it. */
+  async login(password) {
+    const note = $('login-note');
+    note.textContent = 'checking…';
+    note.classList.remove('refused');
+    let r;
+    let body = {};
+    try {
+      r = await fetch('/api/login', {
+        method: 'POST',
+        headers: { 'Content-Type': 'application/json' },
+        body: JSON.stringify({ password }),
+      });
+      body = await r.json();
+    } catch {
+      note.textContent = 'the vehicle did not answer: try again';
+      return;
+    }
+    note.textContent = body.message || `HTTP ${r.status}`;
+    note.classList.toggle('refused', !body.ok);
+    this.view.message(body.ok ? 6 : 4, `login: ${note.textContent}`);
+    if (body.ok) this.reconnect();
+  }
+
+  async logout() {
+    try { await fetch('/api/logout', { method: 'POST' }); } catch { /* the reconnect shows the state */ }
+    $('login-note').textContent = '';
+    this.reconnect();
+  }
+
+  reconnect() {
+    this.safetyStop(null);
+    this.session.reconnect();
+  }
+
+  // ---- buttons, forms and sliders ---------------------------------------------
+
+  bindButtons() {
+    const { session, input, logger, view } = this;
+    const send = (msg) => session.send(msg);
+    $('request').onclick = () => { send({ type: 'request_control' }); logger.log('control', 'control requested'); };
+    $('release').onclick = () => send({ type: 'release_control' });
+    $('arm').onclick = () => send({ type: 'arm', arm: true });
+    $('disarm').onclick = () => send({ type: 'arm', arm: false });
+    $('accept').onclick = () => { send({ type: 'answer_request', accept: true }); view.closeRequest(); };
+    $('refuse').onclick = () => { send({ type: 'answer_request', accept: false }); view.closeRequest(); };
+    $('login').onsubmit = (e) => {
+      e.preventDefault();
+      const password = $('password').value;
+      $('password').value = '';
+      this.login(password);
+    };
+    $('logout').onclick = () => this.logout();
+    document.querySelectorAll('input[name=input]').forEach((r) => r.addEventListener('change', () => {
+      if (!r.checked) return;
+      input.mode = r.value;
+      this.safetyStop(null);
+      send({ type: 'input_mode', mode: r.value });
+      logger.log('stop', `input mode ${r.value}: stop`);
+      $('input-note').textContent = '';
+      if (r.value === 'headtracking') input.startHead((n) => { $('input-note').textContent = n; });
+      if (r.value === 'gamepad') $('input-note').textContent = input.pad ? input.pad.id : 'press a button on the gamepad';
+    }));
+    $('surface').onclick = () => {
+      this.safetyStop(null);
+      const surface = session.offeredModes().find((m) => m.button);
+      if (surface) send({ type: 'mode', mode: surface.mode });
+    };
+    document.querySelectorAll('input[name=run]').forEach((r) => r.addEventListener('change', () => {
+      if (!r.checked) return;
+      this.safetyStop(null);
+      send({ type: 'run_mode', mode: r.value });
+    }));
+    $('ap-form').onsubmit = (e) => {
+      e.preventDefault();
+      const num = (id, lo, hi) => {
+        const v = $(id).value.trim();
+        if (v === '') return null;
+        const n = Number(v);
+        return Number.isFinite(n) && n >= lo && n <= hi ? n : undefined;
+      };
+      const depth = num('ap-depth', 0, 1000);
+      const heading = num('ap-heading', 0, 360);
+      if (depth === undefined || heading === undefined) { view.message(4, 'Autopilot: depth 0..1000 m, heading 0..360°'); return; }
+      if (depth === null && heading === null) return;
+      send({ type: 'autopilot_target', depth_m: depth, heading_deg: heading });
+      if (depth !== null) logger.log('ap_depth', `depth target ${depth} m requested`);
+      if (heading !== null) logger.log('ap_heading', `heading target ${heading}° requested`);
+    };
+    // `data-dragging` keeps the view's telemetry from moving a slider the
+    // operator holds (view.js syncSlider).
+    const slider = (id, type, key, show, log) => {
+      const el = $(id);
+      el.addEventListener('pointerdown', () => { el.dataset.dragging = '1'; });
+      el.addEventListener('pointerup', () => { delete el.dataset.dragging; });
+      el.addEventListener('input', () => { $(`${id}-out`).textContent = show(Number(el.value)); });
+      el.addEventListener('change', () => {
+        delete el.dataset.dragging;
+        send({ type, [key]: Number(el.value) });
+        if (log) log(Number(el.value));
+      });
+    };
+    slider('gain', 'gain', 'value', (v) => v.toFixed(2), (v) => logger.log('gain', `gain ${v.toFixed(2)} requested`));
+    slider('lights', 'lights', 'level', (v) => String(v));
+    slider('tilt', 'tilt', 'deg', (v) => v.toFixed(0));
+    $('laser').onchange = () => send({ type: 'laser', on: $('laser').checked });
+    this.bindDevPanel();
+  }
+
+  bindDevPanel() {
+    const { recorder, plots } = this;
+    $('dev-toggle').onclick = () => {
+      $('dev').hidden = !$('dev').hidden;
+      if (!$('dev').hidden) plots.refresh();
+    };
+    const sel = $('signal');
+    for (const [key, label] of SIGNALS) {
+      const o = document.createElement('option');
+      o.value = key;
+      o.textContent = label;
+      sel.append(o);
+    }
+    $('add-plot').onclick = () => plots.add(sel.value);
+    $('remove-plots').onclick = () => plots.removeAll();
+    $('reset-data').onclick = () => { recorder.reset(); plots.refresh(); $('samples').textContent = '0'; };
+    $('export-csv').onclick = () => {
+      const blob = new Blob([recorder.csv()], { type: 'text/csv' });
+      const a = document.createElement('a');
+      a.href = URL.createObjectURL(blob);
+      a.download = `neptunus-${new Date().toISOString().replace(/[:.]/g, '-')}.csv`;
+      document.body.append(a);
+      a.click();
+      a.remove();
+      setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+    };
+  }
+
+  // ---- keyboard, touch and the safety events ------------------------------------
+
+  bindKeys() {
+    const { input } = this;
+    window.addEventListener('keydown', (e) => {
+      if (typing(e) || e.ctrlKey || e.metaKey || e.altKey) return;
+      if (input.mode !== 'keyboard' && input.mode !== 'touch') return;
+      if (input.press(e.code)) e.preventDefault();
+    });
+    window.addEventListener('keyup', (e) => input.release(e.code));
+  }
+
+  bindTouch() {
+    const { input } = this;
+    const pad = $('touchpad');
+    pad.addEventListener('contextmenu', (e) => e.preventDefault());
+    document.querySelectorAll('#touchpad .tp').forEach((b) => {
+      const down = (e) => {
+        e.preventDefault();
+        b.setPointerCapture?.(e.pointerId);
+        b.classList.add('held');
+        input.press(b.dataset.key);
+      };
+      const up = () => {
+        b.classList.remove('held');
+        input.release(b.dataset.key);
+      };
+      b.addEventListener('pointerdown', down);
+      b.addEventListener('pointerup', up);
+      b.addEventListener('pointercancel', up);
+      b.addEventListener('lostpointercapture', up);
+    });
+    $('video').addEventListener('contextmenu', (e) => e.preventDefault());
+  }
+
+  bindSafety() {
+    window.addEventListener('blur', () => this.safetyStop('focus'));
+    document.addEventListener('visibilitychange', () => { if (document.visibilityState === 'hidden') this.safetyStop('focus'); });
+  }
+}
+
+/** Whether a key press is typing into a field rather than driving. */
+function typing(e) {
+  const t = e.target;
+  return t && (t.tagName === 'INPUT' && t.type !== 'radio' && t.type !== 'checkbox' && t.type !== 'range') || (t && t.tagName === 'SELECT');
+}
