@@ -4,7 +4,7 @@
 //! This module owns the message types and their validation. It must never
 //! build MAVLink or decide anything about the vehicle: a [`ClientMsg`] that
 //! passes [`ClientMsg::validate`] is turned into MAVLink by the session
-//! (`session.rs`), and the vehicle core decides whether it is honoured.
+//! (`session/`), and the vehicle core decides whether it is honoured.
 //!
 //! # Browser → server ([`ClientMsg`])
 //! | type | fields | becomes |

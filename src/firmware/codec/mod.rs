@@ -59,17 +59,17 @@
 //!   present, [`Event::Status`] if any status key is present, then the event
 //!   keys in line order. When a key repeats on a line, the last value wins.
 //!
-//! One file per concern: `encode` (host → board), `types` (what a line
+//! One file per concern: `command` (host → board), `types` (what a line
 //! yields), `value` (key ranges and number parsing) and `decode`
 //! ([`LineDecoder`]); everything public is re-exported here.
 
+mod command;
 mod decode;
-mod encode;
 mod types;
 mod value;
 
+pub use command::{Command, Framing, ParseFramingError, crc8, encode, encoded};
 pub use decode::LineDecoder;
-pub use encode::{Command, Framing, ParseFramingError, crc8, encode, encoded};
 pub use types::{DecodeStats, Event, NavSample, RejectReason, StatusSample};
 pub use value::physical_range;
 
