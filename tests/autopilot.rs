@@ -419,3 +419,71 @@ fn sim_report_writes_a_png_and_a_csv_per_scenario() {
     assert_eq!(lines.count(), outcome.samples.len());
     assert_eq!(written.len(), 3, "{written:?}");
 }
+
+/// Issue 14: Normal → Simulator → Normal at 1.5 m / 60° in ALT_HOLD once
+/// took the held depth and heading from the reset estimator (0 m, north):
+/// the ROV rose to the surface and turned north with no message.
+#[test]
+fn a_run_mode_round_trip_keeps_the_setpoints_and_the_vehicle_at_depth() {
+    let mut s = Scenario::new(report::options(31));
+    s.place(1.5, 60.0);
+    s.run(secs(3));
+    assert_eq!(s.arm(), Some(MavResult::MAV_RESULT_ACCEPTED));
+    assert_eq!(
+        s.set_mode(Mode::AltHold.number()),
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    );
+    s.set_depth_target(1.5);
+    assert_eq!(
+        s.set_heading_target(60.0),
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    );
+    s.run(secs(10));
+    let (depth, heading) = s.vehicle().targets();
+    assert!((depth.expect("held depth") - 1.5).abs() < 1e-6);
+    assert!((heading.expect("held heading") - 60.0).abs() < 1e-6);
+
+    assert_eq!(
+        s.set_run_mode(RunMode::Simulator),
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    );
+    s.run(secs(2));
+    assert_eq!(
+        s.set_run_mode(RunMode::Normal),
+        Some(MavResult::MAV_RESULT_ACCEPTED)
+    );
+    // The pilot is told, not left to guess.
+    assert!(
+        s.sent.iter().any(|m| matches!(m, MavMessage::STATUSTEXT(t)
+            if String::from_utf8_lossy(t.text.as_ref()).contains("Setpoints kept: depth 1.50 m, heading 60"))),
+        "{:?}",
+        s.sent
+    );
+    let (depth, heading) = s.vehicle().targets();
+    assert!(
+        depth.is_some_and(|d| (d - 1.5).abs() < 1e-6),
+        "held depth after the round trip: {depth:?}"
+    );
+    assert!(
+        heading.is_some_and(|h| (h - 60.0).abs() < 1e-6),
+        "held heading after the round trip: {heading:?}"
+    );
+    s.run(secs(20));
+    let (depth, heading) = s.vehicle().targets();
+    assert!(depth.is_some_and(|d| (d - 1.5).abs() < 1e-6), "{depth:?}");
+    assert!(
+        heading.is_some_and(|h| (h - 60.0).abs() < 1e-6),
+        "{heading:?}"
+    );
+    // The vehicle never left the held depth by more than a hold's error, and
+    // ends at the held heading.
+    let after: Vec<_> = s.samples().iter().filter(|x| x.t_s > 15.0).collect();
+    let worst = after
+        .iter()
+        .map(|x| (x.depth_true_m - 1.5).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 0.25, "left the held depth by {worst} m");
+    let last = after.last().expect("samples after the round trip");
+    let off = (last.heading_true_deg - 60.0 + 540.0).rem_euclid(360.0) - 180.0;
+    assert!(off.abs() < 5.0, "heading {} deg", last.heading_true_deg);
+}

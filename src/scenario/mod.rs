@@ -222,6 +222,19 @@ impl Scenario {
         )
     }
 
+    /// MAV_CMD_NEPTUNUS_SET_RUN_MODE. The scenario's plant is the board, so
+    /// in simulator run mode the plant gets no thrust (the board is stopped).
+    pub fn set_run_mode(&mut self, mode: crate::vehicle::machine::RunMode) -> Option<MavResult> {
+        let p1 = match mode {
+            crate::vehicle::machine::RunMode::Normal => 0.0,
+            crate::vehicle::machine::RunMode::Simulator => 1.0,
+        };
+        self.command(
+            MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+            [p1, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        )
+    }
+
     pub fn set_sticks(&mut self, s: Sticks) {
         self.sticks = s;
     }

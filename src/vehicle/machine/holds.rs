@@ -110,13 +110,21 @@ impl Vehicle {
         }
         let m = self.measured(now);
         let sticks = self.pilot_sticks(now);
-        self.holds.yaw_out = if self.mode.holds_heading() {
+        // A filter that has not seen its first reading (after a run-mode
+        // switch) estimates nothing: its axis rests until it has, rather than
+        // chase the default 0 m / north.
+        let depth_known = self.holds.est.depth_filter().initialised();
+        let heading_known = self.holds.est.heading_filter().initialised();
+        self.holds.yaw_out = if self.mode.holds_heading() && !heading_known {
+            Some(0.0)
+        } else if self.mode.holds_heading() {
             let g = self.params.heading_gains();
             Some(self.holds.heading.step(&g, &m, sticks.yaw, dt_s))
         } else {
             None
         };
         self.holds.heave_out = match self.mode {
+            Mode::AltHold | Mode::Surface if !depth_known => Some(0.0),
             Mode::AltHold => {
                 let g = self.params.depth_gains();
                 Some(self.holds.depth.step(&g, &m, sticks.heave, dt_s))

@@ -52,6 +52,10 @@ impl Vehicle {
             return;
         }
         let old = self.run_mode;
+        // The pilot's setpoints are the pilot's, not the source's: they
+        // survive the switch (the controllers and the estimates do not).
+        let (depth_target, heading_target) =
+            (self.holds.depth.target_m, self.holds.heading.target_rad);
         // Both the board and the simulator get neutral before anything moves on.
         self.safety_stop(true, out);
         out.push(Output::SimBoard(super::NEUTRAL_GO));
@@ -90,6 +94,26 @@ impl Vehicle {
         // The other source's estimates are not this one's.
         self.holds.est = Estimator::default();
         self.holds_reset();
+        self.holds.depth.target_m = depth_target;
+        self.holds.heading.target_rad = heading_target;
+        let kept: Vec<String> = depth_target
+            .map(|d| format!("depth {d:.2} m"))
+            .into_iter()
+            .chain(heading_target.map(|h| format!("heading {:.0}°", h.to_degrees())))
+            .collect();
+        if !kept.is_empty() {
+            let topic = if depth_target.is_some() {
+                Topic::ApDepth
+            } else {
+                Topic::ApHeading
+            };
+            self.statustext(
+                topic,
+                MavSeverity::MAV_SEVERITY_INFO,
+                &format!("Setpoints kept: {}", kept.join(", ")),
+                out,
+            );
+        }
         self.log("run_mode", by, format!("{old:?} -> {mode:?}"), out);
     }
 
