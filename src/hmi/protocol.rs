@@ -53,7 +53,7 @@ pub const MAX_MESSAGE_BYTES: usize = 4096;
 /// The page gets them in the welcome ([`ModeView`]) and spells no mode number.
 pub const HMI_MODES: [(Mode, &str); 5] = [
     (Mode::ManualThrusters, "Manual thrusters"),
-    (Mode::Manual, "Motion"),
+    (Mode::Manual, "Manual"),
     (Mode::Stabilize, "Heading hold"),
     (Mode::AltHold, "Depth + heading hold"),
     (Mode::Surface, "SURFACE"),
@@ -476,7 +476,7 @@ mod tests {
             modes,
             serde_json::json!([
                 {"mode": 100, "name": "MANUAL_THRUSTERS", "label": "Manual thrusters", "thrusters": true, "button": false},
-                {"mode": 19, "name": "MANUAL", "label": "Motion", "thrusters": false, "button": false},
+                {"mode": 19, "name": "MANUAL", "label": "Manual", "thrusters": false, "button": false},
                 {"mode": 0, "name": "STABILIZE", "label": "Heading hold", "thrusters": false, "button": false},
                 {"mode": 2, "name": "ALT_HOLD", "label": "Depth + heading hold", "thrusters": false, "button": false},
                 {"mode": 9, "name": "SURFACE", "label": "SURFACE", "thrusters": false, "button": true},

@@ -30,23 +30,25 @@ export async function until(fn, ms, what) {
 /** `neptunus --sim` with its HMI on 127.0.0.1:0; resolves once the page is served.
  * `password`: set first with `neptunus hmi set-password` (piped, as a script
  * would); `hmiToml`: the body of an `[hmi]` section of a config file. */
-export async function startVehicle(extraArgs = [], { password, hmiToml } = {}) {
+export async function startVehicle(extraArgs = [], { password, hmiToml, toml, http = '127.0.0.1:0', dataDir } = {}) {
   if (!existsSync(BIN)) throw new Error(`no neptunus binary at ${BIN}: run \`cargo build\` or set NEPTUNUS_BIN`);
   const dir = mkdtempSync(join(tmpdir(), 'neptunus-browser-'));
-  const data = join(dir, 'data');
+  const data = dataDir || join(dir, 'data');
   if (password) {
     const r = spawnSync(BIN, ['hmi', 'set-password', '--data-dir', data], { input: `${password}\n`, encoding: 'utf8' });
     if (r.status !== 0) throw new Error(`neptunus hmi set-password failed: ${r.stderr}`);
   }
-  if (hmiToml) {
+  if (hmiToml || toml) {
     const config = join(dir, 'neptunus.toml');
-    writeFileSync(config, `[hmi]\n${hmiToml}\n`);
+    writeFileSync(config, `${toml || ''}\n${hmiToml ? `[hmi]\n${hmiToml}\n` : ''}`);
     extraArgs = [...extraArgs, '--config', config];
   }
+  // A restarted vehicle writes its address again: wait for the new one.
+  rmSync(join(data, 'http.addr'), { force: true });
   const log = openSync(join(dir, 'stderr.txt'), 'w');
   const child = spawn(
     BIN,
-    ['--sim', '--data-dir', data, '--http', '127.0.0.1:0', '--mavlink', 'udpin:127.0.0.1:0', ...extraArgs],
+    ['--sim', '--data-dir', data, '--http', http, '--mavlink', 'udpin:127.0.0.1:0', ...extraArgs],
     { stdio: ['ignore', log, log], env: { ...process.env, NO_COLOR: '1', RUST_LOG: process.env.RUST_LOG || 'info' } },
   );
   let exited = null;

@@ -34,17 +34,17 @@ test('the page loads with no console errors and shows the video', () => withVehi
   assert.match(await page.textContent('[data-testid=me]'), /you may pilot/);
   assert.equal(await page.isVisible('[data-testid=login]'), false);
   assert.equal(await page.isVisible('[data-testid=watch-only]'), false);
-  // A frame of telemetry reaches the attitude readout.
-  await until(async () => (await page.textContent('#hdg')) !== '—', 10000, 'heading readout');
+  // A frame of telemetry reaches the HUD: the mode has a name.
+  await until(async () => (await page.textContent('[data-testid=mode-name]')) !== '—', 10000, 'the mode on the HUD');
   assert.deepEqual(problems, []);
   await context.close();
 }));
 
-test('video <img> gets frames', async () => withVehicle(async (v) => {
+test('the video gets frames', async () => withVehicle(async (v) => {
   const { page, context, problems } = await openPage(browser, v.url);
   const video = await page.evaluate(async () => (await fetch('/api/video')).json());
   assert.equal(video.available, true, `the synthetic camera serves /video.mjpg with --sim: ${JSON.stringify(video)}`);
-  await until(() => page.evaluate(() => document.getElementById('video').naturalWidth > 0), 15000, 'a video frame');
+  await until(() => page.evaluate(() => window.neptunus.video.frames > 0 && document.getElementById('video').width > 0), 15000, 'a video frame');
   // Frames keep coming: the camera reports a frame rate and a fresh frame.
   const status = await until(async () => {
     const s = await page.evaluate(async () => (await fetch('/camera/status')).json());
@@ -101,8 +101,8 @@ test('a second browser requests control and the first accepts in its prompt', ()
   await a.page.click('[data-testid=request-control]');
   await until(async () => (await telemetry(a.page)).control.you, 10000, 'A in control');
   await b.page.click('[data-testid=request-control]');
-  await a.page.waitForSelector('[data-testid=request-dialog][open]', { timeout: 10000 });
-  assert.match(await a.page.textContent('#request-text'), /GCS 201 requests control/);
+  await a.page.waitForSelector('[data-testid=request-dialog]:not([hidden])', { timeout: 10000 });
+  assert.match(await a.page.textContent('#request-text'), /GCS 201 asks for control/);
   await a.page.click('[data-testid=accept]');
   await until(async () => (await telemetry(b.page)).control.you, 10000, 'B in control');
   assert.match(await b.page.textContent('[data-testid=who]'), /you/);

@@ -64,12 +64,22 @@ export class Controls {
       this.lastCmd = cmd;
     }
     this.wasActive = active;
+    this.showDriving(cmd, active);
     const tilt = input.headTilt();
     if (tilt != null && (this.lastTilt == null || Math.abs(tilt - this.lastTilt) >= 2)) {
       this.lastTilt = tilt;
       session.send({ type: 'tilt', deg: Math.round(tilt) });
     }
     session.keepAlive();
+  }
+
+  /** The driving indicator: what is being sent, and the touch buttons of
+   * the keys held lit. */
+  showDriving(cmd, active) {
+    const el = $('driving');
+    el.classList.toggle('active', active);
+    $('drive-indicator').textContent = active ? `sending: ${drivingWords(cmd)}` : `${this.input.mode}: idle`;
+    document.querySelectorAll('#touchpad .tp').forEach((b) => b.classList.toggle('held', this.input.held.has(b.dataset.key)));
   }
 
   /** The thesis' safety mode: stop now; the server tells the vehicle why. */
@@ -80,7 +90,7 @@ export class Controls {
     this.wasActive = false;
     if (kind === 'focus') this.session.send({ type: 'focus_lost' });
     else if (kind) this.session.send({ type: 'stop' });
-    this.logger.log('stop', kind === 'focus' ? 'window lost focus: stop' : 'stop');
+    this.logger.log('stop', kind === 'focus' ? 'window lost focus: stop' : kind === 'stop' ? 'STOP pressed: disarm' : 'stop');
   }
 
   // ---- login ------------------------------------------------------------------
@@ -129,9 +139,30 @@ export class Controls {
     $('request').onclick = () => { send({ type: 'request_control' }); logger.log('control', 'control requested'); };
     $('release').onclick = () => send({ type: 'release_control' });
     $('arm').onclick = () => send({ type: 'arm', arm: true });
-    $('disarm').onclick = () => send({ type: 'arm', arm: false });
-    $('accept').onclick = () => { send({ type: 'answer_request', accept: true }); view.closeRequest(); };
-    $('refuse').onclick = () => { send({ type: 'answer_request', accept: false }); view.closeRequest(); };
+    // STOP: the page lets go of every key and the vehicle disarms (thrusters neutral).
+    $('disarm').onclick = () => { this.safetyStop('stop'); send({ type: 'arm', arm: false }); };
+    // The owner's answer is a pointer act: a key press (Space, Enter) can
+    // never hand the vehicle over, and the buttons never take the focus.
+    for (const [id, accept] of [['accept', true], ['refuse', false]]) {
+      const b = $(id);
+      b.addEventListener('pointerdown', (e) => e.preventDefault());
+      b.addEventListener('click', (e) => {
+        if (e.detail === 0) return; // a click made by the keyboard
+        send({ type: 'answer_request', accept });
+        view.closeRequest();
+      });
+    }
+    $('fullscreen').onclick = () => {
+      const box = $('video-box');
+      if (document.fullscreenElement) document.exitFullscreen?.();
+      else box.requestFullscreen?.().catch(() => view.message(4, 'This browser refused full screen'));
+    };
+    // A button clicked with the pointer gives the focus back, so the next
+    // Space or Enter drives nothing by surprise and the keys keep driving.
+    document.addEventListener('click', (e) => {
+      const b = e.target.closest && e.target.closest('button');
+      if (b && e.detail > 0) b.blur();
+    });
     $('login').onsubmit = (e) => {
       e.preventDefault();
       const password = $('password').value;
@@ -169,7 +200,9 @@ export class Controls {
       };
       const depth = num('ap-depth', 0, 1000);
       const heading = num('ap-heading', 0, 360);
-      if (depth === undefined || heading === undefined) { view.message(4, 'Autopilot: depth 0..1000 m, heading 0..360°'); return; }
+      // Back to driving: the keys go to the vehicle again, not to the field.
+      document.activeElement?.blur?.();
+      if (depth === undefined || heading === undefined) { view.message(4, 'Autopilot setpoints: depth 0 to 1000 m, heading 0 to 360°'); return; }
       if (depth === null && heading === null) return;
       send({ type: 'autopilot_target', depth_m: depth, heading_deg: heading });
       if (depth !== null) logger.log('ap_depth', `depth target ${depth} m requested`);
@@ -199,7 +232,12 @@ export class Controls {
     const { recorder, plots } = this;
     $('dev-toggle').onclick = () => {
       $('dev').hidden = !$('dev').hidden;
-      if (!$('dev').hidden) plots.refresh();
+      $('dev-toggle').setAttribute('aria-expanded', String(!$('dev').hidden));
+      if (!$('dev').hidden) {
+        plots.refresh();
+        // It opens below the operator screen: bring it into view.
+        $('dev').scrollIntoView({ block: 'start' });
+      }
     };
     const sel = $('signal');
     for (const [key, label] of SIGNALS) {
@@ -228,6 +266,12 @@ export class Controls {
   bindKeys() {
     const { input } = this;
     window.addEventListener('keydown', (e) => {
+      if (typing(e) && (e.key === 'Escape' || e.key === 'Enter')) {
+        // Enter submits the field's form; either way the keys drive again.
+        if (e.key === 'Escape') e.target.blur();
+        else setTimeout(() => e.target.blur(), 0);
+        return;
+      }
       if (typing(e) || e.ctrlKey || e.metaKey || e.altKey) return;
       if (input.mode !== 'keyboard' && input.mode !== 'touch') return;
       if (input.press(e.code)) e.preventDefault();
@@ -262,6 +306,18 @@ export class Controls {
     window.addEventListener('blur', () => this.safetyStop('focus'));
     document.addEventListener('visibilitychange', () => { if (document.visibilityState === 'hidden') this.safetyStop('focus'); });
   }
+}
+
+/** The command being sent, in the pilot's words ("forward 100 %, dive 50 %"). */
+function drivingWords(cmd) {
+  const words = {
+    surge: ['forward', 'back'], heave_up: ['rise', 'dive'], yaw: ['turn right', 'turn left'],
+    port: ['port fwd', 'port back'], vertical: ['vert. down', 'vert. up'], starboard: ['stbd fwd', 'stbd back'],
+  };
+  return Object.entries(cmd)
+    .filter(([, v]) => v !== 0)
+    .map(([k, v]) => `${(words[k] || [k, `-${k}`])[v > 0 ? 0 : 1]} ${Math.round(Math.abs(v) * 100)} %`)
+    .join(', ');
 }
 
 /** Whether a key press is typing into a field rather than driving. */

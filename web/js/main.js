@@ -9,6 +9,7 @@ import { Recorder, Plots, Logger, CATEGORIES } from '/js/dev.js';
 import { Session } from '/js/session.js';
 import { View } from '/js/view.js';
 import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
+import { Video } from '/js/video.js';
 
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
@@ -26,10 +27,11 @@ const input = new Input();
 const recorder = new Recorder();
 const logger = new Logger($('log'), $('categories'));
 const plots = new Plots($('plots'), recorder, (text) => { $('plot-note').textContent = text; });
-const view = new View({ session, logger, recorder });
+const video = new Video($('video'));
+const view = new View({ session, video, logger, recorder });
 const controls = new Controls({ session, view, input, logger, recorder, plots });
 // Exposed for the browser tests and for poking around in the console.
-window.neptunus = { state: session.state, session, view, controls, input, recorder, plots, logger };
+window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots, logger };
 
 // Every server message, and who acts on it.
 session.on('open', () => view.connected());
@@ -50,6 +52,7 @@ session.on('statustext', (m) => {
 session.on('ack', (m) => view.ack(m));
 session.on('control', (m) => view.control(m));
 session.on('control_request', (m) => view.controlRequest(m));
+session.on('request_pending', (m) => view.setPending(m));
 session.on('identity', () => view.showRights());
 session.on('login_result', (m) => view.message(m.ok ? 6 : 4, m.message));
 session.on('error', (m) => view.message(4, `server: ${m.message}`));
@@ -57,13 +60,13 @@ session.on('error', (m) => view.message(4, `server: ${m.message}`));
 function frame() {
   // Polled every animation frame: no gamepad event ordering to go wrong.
   input.pollGamepad();
-  view.drawAttitude();
+  view.frame();
   requestAnimationFrame(frame);
 }
 
 controls.bind();
 view.labelTouchpad();
-view.startVideo();
+video.start();
 session.connect();
 setInterval(() => controls.tick(), SEND_PERIOD_MS);
 setInterval(() => { if (view.devShown()) plots.refresh(); }, PLOT_REFRESH_MS);

@@ -10,7 +10,8 @@ const RETRY_MS = 1000;
 const ALIVE_PERIOD_MS = 500;
 /** The server's message types the page acts on; anything else is ignored. */
 const SERVER_TYPES = new Set([
-  'welcome', 'telemetry', 'statustext', 'ack', 'control', 'control_request', 'identity', 'login_result', 'error',
+  'welcome', 'telemetry', 'statustext', 'ack', 'control', 'control_request', 'request_pending', 'identity',
+  'login_result', 'error',
 ]);
 
 export class Session {

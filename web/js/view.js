@@ -1,39 +1,64 @@
 // The operator page's view: renders what the session knows into the DOM —
-// the status bar, the HUD and attitude indicator, the video, the messages
-// list, the control-request prompt, the rights/login banner, the control
-// modes offered by the server, and the readouts and sliders that follow
-// telemetry — and writes the logger entries that telemetry and server
-// messages imply. Sends nothing: the controls do (controls.js).
-// docs/ARCHITECTURE.md is the map of the whole program.
+// the status bar, the HUD's words (armed and mode, battery, who drives,
+// failsafe reasons) and its drawing (hud.js), the video's state, the
+// messages list, the owner's control-request prompt and the requester's
+// waiting note, the rights/login banner, the modes offered by the server,
+// and the readouts and sliders that follow telemetry — and writes the
+// logger entries that telemetry and server messages imply. Nothing shown
+// looks live once its data is older than STALE_MS. Sends nothing: the
+// controls do (controls.js). docs/ARCHITECTURE.md is the map of the whole program.
 import { KEY_LABELS } from '/js/input.js';
-import { drawAttitude } from '/js/attitude.js';
+import { drawHud, hudData, STALE_MS } from '/js/hud.js';
 
 const $ = (id) => document.getElementById(id);
 const fmt = (v, d) => (Number.isFinite(v) ? v.toFixed(d) : '—');
 const MAX_MESSAGES = 100;
+/** Video with no new frame for this long is dimmed and marked lost. */
+export const VIDEO_LOST_MS = 1000;
+/** Battery: the fraction left below which the widget warns, and turns red. */
+const BATTERY_LOW_PCT = 30;
+const BATTERY_CRITICAL_PCT = 15;
 
 export class View {
   /** `session`: read for the welcome, telemetry and modes (session.js);
-   * `logger`, `recorder`: the developer interface's (dev.js). */
-  constructor({ session, logger, recorder }) {
+   * `video`: the camera picture (video.js); `logger`, `recorder`: the
+   * developer interface's (dev.js). */
+  constructor({ session, video, logger, recorder }) {
     this.session = session;
+    this.video = video;
     this.logger = logger;
     this.recorder = recorder;
-    this.requestTimer = null;
-    this.rotation = 0;
+    this.tAt = null; // performance.now() when the latest telemetry arrived
+    this.online = false;
+    this.request = null; // the owner's prompt: { requester, deadline }
+    this.pending = null; // this page's own request: { owner, deadline }
   }
 
   // ---- connection and session --------------------------------------------
 
-  connected() { setPill('conn', 'connected', 'ok'); }
+  connected() {
+    this.online = true;
+    setPill('conn', 'connected', 'ok');
+    $('disconnected').hidden = true;
+    document.body.classList.remove('offline');
+    // The vehicle may have restarted: ask for the picture again at once.
+    this.video.restart();
+  }
 
-  disconnected() { setPill('conn', 'disconnected — retrying', 'bad'); }
+  disconnected() {
+    this.online = false;
+    setPill('conn', 'disconnected — retrying', 'bad');
+    $('disconnected').hidden = false;
+    document.body.classList.add('offline');
+    this.closeRequest();
+    this.setPending(null);
+  }
 
   /** `onPickMode(mode)`: called when the operator picks a control mode. */
   welcome(m, onPickMode) {
     this.showModes(m.modes || [], onPickMode);
     this.showRights();
-    this.applyRotation(m.camera_rotation_deg || 0);
+    this.video.rotation = m.camera_rotation_deg || 0;
   }
 
   /** What this session may do: the watch-only banner, the login form, the
@@ -45,25 +70,23 @@ export class View {
     $('watch-only').textContent = w.watch_only_reason ? `Watch only: ${w.watch_only_reason}` : '';
     $('login').hidden = !(w.password_set && !w.logged_in && !w.pilot);
     $('logout').hidden = !w.logged_in;
+    $('pilot-box').hidden = $('login').hidden && $('logout').hidden && !$('login-note').textContent;
     const who = w.sysid != null ? `you are GCS ${w.sysid}` : w.pilot ? 'you may pilot' : 'watching';
     $('me').textContent = `${who}${w.logged_in ? ' (logged in)' : ''}`;
   }
 
-  /** The control-mode radio buttons and the SURFACE button, from the welcome's mode list. */
+  /** The control-mode buttons and the SURFACE button, from the welcome's mode list. */
   showModes(modes, onPickMode) {
-    const box = $('control-modes');
-    box.querySelectorAll('label.mode').forEach((l) => {
-      if (l.nextSibling && l.nextSibling.nodeType === Node.TEXT_NODE) l.nextSibling.remove();
-      l.remove();
-    });
-    const surface = $('surface');
+    const box = $('mode-list');
+    box.replaceChildren();
     for (const m of modes) {
       if (m.button) {
-        surface.textContent = m.label;
+        $('surface').textContent = m.label;
         continue;
       }
       const label = document.createElement('label');
       label.className = 'mode';
+      label.title = `${m.label} (${m.name} in QGroundControl)`;
       const r = document.createElement('input');
       r.type = 'radio';
       r.name = 'mode';
@@ -71,11 +94,15 @@ export class View {
       r.checked = m.mode === this.session.currentMode();
       r.addEventListener('change', () => { if (r.checked) onPickMode(m.mode); });
       label.append(r, ` ${m.label}`);
-      // The space between inline labels that the static markup had.
-      box.insertBefore(label, surface);
-      box.insertBefore(document.createTextNode(' '), surface);
+      box.append(label);
     }
     this.labelTouchpad();
+  }
+
+  /** The page's words for `mode` (a number), from the server's list. */
+  modeLabel(mode, name) {
+    const m = this.session.offeredModes().find((x) => x.mode === mode);
+    return m ? m.label : name || '—';
   }
 
   /** The touch buttons' labels for `mode` (default: the vehicle's). */
@@ -87,19 +114,31 @@ export class View {
 
   // ---- telemetry ------------------------------------------------------------
 
+  /** How old the data behind `key` is (ms): the server's age of the message
+   * it came from (`ages_ms`) plus the time since this telemetry arrived;
+   * Infinity when there is none or the page is offline. */
+  ageOf(key, now = performance.now()) {
+    const t = this.session.state.t;
+    if (!t || this.tAt == null || !this.online) return Infinity;
+    const since = now - this.tAt;
+    const ages = t.ages_ms;
+    if (!ages) return since;
+    return ages[key] == null ? Infinity : ages[key] + since;
+  }
+
   telemetry(t, prev) {
-    $('hdg').textContent = fmt(t.heading_deg, 0);
-    $('depth').textContent = fmt(t.depth_m, 2);
+    this.tAt = performance.now();
+    const label = t.mode == null ? '—' : this.modeLabel(t.mode, t.mode_name);
     $('armed-state').textContent = t.armed ? 'ARMED' : 'DISARMED';
-    $('mode-name').textContent = t.mode_name || '—';
+    $('mode-name').textContent = label;
+    $('state').className = t.armed ? 'armed' : 'disarmed';
     $('sim-banner').hidden = !t.simulated;
-    document.querySelectorAll('input[name=run]').forEach((r) => {
-      if (document.activeElement !== r) r.checked = (r.value === 'simulator') === !!t.simulated;
-    });
+    // The radios show the vehicle's run mode, whatever was clicked.
+    document.querySelectorAll('input[name=run]').forEach((r) => { r.checked = (r.value === 'simulator') === !!t.simulated; });
     const h = t.health;
     setPill('link', `board: ${!t.vehicle_seen ? 'no vehicle' : h ? (h.board_link ? 'link up' : 'LINK DOWN') : '—'}`, h && h.board_link && t.vehicle_seen ? 'ok' : 'bad');
-    const fs = h && (!h.pilot_input || t.critical);
-    setPill('failsafe', `failsafe: ${h ? (fs ? 'ACTIVE' : 'none') : '—'}`, h ? (fs ? 'bad' : 'ok') : '');
+    this.failsafe(t);
+    this.battery(t);
     if (t.mode != null && t.mode !== (prev && prev.mode)) {
       document.querySelectorAll('input[name=mode]').forEach((r) => { r.checked = Number(r.value) === t.mode; });
       this.labelTouchpad();
@@ -107,13 +146,44 @@ export class View {
     this.controlOwner(t.control);
     syncSlider('gain', t.gain, (v) => v.toFixed(2));
     syncSlider('lights', t.lights, (v) => String(v));
-    if (Number.isFinite(t.tilt)) syncSlider('tilt', (t.tilt - 0.5) * 180, (v) => v.toFixed(0));
+    const tiltDeg = Number.isFinite(t.tilt) ? (t.tilt - 0.5) * 180 : null;
+    if (tiltDeg != null) syncSlider('tilt', tiltDeg, (v) => v.toFixed(0));
     if (t.laser != null && document.activeElement !== $('laser')) $('laser').checked = t.laser;
+    $('hud-tilt').textContent = `tilt ${tiltDeg == null ? '—' : `${tiltDeg.toFixed(0)}°`}`;
+    $('hud-lights').textContent = `lights ${t.lights == null ? '—' : `${Math.round((t.lights / 255) * 100)} %`}`;
+    $('hud-gain').textContent = `gain ${fmt(t.gain, 2)}`;
     const ap = t.autopilot;
     $('ap-depth-now').textContent = ap && ap.depth_target_m != null ? `${ap.depth_target_m.toFixed(1)} m` : 'off';
     $('ap-heading-now').textContent = ap && ap.heading_target_deg != null ? `${ap.heading_target_deg.toFixed(0)}°` : 'off';
     this.derivedLogs(prev, t);
     $('samples').textContent = String(this.recorder.length);
+  }
+
+  /** The bar's failsafe pill and the HUD's banner with every active reason. */
+  failsafe(t) {
+    const h = t.health;
+    let reasons = Array.isArray(t.failsafes) ? t.failsafes : [];
+    if (!Array.isArray(t.failsafes) && h && (!h.pilot_input || t.critical)) {
+      reasons = [t.critical ? 'vehicle critical' : 'no pilot input'];
+    }
+    const active = reasons.length > 0;
+    setPill('failsafe', `failsafe: ${h ? (active ? 'ACTIVE' : 'none') : '—'}`, h ? (active ? 'bad' : 'ok') : '');
+    $('failsafe').title = reasons.join('; ');
+    $('fs-banner').hidden = !active;
+    $('fs-banner').textContent = active ? `FAILSAFE: ${reasons.join(' · ')}` : '';
+  }
+
+  /** The battery widget: volts, amps and what is left, coloured when low. */
+  battery(t) {
+    const el = $('battery');
+    $('bat-v').textContent = `${fmt(t.voltage_v, 1)} V`;
+    $('bat-a').textContent = `${fmt(t.current_a, 1)} A`;
+    $('bat-pct').textContent = `${t.battery_pct == null ? '—' : t.battery_pct} %`;
+    const pct = t.battery_pct;
+    const unhealthy = t.health && !t.health.battery;
+    const level = pct != null && pct <= BATTERY_CRITICAL_PCT ? 'critical' : (pct != null && pct <= BATTERY_LOW_PCT) || unhealthy ? 'low' : '';
+    el.classList.toggle('low', level === 'low');
+    el.classList.toggle('critical', level === 'critical');
   }
 
   /** Logger entries for what changed between two telemetry messages. */
@@ -133,18 +203,41 @@ export class View {
     if (t.health && p.health && t.health.board_link !== p.health.board_link) logger.log('board_link', t.health.board_link ? 'board link up' : 'board link DOWN');
     if (t.critical !== p.critical) logger.log('failsafe', t.critical ? 'vehicle critical (failsafe or link down)' : 'vehicle no longer critical');
     if (t.armed !== p.armed) logger.log('stop', t.armed ? 'armed' : 'disarmed');
-    if (t.mode !== p.mode) logger.log('stop', `mode ${t.mode_name} (a stop)`);
+    if (t.mode !== p.mode) logger.log('stop', `mode ${this.modeLabel(t.mode, t.mode_name)} (a stop)`);
   }
 
-  /** The attitude indicator, from the latest telemetry (every animation frame). */
-  drawAttitude() {
-    drawAttitude($('attitude'), this.session.state.t);
+  /** Every animation frame: the HUD drawing, what has gone stale, the video
+   * state and the countdowns. */
+  frame(now = performance.now()) {
+    const t = this.session.state.t;
+    drawHud($('hud'), hudData(t, (k) => this.ageOf(k, now)));
+    $('state').classList.toggle('stale', this.ageOf('heartbeat', now) > STALE_MS);
+    $('battery').classList.toggle('stale', this.ageOf('battery', now) > STALE_MS);
+    $('hud-bottom').classList.toggle('stale', !this.online);
+    this.videoState(now);
+    this.countdowns(now);
+  }
+
+  videoState(now) {
+    const v = this.video;
+    const has = v.available === true && v.frames > 0;
+    $('video').hidden = !has;
+    $('no-video').hidden = has;
+    if (!has) {
+      $('no-video').textContent = v.available === false ? 'No video: this vehicle has no camera stream'
+        : v.available === null && !this.online ? 'No video: the vehicle does not answer' : 'Waiting for the camera…';
+    }
+    const age = v.frameAgeMs(now);
+    const lost = has && age > VIDEO_LOST_MS;
+    $('video-box').classList.toggle('lost', lost);
+    $('video-lost').hidden = !lost;
+    if (lost) $('video-lost').textContent = `VIDEO LOST — last frame ${Math.round(age / 1000)} s ago`;
   }
 
   // ---- server messages ------------------------------------------------------
 
   ack(m) {
-    this.message(6, `${m.command_name}: ${m.result_name}`);
+    this.message(m.result_name === 'ACCEPTED' ? 6 : 4, m.text || `${m.command_name}: ${m.result_name}`);
     if (m.command_name === 'NEPTUNUS_SET_AUTOPILOT_TARGET' && m.result_name !== 'ACCEPTED') {
       this.logger.log('ap_depth', `target refused: ${m.result_name}`);
     }
@@ -158,6 +251,8 @@ export class View {
     const list = $('messages');
     list.prepend(li);
     while (list.childElementCount > MAX_MESSAGES) list.lastChild.remove();
+    // The request's outcome, told by the vehicle to everyone.
+    if (this.pending && /refused by GCS/.test(text)) this.setPending(null);
   }
 
   // ---- control ----------------------------------------------------------------
@@ -166,69 +261,56 @@ export class View {
   controlOwner(c) {
     const owner = c.owner == null ? 'nobody' : c.you ? `you (GCS ${c.owner})` : `GCS ${c.owner}`;
     setPill('who', `control: ${owner}`, c.you ? 'ok' : c.owner == null ? '' : 'warn');
+    const hud = $('hud-control');
+    hud.textContent = c.you ? 'you are in control' : c.owner == null ? 'nobody in control' : `GCS ${c.owner} in control`;
+    hud.classList.toggle('you', !!c.you);
     $('release').disabled = !c.you;
+    $('request').disabled = !!c.you;
   }
 
   /** The server's `control` message: control changed hands. */
   control(c) {
     this.logger.log('control', `in control: ${c.owner == null ? 'nobody' : `GCS ${c.owner}`}${c.you ? ' (you)' : ''}`);
     if (!c.you) this.closeRequest();
+    this.setPending(null);
   }
 
-  /** Another station asks for control: the prompt, closed after the server's timeout. */
+  /** Another station asks for control: the prompt, closed after the server's
+   * timeout. It never takes focus or moves the page (controls.js makes
+   * Accept a pointer-only act). */
   controlRequest(m) {
-    $('request-text').textContent = `GCS ${m.requester} requests control of the vehicle. Hand it over? (${Math.round(m.timeout_s)} s to answer)`;
-    const d = $('request-dialog');
-    if (!d.open) d.show();
-    clearTimeout(this.requestTimer);
-    this.requestTimer = setTimeout(() => this.closeRequest(), m.timeout_s * 1000);
+    $('request-text').textContent = `GCS ${m.requester} asks for control of the vehicle. Hand it over?`;
+    this.request = { requester: m.requester, deadline: performance.now() + m.timeout_s * 1000 };
+    $('request-dialog').hidden = false;
     this.logger.log('control', `GCS ${m.requester} requests control`);
   }
 
   closeRequest() {
-    const d = $('request-dialog');
-    if (d.open) d.close();
+    this.request = null;
+    $('request-dialog').hidden = true;
   }
 
-  // ---- video -------------------------------------------------------------------
-
-  applyRotation(deg) {
-    this.rotation = deg;
-    this.layoutVideo();
+  /** This page's own request waits for the owner's answer (null: not any more). */
+  setPending(p) {
+    this.pending = p ? { owner: p.owner, deadline: performance.now() + p.timeout_s * 1000 } : null;
+    $('request-pending').hidden = !this.pending;
   }
 
-  layoutVideo() {
-    const img = $('video');
-    const box = $('video-box');
-    if (this.rotation % 180 === 0) {
-      img.style.width = '100%';
-      img.style.height = '100%';
-    } else {
-      // Rotated a quarter turn: the image's box is the container's, transposed.
-      img.style.width = `${box.clientHeight}px`;
-      img.style.height = `${box.clientWidth}px`;
+  countdowns(now) {
+    if (this.request) {
+      const left = Math.ceil((this.request.deadline - now) / 1000);
+      if (left <= 0) this.closeRequest();
+      else $('request-countdown').textContent = `${left} s`;
     }
-    img.style.position = 'absolute';
-    img.style.left = '50%';
-    img.style.top = '50%';
-    img.style.transform = `translate(-50%, -50%) rotate(${this.rotation}deg)`;
-  }
-
-  async startVideo() {
-    const img = $('video');
-    img.addEventListener('error', () => { img.hidden = true; $('no-video').hidden = false; $('no-video').textContent = 'No video: the camera stream stopped'; });
-    img.addEventListener('load', () => { img.hidden = false; $('no-video').hidden = true; });
-    let available = false;
-    try {
-      const r = await fetch('/api/video');
-      available = r.ok && (await r.json()).available;
-    } catch { available = false; }
-    if (available) {
-      img.hidden = false;
-      $('no-video').hidden = true;
-      img.src = '/video.mjpg';
+    if (this.pending) {
+      const left = Math.ceil((this.pending.deadline - now) / 1000);
+      if (left <= 0) {
+        this.message(4, `GCS ${this.pending.owner} did not answer the control request`);
+        this.setPending(null);
+      } else {
+        $('request-pending').textContent = `Waiting for GCS ${this.pending.owner} to answer your control request (${left} s)`;
+      }
     }
-    window.addEventListener('resize', () => this.layoutVideo());
   }
 
   // ---- developer interface -------------------------------------------------
