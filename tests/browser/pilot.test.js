@@ -240,3 +240,35 @@ test('after the vehicle process restarts, video and telemetry return without a r
     await second.stop();
   }
 });
+
+test('a failsafe shows its reason on the HUD and in the alerts, also to a pilot who joins late, and is spoken when asked', () => withVehicle(async (v) => {
+  const a = await openPage(browser, v.url);
+  const b = await openPage(browser, v.url);
+  try {
+    // B's pilot asked for spoken alerts; the test listens to what would be said.
+    await b.page.evaluate(() => {
+      window.spoken = [];
+      window.speechSynthesis.speak = (u) => window.spoken.push(u.text);
+    });
+    await b.page.check('[data-testid=speak]');
+    await takeControlAndArm(a.page);
+    // A's pilot walks away: the tab closes, the owner's heartbeat stops.
+    await a.context.close();
+    await until(() => b.page.isVisible('[data-testid=fs-banner]'), 20000, 'the failsafe banner');
+    const banner = await b.page.textContent('[data-testid=fs-banner]');
+    assert.match(banner, /^FAILSAFE: .*(heartbeat|pilot input|manual control)/i, banner);
+    await until(() => b.page.locator('#messages li').filter({ hasText: /Failsafe: / }).count(), 10000, 'the failsafe alert');
+    const alert = await b.page.locator('#messages li').filter({ hasText: /Failsafe: / }).first().getAttribute('data-severity');
+    assert.ok(['WARNING', 'CRITICAL', 'ERROR', 'ALERT', 'EMERGENCY'].includes(alert), alert);
+    await until(() => b.page.evaluate(() => window.spoken.some((s) => /failsafe/i.test(s))), 5000, 'the failsafe spoken');
+    assert.ok(await b.page.isVisible('[data-testid=alert-badge]'));
+    // A pilot who opens the page now sees the reason without having seen the text.
+    const c = await openPage(browser, v.url);
+    await until(() => c.page.isVisible('[data-testid=fs-banner]'), 10000, 'the banner for a late joiner');
+    assert.doesNotMatch(await c.page.textContent('[data-testid=fs-banner]'), /vehicle critical$/);
+    await c.context.close();
+  } finally {
+    await a.context.close().catch(() => {});
+    await b.context.close();
+  }
+}));

@@ -45,7 +45,7 @@ session.on('telemetry', (t, prev) => {
   view.telemetry(t, prev);
 });
 session.on('statustext', (m) => {
-  view.message(m.severity, m.text);
+  view.message(m.severity, m.text, { failsafe: m.category === 'failsafe' });
   const category = categoryOf(m);
   if (category) logger.log(category, m.text);
 });

@@ -1,7 +1,7 @@
 // The operator page's view: renders what the session knows into the DOM —
 // the status bar, the HUD's words (armed and mode, battery, who drives,
 // failsafe reasons) and its drawing (hud.js), the video's state, the
-// messages list, the owner's control-request prompt and the requester's
+// alerts (alerts.js), the owner's control-request prompt and the requester's
 // waiting note, the rights/login banner, the modes offered by the server,
 // and the readouts and sliders that follow telemetry — and writes the
 // logger entries that telemetry and server messages imply. Nothing shown
@@ -9,10 +9,10 @@
 // controls do (controls.js). docs/ARCHITECTURE.md is the map of the whole program.
 import { KEY_LABELS } from '/js/input.js';
 import { drawHud, hudData, STALE_MS } from '/js/hud.js';
+import { Alerts } from '/js/alerts.js';
 
 const $ = (id) => document.getElementById(id);
 const fmt = (v, d) => (Number.isFinite(v) ? v.toFixed(d) : '—');
-const MAX_MESSAGES = 100;
 /** Video with no new frame for this long is dimmed and marked lost. */
 export const VIDEO_LOST_MS = 1000;
 /** Battery: the fraction left below which the widget warns, and turns red. */
@@ -25,6 +25,7 @@ export class View {
    * developer interface's (dev.js). */
   constructor({ session, video, logger, recorder }) {
     this.session = session;
+    this.alerts = new Alerts($('messages'), $('alert-badge'), $('speak'));
     this.video = video;
     this.logger = logger;
     this.recorder = recorder;
@@ -243,14 +244,10 @@ export class View {
     }
   }
 
-  /** A line in the messages list (newest first); `severity` as MAV_SEVERITY. */
-  message(severity, text) {
-    const li = document.createElement('li');
-    li.className = `sev${severity}`;
-    li.textContent = `${new Date().toLocaleTimeString()} ${text}`;
-    const list = $('messages');
-    list.prepend(li);
-    while (list.childElementCount > MAX_MESSAGES) list.lastChild.remove();
+  /** An alert (alerts.js); `severity` as MAV_SEVERITY; `opts.failsafe`:
+   * a failsafe's text (spoken whatever its severity). */
+  message(severity, text, opts = {}) {
+    this.alerts.add(severity, text, opts);
     // The request's outcome, told by the vehicle to everyone.
     if (this.pending && /refused by GCS/.test(text)) this.setPending(null);
   }
