@@ -57,6 +57,11 @@ impl HmiRig {
     /// Like [`start`](Self::start), after `setup` ran on the data directory
     /// (e.g. the CLI setting a password or a signing key).
     fn start_with(hmi_toml: &str, setup: impl FnOnce(&Path)) -> Self {
+        let gcs_port = common::free_udp_port().unwrap();
+        Self::start_full(hmi_toml, setup, gcs_port)
+    }
+
+    fn start_full(hmi_toml: &str, setup: impl FnOnce(&Path), gcs_port: u16) -> Self {
         let dir = tempfile::tempdir().unwrap();
         setup(&dir.path().join("data"));
         let board = spawn_board_here();
@@ -71,7 +76,6 @@ impl HmiRig {
             "open_control = \"loopback\"\n"
         };
         std::fs::write(&config, format!("[hmi]\n{open}{hmi_toml}\n")).unwrap();
-        let gcs_port = common::free_udp_port().unwrap();
         let mut vehicle = Vehicle::spawn(
             bin(),
             &[
@@ -367,6 +371,17 @@ async fn sessions_get_telemetry_and_distinct_sysids() {
         })
         .await;
     assert_eq!(t["mode_name"], "MANUAL", "{t}");
+    // Each kind of data says how old it is: fresh while the board talks
+    // (once the vehicle reported its link up: the battery reading counts
+    // from then on).
+    let t = a
+        .telemetry_until(|t| t["critical"] == false && t["ages_ms"]["battery"].is_number())
+        .await;
+    for kind in ["heartbeat", "attitude", "depth", "battery"] {
+        let age = t["ages_ms"][kind].as_u64();
+        assert!(age.is_some_and(|a| a < 3000), "{kind}: {t}");
+    }
+    assert_eq!(t["failsafes"], json!([]), "{t}");
     b.telemetry_until(|t| t["vehicle_seen"] == true).await;
     // A closed session gives its sysid back.
     drop(a);
@@ -852,6 +867,11 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     b.send(json!({"type": "request_control"})).await;
     let req = a.wait("control_request", |_| true).await;
     assert_eq!(req["requester"], 201);
+    // The requester reads that it waits for the owner, not that it failed
+    // (the vehicle acks a forwarded request FAILED, as MAVLink says).
+    let pending = b.wait("request_pending", |_| true).await;
+    assert_eq!(pending["owner"], 200, "{pending}");
+    assert_eq!(pending["timeout_s"], 10.0, "{pending}");
     a.send(json!({"type": "answer_request", "accept": false}))
         .await;
     let refused = b
@@ -864,13 +884,26 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     assert_eq!(refused["category"], "control", "{refused}");
     b.send(json!({"type": "request_control"})).await;
     a.wait("control_request", |_| true).await;
+    b.wait("request_pending", |p| p["owner"] == 200).await;
     a.send(json!({"type": "answer_request", "accept": true}))
         .await;
     b.wait("control", |v| v["you"] == true && v["owner"] == 201)
         .await;
     a.wait("control", |v| v["you"] == false).await;
+    // The owner's yes was a release, and reads as one.
+    let yes = a.ack("REQUEST_OPERATOR_CONTROL").await;
+    assert_eq!(yes["text"], "Control release: done", "{yes}");
     // The watcher sees it as well.
     c.wait("control", |v| v["owner"] == 201).await;
+    let failed: Vec<&Value> = b
+        .seen
+        .iter()
+        .filter(|m| m["type"] == "ack" && m["result_name"] == "FAILED")
+        .collect();
+    assert!(
+        failed.is_empty(),
+        "the requester was told FAILED: {failed:?}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
