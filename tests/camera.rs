@@ -367,7 +367,8 @@ async fn the_picture_follows_heading_roll_and_pitch() {
         ..Scene::default()
     })
     .await;
-    // The heading tape (top rows) moved; count clearly different pixels.
+    // The light shafts high above the horizon (top rows) swept across as
+    // the vehicle turned; count clearly different pixels.
     let tape_rows = 20 * 320 * 3;
     let changed = level.rgb[..tape_rows]
         .iter()

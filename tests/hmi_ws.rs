@@ -14,7 +14,9 @@ use std::time::{Duration, Instant};
 
 use common::{NEUTRAL_US, Vehicle};
 use futures_util::{SinkExt as _, StreamExt as _};
+use neptunus::dialect::neptunus::*;
 use neptunus::firmware::emulator::{BoardControl, PtyBoard};
+use neptunus::mavlink::frame::{FrameStats, decode_datagram, encode_v2};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use tokio_tungstenite::tungstenite::Message;
@@ -57,6 +59,19 @@ impl HmiRig {
     /// Like [`start`](Self::start), after `setup` ran on the data directory
     /// (e.g. the CLI setting a password or a signing key).
     fn start_with(hmi_toml: &str, setup: impl FnOnce(&Path)) -> Self {
+        let gcs_port = common::free_udp_port().unwrap();
+        Self::start_full(hmi_toml, setup, gcs_port)
+    }
+
+    /// The rig with a raw MAVLink ground station on UDP: the vehicle sends
+    /// to it (`udpout`) and hears it back.
+    async fn start_with_station(hmi_toml: &str) -> (Self, Station) {
+        let station = Station::bind().await;
+        let port = station.sock.local_addr().unwrap().port();
+        (Self::start_full(hmi_toml, |_| {}, port), station)
+    }
+
+    fn start_full(hmi_toml: &str, setup: impl FnOnce(&Path), gcs_port: u16) -> Self {
         let dir = tempfile::tempdir().unwrap();
         setup(&dir.path().join("data"));
         let board = spawn_board_here();
@@ -71,7 +86,6 @@ impl HmiRig {
             "open_control = \"loopback\"\n"
         };
         std::fs::write(&config, format!("[hmi]\n{open}{hmi_toml}\n")).unwrap();
-        let gcs_port = common::free_udp_port().unwrap();
         let mut vehicle = Vehicle::spawn(
             bin(),
             &[
@@ -275,6 +289,86 @@ impl Client {
     }
 }
 
+/// A bare MAVLink station on UDP, as pymavlink would be: sysid 255
+/// (SYSID_MYGCS, an allowed station), talking to a `udpout` vehicle.
+struct Station {
+    sock: tokio::net::UdpSocket,
+    seq: u8,
+    /// Everything the vehicle sent it.
+    seen: Vec<MavMessage>,
+}
+
+impl Station {
+    const SYSID: u8 = 255;
+
+    async fn bind() -> Self {
+        Self {
+            sock: tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap(),
+            seq: 0,
+            seen: Vec::new(),
+        }
+    }
+
+    /// Waits for the vehicle's first datagram, then talks to its sender.
+    async fn await_vehicle(&mut self) {
+        let mut buf = [0u8; 2048];
+        let (_, from) = tokio::time::timeout(GENEROUS, self.sock.recv_from(&mut buf))
+            .await
+            .expect("no datagram from the vehicle")
+            .unwrap();
+        self.sock.connect(from).await.unwrap();
+    }
+
+    async fn send(&mut self, msg: &MavMessage) {
+        let bytes = encode_v2(Self::SYSID, 190, self.seq, msg);
+        self.seq = self.seq.wrapping_add(1);
+        self.sock.send(&bytes).await.unwrap();
+    }
+
+    async fn command(&mut self, command: MavCmd, param1: f32, param2: f32) {
+        self.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1,
+            param2,
+            command,
+            target_system: 1,
+            target_component: 1,
+            ..Default::default()
+        }))
+        .await;
+    }
+
+    /// Reads the vehicle until `pred` holds for one of its messages.
+    async fn wait(&mut self, what: &str, pred: impl Fn(&MavMessage) -> bool) -> MavMessage {
+        let end = tokio::time::Instant::now() + GENEROUS;
+        let mut buf = [0u8; 4096];
+        loop {
+            let n = tokio::time::timeout_at(end, self.sock.recv(&mut buf))
+                .await
+                .unwrap_or_else(|_| panic!("the station got no {what}"))
+                .unwrap();
+            let mut frames = Vec::new();
+            decode_datagram(&buf[..n], &mut FrameStats::default(), &mut frames);
+            for f in frames {
+                let hit = pred(&f.msg);
+                self.seen.push(f.msg.clone());
+                if hit {
+                    return f.msg;
+                }
+            }
+        }
+    }
+}
+
+fn statustext_of(m: &MavMessage) -> Option<String> {
+    match m {
+        MavMessage::STATUSTEXT(s) => {
+            let b: &[u8] = s.text.as_ref();
+            Some(String::from_utf8_lossy(b).trim_end_matches('\0').to_owned())
+        }
+        _ => None,
+    }
+}
+
 async fn http_get(addr: SocketAddr, path: &str) -> (u16, String, String) {
     http_request(addr, "GET", path, &[], "").await
 }
@@ -367,6 +461,17 @@ async fn sessions_get_telemetry_and_distinct_sysids() {
         })
         .await;
     assert_eq!(t["mode_name"], "MANUAL", "{t}");
+    // Each kind of data says how old it is: fresh while the board talks
+    // (once the vehicle reported its link up: the battery reading counts
+    // from then on).
+    let t = a
+        .telemetry_until(|t| t["critical"] == false && t["ages_ms"]["battery"].is_number())
+        .await;
+    for kind in ["heartbeat", "attitude", "depth", "battery"] {
+        let age = t["ages_ms"][kind].as_u64();
+        assert!(age.is_some_and(|a| a < 3000), "{kind}: {t}");
+    }
+    assert_eq!(t["failsafes"], json!([]), "{t}");
     b.telemetry_until(|t| t["vehicle_seen"] == true).await;
     // A closed session gives its sysid back.
     drop(a);
@@ -852,6 +957,11 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     b.send(json!({"type": "request_control"})).await;
     let req = a.wait("control_request", |_| true).await;
     assert_eq!(req["requester"], 201);
+    // The requester reads that it waits for the owner, not that it failed
+    // (the vehicle acks a forwarded request FAILED, as MAVLink says).
+    let pending = b.wait("request_pending", |_| true).await;
+    assert_eq!(pending["owner"], 200, "{pending}");
+    assert_eq!(pending["timeout_s"], 10.0, "{pending}");
     a.send(json!({"type": "answer_request", "accept": false}))
         .await;
     let refused = b
@@ -864,13 +974,134 @@ async fn handover_between_sessions_and_watch_only_when_ids_run_out() {
     assert_eq!(refused["category"], "control", "{refused}");
     b.send(json!({"type": "request_control"})).await;
     a.wait("control_request", |_| true).await;
+    b.wait("request_pending", |p| p["owner"] == 200).await;
     a.send(json!({"type": "answer_request", "accept": true}))
         .await;
     b.wait("control", |v| v["you"] == true && v["owner"] == 201)
         .await;
     a.wait("control", |v| v["you"] == false).await;
+    // The owner's yes was a release, and reads as one.
+    let yes = a.ack("REQUEST_OPERATOR_CONTROL").await;
+    assert_eq!(yes["text"], "Control release: done", "{yes}");
     // The watcher sees it as well.
     c.wait("control", |v| v["owner"] == 201).await;
+    let failed: Vec<&Value> = b
+        .seen
+        .iter()
+        .filter(|m| m["type"] == "ack" && m["result_name"] == "FAILED")
+        .collect();
+    assert!(
+        failed.is_empty(),
+        "the requester was told FAILED: {failed:?}"
+    );
+}
+
+/// Replies the vehicle aims at one station reach that station alone: the
+/// owner's page sees nothing of a watcher's or another ground station's
+/// refused arm, mode change, lights and sticks.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_owner_sees_only_what_concerns_it() {
+    let (rig, mut station) = HmiRig::start_with_station("").await;
+    let mut owner = rig.connect().await;
+    let mut other = rig.connect().await;
+    owner.ready().await;
+    assert_eq!(owner.take_control().await, 200);
+
+    // Another browser session: arm, a mode, lights and sticks, all refused.
+    other.send(json!({"type": "arm", "arm": true})).await;
+    let ack = other.ack("COMPONENT_ARM_DISARM").await;
+    assert_eq!(ack["result_name"], "NOT_IN_CONTROL", "{ack}");
+    assert_eq!(ack["text"], "Arm/disarm: refused: not in control", "{ack}");
+    other.send(json!({"type": "mode", "mode": 0})).await;
+    other.ack("DO_SET_MODE").await;
+    other.send(json!({"type": "lights", "level": 200})).await;
+    other.ack("DO_ILLUMINATOR_CONFIGURE").await;
+    other
+        .send(json!({"type": "sticks", "surge": 1.0, "heave_up": 0.0, "yaw": 0.0}))
+        .await;
+    other
+        .wait("statustext", |s| {
+            s["text"].as_str().unwrap().starts_with("Ignoring")
+        })
+        .await;
+    assert!(
+        other.seen.iter().any(|m| m["type"] == "statustext"
+            && m["text"]
+                .as_str()
+                .unwrap()
+                .contains("Refused arm from sysid 201")),
+        "{:?}",
+        other.seen
+    );
+
+    // A MAVLink station on UDP does the same.
+    station.await_vehicle().await;
+    station
+        .command(MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 1.0, 0.0)
+        .await;
+    station
+        .wait("its arm ack", |m| {
+            matches!(m, MavMessage::COMMAND_ACK(a)
+                if a.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM
+                    && a.result == MavResult::MAV_RESULT_NOT_IN_CONTROL)
+        })
+        .await;
+    station.command(MavCmd::MAV_CMD_DO_SET_MODE, 1.0, 2.0).await;
+    station
+        .send(&MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
+            x: 800,
+            z: 500,
+            target: 1,
+            ..Default::default()
+        }))
+        .await;
+    station
+        .wait("its refusal text", |m| {
+            statustext_of(m).is_some_and(|t| t.contains("Ignoring") && t.contains("sysid 255"))
+        })
+        .await;
+    assert!(
+        station
+            .seen
+            .iter()
+            .filter_map(statustext_of)
+            .any(|t| t.contains("Refused arm from sysid 255")),
+        "{:?}",
+        station.seen
+    );
+
+    // Everything the vehicle said before the owner's own ack has reached
+    // the owner's page by then (one ordered hub).
+    owner.send(json!({"type": "lights", "level": 30})).await;
+    let lights = owner.ack("DO_ILLUMINATOR_CONFIGURE").await;
+    assert_eq!(lights["text"], "Lights: done", "{lights}");
+    for m in &owner.seen {
+        if m["type"] == "statustext" {
+            let t = m["text"].as_str().unwrap();
+            assert!(
+                !t.contains("Refused") && !t.contains("Ignoring") && !t.contains("sysid"),
+                "the owner saw a reply aimed at another station: {m}"
+            );
+        }
+        if m["type"] == "ack" {
+            assert!(
+                m["command_name"] == "REQUEST_OPERATOR_CONTROL"
+                    || (m["command_name"] == "DO_ILLUMINATOR_CONFIGURE"
+                        && m["result_name"] == "ACCEPTED"),
+                "the owner saw another station's ack: {m}"
+            );
+        }
+    }
+    // The station never heard the browser session's refusals either.
+    assert!(
+        !station
+            .seen
+            .iter()
+            .filter_map(statustext_of)
+            .any(|t| t.contains("sysid 201")),
+        "{:?}",
+        station.seen
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

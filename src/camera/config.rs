@@ -64,6 +64,11 @@ pub struct CameraConfig {
     pub fps: f64,
     /// Synthetic JPEG quality, 1–100.
     pub jpeg_quality: u8,
+    /// The synthetic camera draws its own instruments (heading tape, depth,
+    /// attitude, armed state) into the picture. Off by default: the
+    /// browser's HUD draws them over any camera, and two would collide. On
+    /// for viewers without the page (`/video.mjpg` in a video player).
+    pub synthetic_overlay: bool,
     /// How the image must be turned for display (0, 90, 180 or 270,
     /// clockwise). Only reported in the status: the browser applies it with
     /// CSS so every browser shows the same picture.
@@ -88,6 +93,7 @@ impl Default for CameraConfig {
             height: 480,
             fps: 10.0,
             jpeg_quality: 80,
+            synthetic_overlay: false,
             rotation_deg: 0,
             stall_timeout_s: 5.0,
             backoff: BackoffConfig::default(),
@@ -372,6 +378,13 @@ mod tests {
         sim.validate().expect("synthetic");
         assert_eq!(sim.source, SourceKind::Synthetic);
         assert_eq!((sim.width, sim.height, sim.fps), (640, 480, 10.0));
+        // The page's HUD draws the instruments: the picture carries none.
+        assert!(!sim.synthetic_overlay);
+        let on: CameraConfig = toml::from_str("synthetic_overlay = true").expect("parses");
+        assert!(on.synthetic_overlay);
+        let err = toml::from_str::<CameraConfig>("synthetic_overlay = \"yes\"")
+            .expect_err("not a boolean");
+        assert!(err.to_string().contains("synthetic_overlay"), "{err}");
     }
 
     #[test]

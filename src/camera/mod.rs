@@ -2,8 +2,9 @@
 //! them to the browser from the HMI's own origin.
 //!
 //! [`Camera::start`] runs one source, chosen by [`CameraConfig::source`]:
-//! - `synthetic`: pictures drawn from the simulator's [`Scene`] (horizon,
-//!   heading tape, depth) and encoded as JPEG in-process;
+//! - `synthetic`: pictures drawn from the simulator's [`Scene`] (water,
+//!   horizon, light shafts; the instruments too with `synthetic_overlay`)
+//!   and encoded as JPEG in-process;
 //! - `ffmpeg` / `mjpg-streamer`: a supervised child process, restarted with
 //!   exponential backoff when it exits, stalls or cannot be found;
 //! - `url`: an MJPEG HTTP stream elsewhere, reconnected with the same

@@ -18,7 +18,8 @@ pub(crate) async fn run(
     scene: watch::Receiver<Scene>,
     out: &mut Publisher,
 ) -> Result<(), RenderError> {
-    let mut renderer = SyntheticRenderer::new(cfg.width, cfg.height, cfg.jpeg_quality);
+    let mut renderer = SyntheticRenderer::new(cfg.width, cfg.height, cfg.jpeg_quality)
+        .with_overlay(cfg.synthetic_overlay);
     let (w, h) = (renderer.width(), renderer.height());
     let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / cfg.fps));
     // A late frame is not made up for: the next one comes a period later.

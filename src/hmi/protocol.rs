@@ -33,13 +33,19 @@
 //! |---|---|---|
 //! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version`, `modes` (the modes to offer: `mode`, `name`, `label`, `thrusters`, `button`), `boot_mode` |
 //! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
-//! | `telemetry` | 20 Hz | see [`Telemetry`] |
+//! | `telemetry` | 20 Hz | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, and `failsafes`: the plain-word reason of every active failsafe (empty: none) |
 //! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text`, `category` (what it is about, chosen where the text is written: `stop`, `control`, `gain`, `ap_depth`, `ap_heading`, `failsafe`, `board_link` — the developer logger's categories — or `general`) |
-//! | `ack` | at once | `command`, `command_name`, `result`, `result_name` |
+//! | `ack` | this session's command answered | `command`, `command_name`, `result`, `result_name`, `text` (plain words: "Arm/disarm: refused", "Lights: done") |
+//! | `request_pending` | this session's control request was passed to the owner (instead of its `ack`: MAVLink answers a forwarded request with FAILED, which is no failure) | `owner` (sysid asked), `timeout_s` (how long the owner has to answer) |
 //! | `control` | on change | `owner` (sysid or null), `you`, `takeover_allowed` |
 //! | `control_request` | the owner is asked | `requester`, `timeout_s` |
 //! | `login_result` | after `login` | `ok`, `message` |
 //! | `error` | a bad message | `message` (what was wrong and the fix); the message was dropped |
+//!
+//! A session gets only what concerns it: texts and acks the vehicle aims
+//! at one station (a refusal, a reply) reach that station's session alone;
+//! what every ground station gets on MAVLink (failsafes, arming, handover
+//! news) reaches every session.
 
 use serde::{Deserialize, Serialize};
 
@@ -351,6 +357,25 @@ pub struct HealthView {
     pub prearm: bool,
 }
 
+/// How old each kind of data is: milliseconds between the arrival of the
+/// message that carried it and the snapshot (null: never received). The
+/// vehicle sends attitude and depth only from fresh board readings, so an
+/// old age means the data is old, not just the message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+pub struct AgesView {
+    /// The vehicle's HEARTBEAT (armed, mode, critical).
+    pub heartbeat: Option<u64>,
+    /// ATTITUDE: heading, roll, pitch, yaw rate.
+    pub attitude: Option<u64>,
+    /// VFR_HUD: depth.
+    pub depth: Option<u64>,
+    /// SYS_STATUS with a battery voltage while the board link was up:
+    /// voltage, current, remaining.
+    pub battery: Option<u64>,
+    /// NEPTUNUS_ESTIMATE.
+    pub estimate: Option<u64>,
+}
+
 /// The vehicle as a session's browser sees it, pushed at 20 Hz. Fields the
 /// vehicle has not sent (yet) are null.
 #[derive(Debug, Clone, PartialEq, Serialize, Default)]
@@ -373,6 +398,7 @@ pub struct Telemetry {
     pub roll_deg: Option<f64>,
     pub pitch_deg: Option<f64>,
     pub yaw_rate_dps: Option<f64>,
+    /// Battery values keep their last reading; `ages_ms.battery` says how old it is.
     pub voltage_v: Option<f64>,
     pub current_a: Option<f64>,
     pub battery_pct: Option<i8>,
@@ -388,6 +414,11 @@ pub struct Telemetry {
     pub sim: Option<SimView>,
     pub estimate: Option<EstimateView>,
     pub autopilot: Option<AutopilotView>,
+    /// How old each kind of data is.
+    pub ages_ms: AgesView,
+    /// Why the vehicle is in failsafe, one plain-word reason per active
+    /// failsafe ("battery low 10.2 V"); empty when none is.
+    pub failsafes: Vec<String>,
 }
 
 /// A message to the browser.
@@ -428,6 +459,15 @@ pub enum ServerMsg {
         command_name: String,
         result: u32,
         result_name: String,
+        /// What was asked and how it went, in plain words.
+        text: String,
+    },
+    /// This session's control request waits for the owner's answer.
+    RequestPending {
+        /// System id of the station in control, which was asked.
+        owner: u8,
+        /// How long it has to answer.
+        timeout_s: f32,
     },
     Control(ControlView),
     ControlRequest {
@@ -536,5 +576,32 @@ mod tests {
         );
         let t = ServerMsg::Telemetry(Box::default()).to_json();
         assert!(t.starts_with(r#"{"type":"telemetry","t_ms":0"#), "{t}");
+        assert!(
+            t.ends_with(
+                r#""ages_ms":{"heartbeat":null,"attitude":null,"depth":null,"battery":null,"estimate":null},"failsafes":[]}"#
+            ),
+            "{t}"
+        );
+        let a = ServerMsg::Ack {
+            command: 400,
+            command_name: "COMPONENT_ARM_DISARM".into(),
+            result: 0,
+            result_name: "ACCEPTED".into(),
+            text: "Arm/disarm: done".into(),
+        }
+        .to_json();
+        assert_eq!(
+            a,
+            r#"{"type":"ack","command":400,"command_name":"COMPONENT_ARM_DISARM","result":0,"result_name":"ACCEPTED","text":"Arm/disarm: done"}"#
+        );
+        let p = ServerMsg::RequestPending {
+            owner: 200,
+            timeout_s: 10.0,
+        }
+        .to_json();
+        assert_eq!(
+            p,
+            r#"{"type":"request_pending","owner":200,"timeout_s":10.0}"#
+        );
     }
 }

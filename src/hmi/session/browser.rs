@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use super::{REFUSAL_REPLY, REQUEST_TIMEOUT_S, Session};
 use crate::dialect::neptunus::*;
+use crate::hmi::model::ControlAsk;
 use crate::hmi::protocol::{ClientMsg, RunMode, ServerMsg};
 use crate::vehicle::machine::{COMPONENT_ID, HmiEvent};
 
@@ -146,6 +147,9 @@ impl Session {
             }
             ClientMsg::RequestControl { takeover_allowed } => {
                 let p2 = if takeover_allowed { 1.0 } else { 0.0 };
+                self.model.asked_control(ControlAsk::Request {
+                    timeout_s: REQUEST_TIMEOUT_S,
+                });
                 self.command(
                     MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL,
                     [1.0, p2, REQUEST_TIMEOUT_S],
@@ -153,12 +157,16 @@ impl Session {
                 .await
             }
             ClientMsg::ReleaseControl {} => {
+                // A watcher has nothing to release and sends nothing.
+                self.sysid()?;
+                self.model.asked_control(ControlAsk::Release);
                 self.command(MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL, [0.0])
                     .await
             }
             ClientMsg::AnswerRequest { accept } => {
                 if accept {
                     // The owner's yes is letting go: the core hands control to the requester.
+                    self.model.asked_control(ControlAsk::Release);
                     self.command(MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL, [0.0])
                         .await
                 } else {

@@ -24,7 +24,8 @@ pub(super) struct Rule {
     raise: fn(&Vehicle, Now) -> bool,
     clear: fn(&Vehicle, Now) -> bool,
     action: fn(&ParamStore) -> FailsafeAction,
-    /// What the operator reads ("GCS 255 heartbeat lost").
+    /// What the operator reads ("GCS 255 heartbeat lost"). The browser
+    /// HMI tells the rows apart by these words (`hmi/model/failsafes.rs`).
     text: fn(&Vehicle) -> String,
 }
 

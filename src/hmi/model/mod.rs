@@ -1,16 +1,21 @@
 //! A session's view of the vehicle, built only from the MAVLink messages the
 //! vehicle sent to it (as any ground station builds its view).
 //!
-//! Owns the translation of telemetry into [`Telemetry`] and of event-like
-//! messages (STATUSTEXT, COMMAND_ACK, CONTROL_STATUS changes, forwarded
-//! control requests) into [`ServerMsg`]s. It must never send anything: it
-//! only reads.
+//! Owns the translation of telemetry into [`Telemetry`] (with how old each
+//! kind of data is, and why the vehicle is in failsafe: `failsafes`) and of
+//! event-like messages (STATUSTEXT, COMMAND_ACK in plain words: `acks`,
+//! CONTROL_STATUS changes, forwarded control requests) into [`ServerMsg`]s.
+//! It must never send anything: it only reads.
 
+mod acks;
+mod failsafes;
+
+use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use super::Delivery;
 use super::protocol::{
-    AutopilotView, ControlView, EstimateView, HealthView, ServerMsg, SimView, Telemetry,
+    AgesView, AutopilotView, ControlView, EstimateView, HealthView, ServerMsg, SimView, Telemetry,
     ThrustersUs,
 };
 use crate::dialect::neptunus::*;
@@ -19,14 +24,62 @@ use crate::vehicle::mode::Mode;
 
 /// No vehicle HEARTBEAT for this long: the vehicle is "not seen".
 const VEHICLE_SEEN: Duration = Duration::from_secs(3);
+/// Control asks remembered until their acks come back (a session sends
+/// them one click at a time; more are a page gone wrong).
+const MAX_ASKS: usize = 8;
+
+/// What a session asked with MAV_CMD_REQUEST_OPERATOR_CONTROL: the ack
+/// alone does not say whether it answers a request or a release.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum ControlAsk {
+    /// p1 1, waiting up to `timeout_s` for the owner's answer.
+    Request { timeout_s: f32 },
+    /// p1 0: letting go (the owner's yes to a request, too).
+    Release,
+}
+
+/// When each kind of data last arrived.
+#[derive(Debug, Clone, Copy, Default)]
+struct Arrivals {
+    heartbeat: Option<Instant>,
+    attitude: Option<Instant>,
+    depth: Option<Instant>,
+    battery: Option<Instant>,
+    estimate: Option<Instant>,
+}
+
+impl Arrivals {
+    fn ages(&self, now: Instant) -> AgesView {
+        let age = |t: Option<Instant>| {
+            t.map(|t| {
+                now.saturating_duration_since(t)
+                    .as_millis()
+                    .min(u128::from(u64::MAX)) as u64
+            })
+        };
+        AgesView {
+            heartbeat: age(self.heartbeat),
+            attitude: age(self.attitude),
+            depth: age(self.depth),
+            battery: age(self.battery),
+            estimate: age(self.estimate),
+        }
+    }
+}
 
 /// What one session knows about the vehicle.
 #[derive(Debug)]
 pub struct Model {
     started: Instant,
-    last_heartbeat: Option<Instant>,
+    arrivals: Arrivals,
     hil: bool,
     tel: Telemetry,
+    /// The last SYS_STATUS health bits (failsafe reasons).
+    health: Option<MavSysStatusSensor>,
+    /// Failsafe texts seen raised and not cleared.
+    failsafe_texts: failsafes::FailsafeTexts,
+    /// This session's control requests and releases awaiting their acks.
+    asks: VecDeque<ControlAsk>,
     /// This session's system id (None: watch only).
     me: Option<u8>,
     /// A long STATUSTEXT being put together from its chunks.
@@ -61,9 +114,12 @@ impl Model {
     pub fn new(me: Option<u8>, started: Instant) -> Self {
         Self {
             started,
-            last_heartbeat: None,
+            arrivals: Arrivals::default(),
             hil: false,
             tel: Telemetry::default(),
+            health: None,
+            failsafe_texts: failsafes::FailsafeTexts::default(),
+            asks: VecDeque::new(),
             me,
             statustext: None,
             topic: Topic::General,
@@ -84,13 +140,25 @@ impl Model {
         self.tel.control.you
     }
 
+    /// This session sent MAV_CMD_REQUEST_OPERATOR_CONTROL: its ack will
+    /// say how that went.
+    pub(crate) fn asked_control(&mut self, ask: ControlAsk) {
+        if self.asks.len() >= MAX_ASKS {
+            self.asks.pop_front();
+        }
+        self.asks.push_back(ask);
+    }
+
     /// The telemetry as of `now`.
     pub fn snapshot(&self, now: Instant) -> Telemetry {
         let mut t = self.tel.clone();
         t.t_ms = now.saturating_duration_since(self.started).as_millis() as u64;
         t.vehicle_seen = self
-            .last_heartbeat
+            .arrivals
+            .heartbeat
             .is_some_and(|h| now.saturating_duration_since(h) <= VEHICLE_SEEN);
+        t.ages_ms = self.arrivals.ages(now);
+        t.failsafes = self.failsafe_texts.reasons(t.critical, self.health);
         t
     }
 
@@ -107,7 +175,7 @@ impl Model {
         let t = &mut self.tel;
         match msg {
             MavMessage::HEARTBEAT(h) => {
-                self.last_heartbeat = Some(now);
+                self.arrivals.heartbeat = Some(now);
                 t.armed = h
                     .base_mode
                     .contains(MavModeFlag::MAV_MODE_FLAG_SAFETY_ARMED);
@@ -119,17 +187,26 @@ impl Model {
                     h.system_status,
                     MavState::MAV_STATE_CRITICAL | MavState::MAV_STATE_EMERGENCY
                 );
+                if !t.critical {
+                    // The core is critical while any failsafe is active.
+                    self.failsafe_texts.clear();
+                }
             }
             MavMessage::ATTITUDE(a) => {
+                self.arrivals.attitude = Some(now);
                 t.heading_deg = Some(deg(a.yaw).rem_euclid(360.0));
                 t.roll_deg = Some(deg(a.roll));
                 t.pitch_deg = Some(deg(a.pitch));
                 t.yaw_rate_dps = Some(deg(a.yawspeed));
             }
-            MavMessage::VFR_HUD(v) => t.depth_m = Some(-f64::from(v.alt)),
+            MavMessage::VFR_HUD(v) => {
+                self.arrivals.depth = Some(now);
+                t.depth_m = Some(-f64::from(v.alt));
+            }
             MavMessage::SYS_STATUS(s) => {
                 use MavSysStatusSensor as S;
                 let h = s.onboard_control_sensors_health;
+                self.health = Some(h);
                 t.health = Some(HealthView {
                     board_link: h.contains(S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS),
                     depth: h.contains(S::MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE),
@@ -138,11 +215,22 @@ impl Model {
                     battery: h.contains(S::MAV_SYS_STATUS_SENSOR_BATTERY),
                     prearm: h.contains(S::MAV_SYS_STATUS_PREARM_CHECK),
                 });
-                t.voltage_v =
-                    (s.voltage_battery != u16::MAX).then(|| f64::from(s.voltage_battery) / 1000.0);
-                t.current_a =
-                    (s.current_battery >= 0).then(|| f64::from(s.current_battery) / 100.0);
-                t.battery_pct = (s.battery_remaining >= 0).then_some(s.battery_remaining);
+                // A value the message lacks keeps its last reading (its age
+                // says how old). The core repeats the last voltage while the
+                // board is silent, so only a voltage over a live board link
+                // counts as a new reading.
+                if s.voltage_battery != u16::MAX {
+                    t.voltage_v = Some(f64::from(s.voltage_battery) / 1000.0);
+                    if h.contains(S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS) {
+                        self.arrivals.battery = Some(now);
+                    }
+                }
+                if s.current_battery >= 0 {
+                    t.current_a = Some(f64::from(s.current_battery) / 100.0);
+                }
+                if s.battery_remaining >= 0 {
+                    t.battery_pct = Some(s.battery_remaining);
+                }
             }
             MavMessage::SERVO_OUTPUT_RAW(s) => {
                 t.thrusters_us = Some(ThrustersUs {
@@ -177,6 +265,7 @@ impl Model {
                 });
             }
             MavMessage::NEPTUNUS_ESTIMATE(e) => {
+                self.arrivals.estimate = Some(now);
                 use NeptunusEstimateFlags as F;
                 let simulated = e.flags.contains(F::NEPTUNUS_ESTIMATE_FLAGS_SIMULATED);
                 t.estimate = Some(EstimateView {
@@ -227,16 +316,7 @@ impl Model {
                         .me
                         .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
             {
-                events.push(ServerMsg::Ack {
-                    command: a.command as u32,
-                    command_name: format!("{:?}", a.command)
-                        .trim_start_matches("MAV_CMD_")
-                        .to_owned(),
-                    result: a.result as u32,
-                    result_name: format!("{:?}", a.result)
-                        .trim_start_matches("MAV_RESULT_")
-                        .to_owned(),
-                });
+                events.push(self.on_ack(a));
             }
             MavMessage::COMMAND_LONG(c)
                 if c.command == MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL
@@ -252,6 +332,18 @@ impl Model {
         }
     }
 
+    /// A whole text: to the browser, and into the failsafe reasons.
+    fn text_done(&mut self, p: Pending, events: &mut Vec<ServerMsg>) {
+        if p.topic == Topic::Failsafe {
+            self.failsafe_texts.on_text(&p.text);
+        }
+        events.push(ServerMsg::Statustext {
+            severity: p.severity,
+            text: p.text,
+            category: p.topic,
+        });
+    }
+
     /// STATUSTEXT, with MAVLink 2 chunks (same id) joined.
     fn on_statustext(&mut self, s: &STATUSTEXT_DATA, events: &mut Vec<ServerMsg>) {
         let bytes: &[u8] = s.text.as_ref();
@@ -259,17 +351,14 @@ impl Model {
         let severity = s.severity as u8;
         let topic = self.topic;
         let full = !bytes.contains(&0);
-        let done = |p: Pending| ServerMsg::Statustext {
-            severity: p.severity,
-            text: p.text,
-            category: p.topic,
-        };
         if s.id == 0 {
-            events.push(ServerMsg::Statustext {
-                severity,
+            let p = Pending {
+                id: 0,
                 text: chunk,
-                category: topic,
-            });
+                severity,
+                topic,
+            };
+            self.text_done(p, events);
             return;
         }
         let text = match self.statustext.take() {
@@ -278,7 +367,7 @@ impl Model {
                 p.text
             }
             Some(other) => {
-                events.push(done(other));
+                self.text_done(other, events);
                 chunk
             }
             None => chunk,
@@ -292,7 +381,7 @@ impl Model {
         if full {
             self.statustext = Some(p);
         } else {
-            events.push(done(p));
+            self.text_done(p, events);
         }
     }
 }
@@ -342,6 +431,121 @@ mod tests {
                 text: long,
                 category: Topic::General,
             }]
+        );
+    }
+
+    pub(super) fn heartbeat(status: MavState) -> MavMessage {
+        MavMessage::HEARTBEAT(HEARTBEAT_DATA {
+            custom_mode: Mode::Manual.number(),
+            mavtype: MavType::MAV_TYPE_SUBMARINE,
+            autopilot: MavAutopilot::MAV_AUTOPILOT_ARDUPILOTMEGA,
+            base_mode: MavModeFlag::MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            system_status: status,
+            mavlink_version: 3,
+        })
+    }
+
+    pub(super) fn sys_status(health: MavSysStatusSensor, voltage_mv: u16) -> MavMessage {
+        MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+            onboard_control_sensors_health: health,
+            voltage_battery: voltage_mv,
+            current_battery: 150,
+            battery_remaining: 40,
+            ..Default::default()
+        })
+    }
+
+    pub(super) fn text(m: &mut Model, topic: Topic, words: &str, now: Instant) -> Vec<ServerMsg> {
+        let mut ev = Vec::new();
+        m.on_delivery(
+            &Delivery {
+                peer: None,
+                msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
+                    severity: MavSeverity::MAV_SEVERITY_CRITICAL,
+                    text: words.into(),
+                    id: 0,
+                    chunk_seq: 0,
+                }),
+                topic: Some(topic),
+            },
+            now,
+            &mut ev,
+        );
+        ev
+    }
+
+    #[test]
+    fn ages_say_how_old_each_kind_of_data_is_and_values_stay() {
+        let t0 = Instant::now();
+        let mut m = Model::new(None, t0);
+        let ms = Duration::from_millis;
+        assert_eq!(m.snapshot(t0).ages_ms, AgesView::default());
+        let mut ev = Vec::new();
+        m.on_message(&heartbeat(MavState::MAV_STATE_STANDBY), t0, &mut ev);
+        m.on_message(
+            &MavMessage::ATTITUDE(ATTITUDE_DATA {
+                yaw: 1.0,
+                ..Default::default()
+            }),
+            t0 + ms(100),
+            &mut ev,
+        );
+        m.on_message(
+            &MavMessage::VFR_HUD(VFR_HUD_DATA {
+                alt: -2.5,
+                ..Default::default()
+            }),
+            t0 + ms(200),
+            &mut ev,
+        );
+        let link_up = MavSysStatusSensor::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS;
+        m.on_message(&sys_status(link_up, 12_100), t0 + ms(300), &mut ev);
+        m.on_message(
+            &MavMessage::NEPTUNUS_ESTIMATE(NEPTUNUS_ESTIMATE_DATA::default()),
+            t0 + ms(400),
+            &mut ev,
+        );
+        let t = m.snapshot(t0 + ms(1000));
+        assert_eq!(
+            t.ages_ms,
+            AgesView {
+                heartbeat: Some(1000),
+                attitude: Some(900),
+                depth: Some(800),
+                battery: Some(700),
+                estimate: Some(600),
+            }
+        );
+        // The board link went down: the core repeats its last voltage, which
+        // is no new reading; a SYS_STATUS without values keeps the old ones.
+        m.on_message(
+            &sys_status(MavSysStatusSensor::empty(), 12_100),
+            t0 + ms(1500),
+            &mut ev,
+        );
+        m.on_message(
+            &MavMessage::SYS_STATUS(SYS_STATUS_DATA {
+                voltage_battery: u16::MAX,
+                current_battery: -1,
+                battery_remaining: -1,
+                ..Default::default()
+            }),
+            t0 + ms(1600),
+            &mut ev,
+        );
+        let t = m.snapshot(t0 + ms(5000));
+        assert_eq!(t.ages_ms.battery, Some(4700));
+        assert_eq!(t.ages_ms.attitude, Some(4900));
+        assert!(!t.vehicle_seen);
+        assert_eq!(t.voltage_v, Some(12.1));
+        assert_eq!(t.current_a, Some(1.5));
+        assert_eq!(t.battery_pct, Some(40));
+        assert_eq!(t.depth_m, Some(2.5));
+        assert!(t.heading_deg.is_some());
+        let json = ServerMsg::Telemetry(Box::new(t)).to_json();
+        assert!(
+            json.contains(r#""ages_ms":{"heartbeat":5000,"attitude":4900,"depth":4800,"battery":4700,"estimate":4600}"#),
+            "{json}"
         );
     }
 }

@@ -1,18 +1,25 @@
 //! The synthetic camera picture: drawn from a [`Scene`] and encoded as JPEG.
 //!
 //! Pure and deterministic (same scene, same bytes), so tests compare pixels
-//! and the bench times it. What it shows, for an operator to tell that the
-//! simulated vehicle moves:
-//! - the horizon, tilted by roll and moved by pitch plus camera tilt
-//!   (nose or camera up moves it down), with a pitch ladder every 10°;
-//! - water that darkens with depth, lighter towards the surface;
-//! - a heading tape with the heading readout, depth, tilt, pitch and roll
-//!   readouts, the armed state and a `SIM` marker when simulated.
+//! and the bench times it. What a camera on the vehicle would see, for an
+//! operator to tell that the simulated vehicle moves:
+//! - water that darkens with depth, lighter towards the surface, the edge
+//!   between the two (the horizon) tilted by roll and moved by pitch plus
+//!   camera tilt (nose or camera up moves it down);
+//! - shafts of light from the surface at fixed bearings, which sweep across
+//!   the picture as the vehicle turns.
+//!
+//! The instruments are not part of the scene: the browser's HUD draws them
+//! over any camera. With `[camera] synthetic_overlay = true` the picture
+//! carries its own ([`overlay`]): a horizon line and pitch ladder, a heading
+//! tape, depth, tilt, pitch and roll readouts, the armed state and a `SIM`
+//! marker, for viewers without the page (`/video.mjpg` in VLC).
+
+mod overlay;
 
 use bytes::Bytes;
 use jpeg_encoder::{ColorType, Encoder};
 
-use super::font::{self, ADVANCE, GLYPH_H, GLYPH_W};
 use super::frame::Scene;
 
 /// Vertical field of view (a 4:3 webcam like the OpenROV's).
@@ -21,6 +28,10 @@ const VFOV_DEG: f64 = 45.0;
 const TAPE_SPAN_DEG: f64 = 90.0;
 /// Sub-pixel resolution of the background table.
 const LUT_STEPS_PER_PX: f64 = 2.0;
+/// Light shafts around the compass, each at its own bearing and width.
+const SHAFTS: usize = 16;
+/// Brightness steps of a shaft (0: none), for the table of colours.
+const SHAFT_LEVELS: usize = 8;
 
 type Rgb = [u8; 3];
 
@@ -48,15 +59,20 @@ pub struct SyntheticRenderer {
     width: usize,
     height: usize,
     quality: u8,
+    /// Draw the instruments into the picture.
+    overlay: bool,
     rgb: Vec<u8>,
     lut: Vec<Cell>,
+    /// Light-shaft level by position along the horizon (same steps as `lut`).
+    shafts: Vec<u8>,
     last_jpeg_len: usize,
 }
 
 /// One entry of the background table, by signed distance to the horizon.
 #[derive(Debug, Clone, Copy, Default)]
 struct Cell {
-    water: Rgb,
+    /// The water at each light-shaft level (`[0]`: no shaft).
+    water: [Rgb; SHAFT_LEVELS],
     line: Rgb,
     kind: Line,
 }
@@ -73,6 +89,7 @@ enum Line {
 
 impl SyntheticRenderer {
     /// Sizes outside 1..=65535 are clamped (the config allows 16..=4096).
+    /// Without the instruments: see [`with_overlay`](Self::with_overlay).
     pub fn new(width: u32, height: u32, quality: u8) -> Self {
         let width = width.clamp(1, u32::from(u16::MAX)) as usize;
         let height = height.clamp(1, u32::from(u16::MAX)) as usize;
@@ -80,10 +97,19 @@ impl SyntheticRenderer {
             width,
             height,
             quality: quality.clamp(1, 100),
+            overlay: false,
             rgb: vec![0; width * height * 3],
             lut: Vec::new(),
+            shafts: Vec::new(),
             last_jpeg_len: 0,
         }
+    }
+
+    /// Draws the instruments (heading tape, readouts, pitch ladder …) into
+    /// the picture too, or not.
+    pub fn with_overlay(mut self, on: bool) -> Self {
+        self.overlay = on;
+        self
     }
 
     pub fn width(&self) -> u32 {
@@ -98,7 +124,10 @@ impl SyntheticRenderer {
     pub fn render(&mut self, scene: &Scene) -> &[u8] {
         let s = Sanitized::from(scene);
         self.background(&s);
-        self.overlays(&s);
+        if self.overlay {
+            let mut canvas = overlay::Canvas::new(&mut self.rgb, self.width, self.height);
+            canvas.instruments(&s);
+        }
         &self.rgb
     }
 
@@ -135,17 +164,20 @@ impl SyntheticRenderer {
         (self.height / 240).max(1)
     }
 
-    /// Water, horizon and pitch ladder. Every pixel's colour depends only on
-    /// its signed distance to the horizon (and, for ladder rungs, on how far
-    /// along the horizon it is), so the colours come from a table indexed by
-    /// that distance, which changes by a constant step along a row.
+    /// Water and light shafts (with the overlay: the horizon line and pitch
+    /// ladder). Every pixel's colour depends only on its signed distance to
+    /// the horizon and on how far along the horizon it is, so the colours
+    /// come from two tables indexed by those, which change by constant
+    /// steps along a row.
     fn background(&mut self, s: &Sanitized) {
         let (w, h) = (self.width, self.height);
         let ppd = self.px_per_deg();
         let scale = self.scale() as f64;
         let reach = (w + h) as f64;
         self.fill_lut(s, reach, ppd, scale);
+        self.fill_shafts(s, reach, ppd);
         let lut_last = self.lut.len() - 1;
+        let shafts_last = self.shafts.len() - 1;
 
         let (sin, cos) = s.roll_deg.to_radians().sin_cos();
         let cx = w as f64 / 2.0;
@@ -161,13 +193,15 @@ impl SyntheticRenderer {
             let row = &mut self.rgb[y * w * 3..(y + 1) * w * 3];
             for px in row.chunks_exact_mut(3) {
                 let i = ((d + reach) * LUT_STEPS_PER_PX).clamp(0.0, lut_last as f64) as usize;
+                let j = ((a + reach) * LUT_STEPS_PER_PX).clamp(0.0, shafts_last as f64) as usize;
                 let cell = &self.lut[i];
+                let water = &cell.water[usize::from(self.shafts[j])];
                 let colour = match cell.kind {
-                    Line::None => &cell.water,
+                    Line::None => water,
                     Line::Horizon => &cell.line,
                     Line::LongRung if a.abs() <= long_rung => &cell.line,
                     Line::ShortRung if a.abs() <= short_rung => &cell.line,
-                    Line::LongRung | Line::ShortRung => &cell.water,
+                    Line::LongRung | Line::ShortRung => water,
                 };
                 px.copy_from_slice(colour);
                 d += sin;
@@ -183,6 +217,7 @@ impl SyntheticRenderer {
         let light = 0.18 + 0.82 * (-s.depth_m.max(0.0) / 20.0).exp();
         let fade = self.height as f64 * 0.6;
         let rung = 10.0 * ppd;
+        let lines = self.overlay;
         for (i, cell) in self.lut.iter_mut().enumerate() {
             let d = i as f64 / LUT_STEPS_PER_PX - reach;
             let water = if d < 0.0 {
@@ -190,9 +225,22 @@ impl SyntheticRenderer {
             } else {
                 mix([25, 85, 105], [6, 28, 38], d / fade)
             };
+            // Shafts come down from the surface: strongest looking up, lost
+            // in the haze towards the horizon, none below it.
+            let t = ((-d / fade - 0.2) / 0.8).clamp(0.0, 1.0);
+            let strength = 0.65 * t * t * (3.0 - 2.0 * t);
+            let levels = std::array::from_fn(|l| {
+                let t = strength * l as f64 / (SHAFT_LEVELS - 1) as f64;
+                dim(
+                    [0, 1, 2].map(|c| water[c] + (f64::from(SHAFT_LIGHT[c]) - water[c]) * t),
+                    light,
+                )
+            });
             let k = (d / rung).round();
             let off = (d - k * rung).abs();
-            let (kind, line) = if d.abs() < scale {
+            let (kind, line) = if !lines {
+                (Line::None, BLACK)
+            } else if d.abs() < scale {
                 (Line::Horizon, dim(rgbf(WHITE), light.max(0.55)))
             } else if k != 0.0 && k.abs() <= 9.0 && off < 0.6 * scale {
                 let kind = if (k as i64) % 2 == 0 {
@@ -205,111 +253,49 @@ impl SyntheticRenderer {
                 (Line::None, BLACK)
             };
             *cell = Cell {
-                water: dim(water, light),
+                water: levels,
                 line,
                 kind,
             };
         }
     }
 
-    fn overlays(&mut self, s: &Sanitized) {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let sc = self.scale();
-        let sci = sc as i64;
-        let mut c = Canvas {
-            px: &mut self.rgb,
-            w: self.width,
-            h: self.height,
-        };
-        let cx = w / 2;
-        let cy = h / 2;
-
-        // Fixed reticle: where the camera points.
-        for x in [cx - 30 * sci, cx + 10 * sci] {
-            c.fill(x, cy - sci / 2, 20 * sci, sci, YELLOW);
-        }
-        c.fill(cx - sci, cy - sci, 2 * sci, 2 * sci, YELLOW);
-
-        // Heading tape along the top.
-        let tape_h = 22 * sci;
-        c.shade(0, 0, w, tape_h, 0.4);
-        let ppd = w as f64 / TAPE_SPAN_DEG;
-        let first = ((s.heading_deg - TAPE_SPAN_DEG / 2.0) / 5.0).ceil() as i64 * 5;
-        let last = ((s.heading_deg + TAPE_SPAN_DEG / 2.0) / 5.0).floor() as i64 * 5;
-        for deg in (first..=last).step_by(5) {
-            let x = cx + ((deg as f64 - s.heading_deg) * ppd).round() as i64;
-            let len = if deg % 10 == 0 { 6 * sci } else { 3 * sci };
-            c.fill(x - sci / 2, tape_h - len, sci, len, WHITE);
-            if deg.rem_euclid(30) == 0 {
-                let label = match deg.rem_euclid(360) {
-                    0 => "N".to_owned(),
-                    90 => "E".to_owned(),
-                    180 => "S".to_owned(),
-                    270 => "W".to_owned(),
-                    other => format!("{other:03}"),
-                };
-                let tw = font::text_width(&label, sc) as i64;
-                c.text(x - tw / 2, 3 * sci, sc, &label, WHITE);
+    /// The light-shaft level along the horizon: each shaft sits at a fixed
+    /// bearing, so turning the vehicle sweeps them across the picture.
+    fn fill_shafts(&mut self, s: &Sanitized, reach: f64, ppd: f64) {
+        let n = (2.0 * reach * LUT_STEPS_PER_PX) as usize + 2;
+        self.shafts.resize(n, 0);
+        for (j, level) in self.shafts.iter_mut().enumerate() {
+            let a = j as f64 / LUT_STEPS_PER_PX - reach;
+            let bearing = s.heading_deg + a / ppd;
+            let mut v: f64 = 0.0;
+            for k in 0..SHAFTS {
+                let (centre, half_width, peak) = shaft(k);
+                let off = (bearing - centre + 180.0).rem_euclid(360.0) - 180.0;
+                // A soft edge: full in the middle, none beyond the half width.
+                let x = (off.abs() / half_width).min(1.0);
+                v = v.max(peak * (1.0 - x * x));
             }
+            *level = (v * (SHAFT_LEVELS - 1) as f64).round() as u8;
         }
-        c.fill(cx - sci / 2, 0, sci.max(2), tape_h + 3 * sci, YELLOW);
-        let hdg = format!("{:03}°", (s.heading_deg.round() as i64).rem_euclid(360));
-        let tw = font::text_width(&hdg, sc) as i64;
-        c.shade(
-            cx - tw / 2 - 3 * sci,
-            tape_h + 3 * sci,
-            tw + 6 * sci,
-            11 * sci,
-            0.4,
-        );
-        c.text(cx - tw / 2, tape_h + 5 * sci, sc, &hdg, YELLOW);
-
-        // Markers under the tape.
-        if s.simulated {
-            let tw = font::text_width("SIM", sc) as i64;
-            c.fill(4 * sci, tape_h + 4 * sci, tw + 6 * sci, 11 * sci, RED);
-            c.text(7 * sci, tape_h + 6 * sci, sc, "SIM", WHITE);
-        }
-        let (armed, colour) = if s.armed {
-            ("ARMED", RED)
-        } else {
-            ("DISARMED", GREEN)
-        };
-        let tw = font::text_width(armed, sc) as i64;
-        c.shade(
-            w - tw - 10 * sci,
-            tape_h + 4 * sci,
-            tw + 6 * sci,
-            11 * sci,
-            0.4,
-        );
-        c.text(w - tw - 7 * sci, tape_h + 6 * sci, sc, armed, colour);
-
-        // Readouts along the bottom.
-        let line = (GLYPH_H as i64 + 4) * sci;
-        let depth = format!("DEPTH {:.1} M", s.depth_m);
-        let attitude = format!("PITCH {:+.0}° ROLL {:+.0}°", s.pitch_deg, s.roll_deg);
-        let tilt = format!("TILT {:+.0}°", s.tilt_deg);
-        let tw = font::text_width(&depth, sc) as i64;
-        c.shade(
-            0,
-            h - 2 * line - 2 * sci,
-            tw + 8 * sci,
-            2 * line + 2 * sci,
-            0.4,
-        );
-        c.text(4 * sci, h - 2 * line, sc, &depth, WHITE);
-        c.text(4 * sci, h - line, sc, &tilt, WHITE);
-        let tw = font::text_width(&attitude, sc) as i64;
-        c.shade(
-            w - tw - 8 * sci,
-            h - line - 2 * sci,
-            tw + 8 * sci,
-            line + 2 * sci,
-            0.4,
-        );
-        c.text(w - tw - 4 * sci, h - line, sc, &attitude, WHITE);
     }
+}
+
+/// The colour a light shaft tends to.
+const SHAFT_LIGHT: Rgb = [225, 245, 250];
+
+/// Shaft `k`'s bearing (deg), half width (deg) and peak brightness (0..1):
+/// spread around the compass with a fixed irregularity, the same every run.
+fn shaft(k: usize) -> (f64, f64, f64) {
+    // A small integer hash: deterministic, looks irregular.
+    let h = (k as u32).wrapping_mul(0x9E37_79B9).rotate_left(13) ^ 0x5bd1_e995;
+    let u = |shift: u32| f64::from((h >> shift) & 0xff) / 255.0;
+    let spacing = 360.0 / SHAFTS as f64;
+    (
+        k as f64 * spacing + (u(0) - 0.5) * spacing * 0.6,
+        1.5 + 3.0 * u(8),
+        0.55 + 0.45 * u(16),
+    )
 }
 
 /// Scene values safe to draw: non-finite become 0, angles are wrapped.
@@ -353,70 +339,6 @@ fn rgbf(c: Rgb) -> [f64; 3] {
 
 fn dim(c: [f64; 3], light: f64) -> Rgb {
     c.map(|v| (v * light).round().clamp(0.0, 255.0) as u8)
-}
-
-/// Pixel drawing with clipping: shapes partly or wholly off the picture
-/// draw what is on it.
-struct Canvas<'a> {
-    px: &'a mut [u8],
-    w: usize,
-    h: usize,
-}
-
-impl Canvas<'_> {
-    /// Clipped pixel rows and columns of a rectangle.
-    fn clip(&self, x: i64, y: i64, w: i64, h: i64) -> Option<(usize, usize, usize, usize)> {
-        let x0 = x.clamp(0, self.w as i64) as usize;
-        let y0 = y.clamp(0, self.h as i64) as usize;
-        let x1 = x.saturating_add(w).clamp(0, self.w as i64) as usize;
-        let y1 = y.saturating_add(h).clamp(0, self.h as i64) as usize;
-        (x0 < x1 && y0 < y1).then_some((x0, y0, x1, y1))
-    }
-
-    fn fill(&mut self, x: i64, y: i64, w: i64, h: i64, c: Rgb) {
-        let Some((x0, y0, x1, y1)) = self.clip(x, y, w, h) else {
-            return;
-        };
-        for yy in y0..y1 {
-            let row = &mut self.px[(yy * self.w + x0) * 3..(yy * self.w + x1) * 3];
-            for px in row.chunks_exact_mut(3) {
-                px.copy_from_slice(&c);
-            }
-        }
-    }
-
-    /// Darkens a rectangle so text on it reads over any background.
-    fn shade(&mut self, x: i64, y: i64, w: i64, h: i64, keep: f64) {
-        let Some((x0, y0, x1, y1)) = self.clip(x, y, w, h) else {
-            return;
-        };
-        let keep = (keep.clamp(0.0, 1.0) * 256.0) as u16;
-        for yy in y0..y1 {
-            let row = &mut self.px[(yy * self.w + x0) * 3..(yy * self.w + x1) * 3];
-            for v in row {
-                *v = ((u16::from(*v) * keep) >> 8) as u8;
-            }
-        }
-    }
-
-    /// Text with a one-pixel dark shadow.
-    fn text(&mut self, x: i64, y: i64, scale: usize, text: &str, c: Rgb) {
-        let s = scale as i64;
-        for (colour, off) in [(BLACK, s), (c, 0)] {
-            let mut gx = x + off;
-            for ch in text.chars() {
-                let rows = font::glyph(ch);
-                for (ry, bits) in rows.iter().enumerate() {
-                    for rx in 0..GLYPH_W {
-                        if bits & (1 << (GLYPH_W - 1 - rx)) != 0 {
-                            self.fill(gx + rx as i64 * s, y + off + ry as i64 * s, s, s, colour);
-                        }
-                    }
-                }
-                gx += (ADVANCE * scale) as i64;
-            }
-        }
-    }
 }
 
 #[cfg(test)]
@@ -492,31 +414,78 @@ mod tests {
         assert!(luma(&r, x, y) < below * 0.5);
     }
 
+    /// Bytes of the top `rows` rows that differ by more than 40.
+    fn changed(a: &[u8], b: &[u8], width: usize, rows: usize) -> usize {
+        let n = width * rows * 3;
+        a[..n]
+            .iter()
+            .zip(&b[..n])
+            .filter(|(x, y)| x.abs_diff(**y) > 40)
+            .count()
+    }
+
     #[test]
-    fn heading_moves_the_tape_and_markers_show() {
+    fn turning_sweeps_the_light_shafts_across_the_picture() {
         let mut r = SyntheticRenderer::new(320, 240, 80);
-        let a = r.render(&Scene::default()).to_vec();
-        let b = r
+        let north = r.render(&Scene::default()).to_vec();
+        let east = r
+            .render(&Scene {
+                heading_deg: 90.0,
+                ..Scene::default()
+            })
+            .to_vec();
+        // High above the horizon the shafts moved; below it nothing did.
+        assert!(changed(&north, &east, 320, 40) > 300);
+        let below = 150 * 320 * 3;
+        assert_eq!(north[below..], east[below..]);
+        // A full turn comes back to the same picture.
+        let round = r
+            .render(&Scene {
+                heading_deg: 360.0,
+                ..Scene::default()
+            })
+            .to_vec();
+        assert_eq!(north, round);
+    }
+
+    #[test]
+    fn the_instruments_are_drawn_only_with_the_overlay() {
+        let mut plain = SyntheticRenderer::new(320, 240, 80);
+        let mut hud = SyntheticRenderer::new(320, 240, 80).with_overlay(true);
+        let scene = Scene {
+            armed: true,
+            simulated: true,
+            ..Scene::default()
+        };
+        let without = plain.render(&scene).to_vec();
+        let with = hud.render(&scene).to_vec();
+        // The heading tape (top 22 rows) is there only with the overlay.
+        assert!(changed(&without, &with, 320, 22) > 1000);
+        // Without it, the armed and simulated markers change nothing.
+        assert_eq!(without, plain.render(&Scene::default()));
+        // With it, the tape moves with the heading and the markers show.
+        let turned = hud
             .render(&Scene {
                 heading_deg: 37.0,
-                ..Scene::default()
+                ..scene.clone()
             })
             .to_vec();
-        let tape = 320 * 22 * 3;
-        assert_ne!(a[..tape], b[..tape]);
-        let c = r
-            .render(&Scene {
-                simulated: true,
-                armed: true,
-                ..Scene::default()
-            })
-            .to_vec();
-        assert_ne!(a, c);
+        assert!(changed(&with, &turned, 320, 22) > 300);
+        assert_ne!(with, hud.render(&Scene::default()));
+        // The horizon line: a bright row across the level horizon.
+        let row = 120 * 320 * 3;
+        let line = |px: &[u8]| {
+            px[row..row + 320 * 3]
+                .iter()
+                .map(|v| u32::from(*v))
+                .sum::<u32>()
+        };
+        assert!(line(&with) > line(&without) + 320 * 3 * 40);
     }
 
     #[test]
     fn wild_values_do_not_panic_and_encode() {
-        let mut r = SyntheticRenderer::new(16, 16, 1);
+        let mut r = SyntheticRenderer::new(16, 16, 1).with_overlay(true);
         for v in [f64::NAN, f64::INFINITY, -1e300, 1e300, -720.0] {
             let scene = Scene {
                 depth_m: v,
