@@ -14,7 +14,7 @@ const MAX_MESSAGES = 100;
 
 export class View {
   /** `session`: read for the welcome, telemetry and modes (session.js);
-   * `logger`, `recorder`: the developer interface's (dev.js). */
+   * `logger`, `recorder`: the developer interface's (recorder.js). */
   constructor({ session, logger, recorder }) {
     this.session = session;
     this.logger = logger;
