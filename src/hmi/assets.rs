@@ -132,3 +132,63 @@ pub fn paths() -> Vec<String> {
         .chain(Uplot::iter().map(|p| format!("vendor/{p}")))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(values: &[&[u8]]) -> HeaderMap {
+        let mut h = HeaderMap::new();
+        for v in values {
+            h.append(
+                header::IF_NONE_MATCH,
+                HeaderValue::from_bytes(v).expect("a header value"),
+            );
+        }
+        h
+    }
+
+    #[test]
+    fn if_none_match_compares_weakly_and_reads_lists() {
+        let tag = etag(&[0xab; 32]);
+        let t = tag.to_str().expect("ascii");
+        assert_eq!(t, format!("W/\"{}\"", "ab".repeat(16)));
+        let strong = t.trim_start_matches("W/");
+        assert!(matches(&with(&[t.as_bytes()]), &tag));
+        assert!(matches(&with(&[strong.as_bytes()]), &tag));
+        assert!(matches(&with(&[format!("\"x\" ,  {t}").as_bytes()]), &tag));
+        assert!(matches(&with(&[b"\"x\"", t.as_bytes()]), &tag));
+        assert!(matches(&with(&[b"*"]), &tag));
+    }
+
+    #[test]
+    fn anything_else_in_if_none_match_is_a_miss() {
+        let tag = etag(&[0xab; 32]);
+        for bad in [
+            &b""[..],
+            b",,,",
+            b"W/",
+            b"W/\"\"",
+            b"\"ab\"",
+            b"\xff\xfe",
+            b"**",
+        ] {
+            assert!(!matches(&with(&[bad]), &tag), "{bad:?}");
+        }
+        assert!(!matches(&HeaderMap::new(), &tag));
+    }
+
+    #[test]
+    fn an_unchanged_file_is_a_304_with_its_validators_and_no_body() {
+        let first = response("index.html", &HeaderMap::new());
+        assert_eq!(first.status(), StatusCode::OK);
+        let tag = first.headers()[header::ETAG].clone();
+        let again = response("index.html", &with(&[tag.as_bytes()]));
+        assert_eq!(again.status(), StatusCode::NOT_MODIFIED);
+        assert_eq!(again.headers()[header::ETAG], tag);
+        assert_eq!(again.headers()[header::CACHE_CONTROL], "no-cache");
+        assert!(again.headers().get(header::CONTENT_TYPE).is_none());
+        let missing = response("no/such/file.js", &with(&[b"*"]));
+        assert_eq!(missing.status(), StatusCode::NOT_FOUND);
+    }
+}
