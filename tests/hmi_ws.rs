@@ -1163,6 +1163,8 @@ async fn rest_api_and_assets() {
         ("/js/session.js", "javascript"),
         ("/js/view.js", "javascript"),
         ("/js/controls.js", "javascript"),
+        ("/js/recorder.js", "javascript"),
+        ("/js/dev.js", "javascript"),
         ("/css/style.css", "text/css"),
         ("/vendor/uPlot.esm.js", "javascript"),
         ("/vendor/uPlot.min.css", "text/css"),

@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use axum::Router;
 use axum::extract::{Path, Request, State, WebSocketUpgrade};
-use axum::http::{StatusCode, header};
+use axum::handler::Handler as _;
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Json, Response};
 use axum::routing::{get, post};
 use serde::Serialize;
@@ -92,7 +93,7 @@ pub(crate) async fn watch_vehicle(
 
 pub(crate) fn routes(shared: Arc<Shared>) -> Router {
     Router::new()
-        .route("/", get(index))
+        .route("/", get(index).layer(assets::compression()))
         .route("/ws", get(ws))
         .route("/api/status", get(status))
         .route("/api/params", get(params))
@@ -101,16 +102,17 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/api/logs/{kind}/{name}", get(log_file))
         .route("/api/login", post(guard::login))
         .route("/api/logout", post(guard::logout))
-        .fallback(asset)
+        // Compression around the page's files only (see `assets`).
+        .fallback(asset.layer(assets::compression()))
         .with_state(shared)
 }
 
-async fn index() -> Response {
-    assets::response("index.html")
+async fn index(headers: HeaderMap) -> Response {
+    assets::response("index.html", &headers)
 }
 
-async fn asset(uri: axum::http::Uri) -> Response {
-    assets::response(uri.path().trim_start_matches('/'))
+async fn asset(uri: axum::http::Uri, headers: HeaderMap) -> Response {
+    assets::response(uri.path().trim_start_matches('/'), &headers)
 }
 
 /// The upgrade (Host and Origin were checked in front): a logged-in client

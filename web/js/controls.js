@@ -2,28 +2,24 @@
 // to the vehicle — the control buttons and the request prompt's answer,
 // login and logout, the input, control and run modes, the autopilot
 // setpoints, the gain/lights/tilt sliders and the laser, the keyboard and
-// touch buttons, the developer panel's buttons — and sends the sticks (or
+// touch buttons — and sends the sticks (or
 // thrusters) from input.js at 20 Hz. Keeps the thesis' safety rule: stop on
 // blur, hidden tab, and input-, control- and run-mode change. Writes the
 // feedback next to its own inputs (login note, input note, slider values
 // while dragged); everything the server says is rendered by the view
 // (view.js). docs/ARCHITECTURE.md is the map of the whole program.
-import { SIGNALS } from '/js/dev.js';
-
 const $ = (id) => document.getElementById(id);
 export const SEND_PERIOD_MS = 50; // sticks at 20 Hz
 
 export class Controls {
   /** `session` (session.js) sends; `view` (view.js) shows; `input`
-   * (input.js) is the operator's sticks; `logger`, `recorder`, `plots` are
-   * the developer interface's (dev.js). */
-  constructor({ session, view, input, logger, recorder, plots }) {
+   * (input.js) is the operator's sticks; `logger` is the developer
+   * interface's (recorder.js). */
+  constructor({ session, view, input, logger }) {
     this.session = session;
     this.view = view;
     this.input = input;
     this.logger = logger;
-    this.recorder = recorder;
-    this.plots = plots;
     this.lastCmd = {}; // latest command sent (for plots and the logger)
     this.wasActive = false;
     this.lastTilt = null;
@@ -225,40 +221,6 @@ export class Controls {
     slider('lights', 'lights', 'level', (v) => String(v));
     slider('tilt', 'tilt', 'deg', (v) => v.toFixed(0));
     $('laser').onchange = () => send({ type: 'laser', on: $('laser').checked });
-    this.bindDevPanel();
-  }
-
-  bindDevPanel() {
-    const { recorder, plots } = this;
-    $('dev-toggle').onclick = () => {
-      $('dev').hidden = !$('dev').hidden;
-      $('dev-toggle').setAttribute('aria-expanded', String(!$('dev').hidden));
-      if (!$('dev').hidden) {
-        plots.refresh();
-        // It opens below the operator screen: bring it into view.
-        $('dev').scrollIntoView({ block: 'start' });
-      }
-    };
-    const sel = $('signal');
-    for (const [key, label] of SIGNALS) {
-      const o = document.createElement('option');
-      o.value = key;
-      o.textContent = label;
-      sel.append(o);
-    }
-    $('add-plot').onclick = () => plots.add(sel.value);
-    $('remove-plots').onclick = () => plots.removeAll();
-    $('reset-data').onclick = () => { recorder.reset(); plots.refresh(); $('samples').textContent = '0'; };
-    $('export-csv').onclick = () => {
-      const blob = new Blob([recorder.csv()], { type: 'text/csv' });
-      const a = document.createElement('a');
-      a.href = URL.createObjectURL(blob);
-      a.download = `neptunus-${new Date().toISOString().replace(/[:.]/g, '-')}.csv`;
-      document.body.append(a);
-      a.click();
-      a.remove();
-      setTimeout(() => URL.revokeObjectURL(a.href), 10000);
-    };
   }
 
   // ---- keyboard, touch and the safety events ------------------------------------

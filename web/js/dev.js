@@ -1,93 +1,47 @@
-// Developer interface: recorder of every plottable signal from connection
-// on, up to 10 live plots (uPlot), CSV export, and the logger with
-// selectable categories (thesis 7.2). docs/ARCHITECTURE.md is the map of
-// the whole program.
+// Developer interface, the plots (thesis 7.2): up to 10 live uPlot charts
+// of what recorder.js recorded since connection (headings unwrapped), zoom
+// and pan, reset, CSV export. main.js imports this module when the
+// developer view is first opened, so the plotting library and its
+// stylesheet load then and never for the operator alone; the recorder and
+// the logger run from connection on without it. docs/ARCHITECTURE.md is
+// the map of the whole program.
 import uPlot from '/vendor/uPlot.esm.js';
+import { SIGNALS, HEADINGS } from '/js/recorder.js';
 
 export const MAX_PLOTS = 10;
-const MAX_ROWS = 72000; // one hour at 20 Hz; the oldest half goes past that
 
-const g = (f) => (t, c) => { const v = f(t, c || {}); return Number.isFinite(v) ? v : null; };
-const us = (k) => g((t) => t.thrusters_us && t.thrusters_us[k]);
+const $ = (id) => document.getElementById(id);
 
-// Thesis table 7.3, plus estimates, setpoints and simulated states.
-export const SIGNALS = [
-  ['depth_m', 'Measured depth [m]', g((t) => t.depth_m)],
-  ['roll_deg', 'Measured roll [deg]', g((t) => t.roll_deg)],
-  ['pitch_deg', 'Measured pitch [deg]', g((t) => t.pitch_deg)],
-  ['heading_deg', 'Measured heading [deg]', g((t) => t.heading_deg)],
-  ['voltage_v', 'Voltage [V]', g((t) => t.voltage_v)],
-  ['current_a', 'Current [A]', g((t) => t.current_a)],
-  ['cmd_surge', 'Command surge', g((t, c) => c.surge)],
-  ['cmd_heave', 'Command heave (up +)', g((t, c) => c.heave_up)],
-  ['cmd_yaw', 'Command yaw', g((t, c) => c.yaw)],
-  ['cmd_port', 'Command port thruster', g((t, c) => c.port)],
-  ['cmd_vertical', 'Command vertical thruster', g((t, c) => c.vertical)],
-  ['cmd_starboard', 'Command starboard thruster', g((t, c) => c.starboard)],
-  ['starboard_us', 'Starboard thruster [µs]', us('starboard')],
-  ['port_us', 'Port thruster [µs]', us('port')],
-  ['vertical_us', 'Vertical thruster [µs]', us('vertical')],
-  ['est_depth_m', 'Estimated depth [m]', g((t) => t.estimate && t.estimate.depth_m)],
-  ['est_heading_deg', 'Estimated heading [deg]', g((t) => t.estimate && t.estimate.heading_deg)],
-  ['est_climb_mps', 'Estimated climb rate [m/s]', g((t) => t.estimate && t.estimate.climb_rate_mps)],
-  ['est_yaw_rate_dps', 'Estimated yaw rate [deg/s]', g((t) => t.estimate && t.estimate.yaw_rate_dps)],
-  ['est_roll_deg', 'Estimated roll [deg] (attitude)', g((t) => t.roll_deg)],
-  ['est_pitch_deg', 'Estimated pitch [deg] (attitude)', g((t) => t.pitch_deg)],
-  ['sp_depth_m', 'Setpoint depth [m]', g((t) => t.autopilot && t.autopilot.depth_target_m)],
-  ['sp_heading_deg', 'Setpoint heading [deg]', g((t) => t.autopilot && t.autopilot.heading_target_deg)],
-  ['ap_heave_out', 'Autopilot heave output', g((t) => t.autopilot && t.autopilot.heave_output)],
-  ['ap_yaw_out', 'Autopilot yaw output', g((t) => t.autopilot && t.autopilot.yaw_output)],
-  ['sim_x_m', 'Simulated x (north) [m]', g((t) => t.sim && t.sim.north_m)],
-  ['sim_y_m', 'Simulated y (east) [m]', g((t) => t.sim && t.sim.east_m)],
-  ['sim_z_m', 'Simulated z (depth) [m]', g((t) => t.sim && t.sim.depth_m)],
-  ['sim_psi_deg', 'Simulated ψ [deg]', g((t) => t.sim && t.sim.heading_deg)],
-  ['sim_u_mps', 'Simulated u [m/s]', g((t) => t.sim && t.sim.surge_mps)],
-  ['sim_v_mps', 'Simulated v [m/s]', g((t) => t.sim && t.sim.sway_mps)],
-  ['sim_w_mps', 'Simulated w [m/s]', g((t) => t.sim && t.sim.heave_mps)],
-  ['sim_r_dps', 'Simulated r [deg/s]', g((t) => t.sim && t.sim.yaw_rate_dps)],
-];
+// uPlot's stylesheet comes with it, placed before the page's own so that
+// the page's rules for `.uplot` still win.
+const css = document.createElement('link');
+css.rel = 'stylesheet';
+css.href = '/vendor/uPlot.min.css';
+document.head.insertBefore(css, document.head.querySelector('link[rel=stylesheet]'));
 
-export const CATEGORIES = [
-  ['gain', 'Gain change'],
-  ['thrust_client', 'Thrust command (client)'],
-  ['thrust_motors', 'Thrust command (to motors)'],
-  ['control', 'Transfer of control'],
-  ['ap_depth', 'Autopilot depth'],
-  ['ap_heading', 'Autopilot heading'],
-  ['stop', 'Stop'],
-  ['failsafe', 'Failsafe'],
-  ['board_link', 'Board link'],
-];
-
-export class Recorder {
-  constructor() {
-    this.reset();
-  }
-
-  reset() {
-    this.time = [];
-    this.cols = SIGNALS.map(() => []);
-  }
-
-  get length() {
-    return this.time.length;
-  }
-
-  add(t, cmd) {
-    this.time.push(t.t_ms / 1000);
-    SIGNALS.forEach(([, , f], i) => this.cols[i].push(f(t, cmd)));
-    if (this.time.length > MAX_ROWS) {
-      const cut = MAX_ROWS / 2;
-      this.time.splice(0, cut);
-      this.cols.forEach((c) => c.splice(0, cut));
-    }
-  }
-
-  csv() {
-    const head = ['t_s'].concat(SIGNALS.map(([k]) => k)).join(',');
-    const rows = this.time.map((t, r) => [t.toFixed(3)].concat(this.cols.map((c) => (c[r] == null ? '' : c[r]))).join(','));
-    return [head].concat(rows).join('\n') + '\n';
-  }
+/** Binds the developer view's plot controls to `recorder` (recorder.js);
+ * returns the plots. */
+export function bindPlots(recorder) {
+  const note = $('plot-note');
+  const plots = new Plots($('plots'), recorder, (text) => { note.textContent = text; });
+  $('add-plot').onclick = () => plots.add($('signal').value);
+  $('remove-plots').onclick = () => plots.removeAll();
+  $('reset-data').onclick = () => {
+    recorder.reset();
+    plots.reset();
+    $('samples').textContent = '0';
+  };
+  $('export-csv').onclick = () => {
+    const blob = new Blob([recorder.csv()], { type: 'text/csv' });
+    const a = document.createElement('a');
+    a.href = URL.createObjectURL(blob);
+    a.download = `neptunus-${new Date().toISOString().replace(/[:.]/g, '-')}.csv`;
+    document.body.append(a);
+    a.click();
+    a.remove();
+    setTimeout(() => URL.revokeObjectURL(a.href), 10000);
+  };
+  return plots;
 }
 
 export class Plots {
@@ -100,12 +54,12 @@ export class Plots {
 
   add(key) {
     if (this.plots.length >= MAX_PLOTS) {
-      this.note(`At most ${MAX_PLOTS} plots at once: remove one before adding another.`);
+      this.note(`At most ${MAX_PLOTS} plots at once: remove one to add another.`);
       return false;
     }
     const index = SIGNALS.findIndex(([k]) => k === key);
     if (index < 0) return false;
-    const [, label] = SIGNALS[index];
+    const label = HEADINGS.has(key) ? `${SIGNALS[index][1]}, unwrapped` : SIGNALS[index][1];
     const box = document.createElement('div');
     box.className = 'plot';
     box.dataset.signal = key;
@@ -163,13 +117,14 @@ export class Plots {
   }
 
   data(index) {
-    return [this.rec.time, this.rec.cols[index]];
+    return [this.rec.time, this.rec.plotCols[index]];
   }
 
   remove(entry) {
     entry.u.destroy();
     entry.box.remove();
     this.plots = this.plots.filter((p) => p !== entry);
+    this.note('');
   }
 
   removeAll() {
@@ -180,49 +135,17 @@ export class Plots {
   refresh() {
     for (const p of this.plots) {
       // uPlot keeps references: hand it fresh array views so it redraws.
-      p.u.setData([this.rec.time.slice(), this.rec.cols[p.index].slice()], !p.zoomed);
-    }
-  }
-}
-
-export class Logger {
-  constructor(list, boxes) {
-    this.list = list;
-    this.enabled = new Set(CATEGORIES.map(([k]) => k));
-    this.entries = [];
-    for (const [key, label] of CATEGORIES) {
-      const l = document.createElement('label');
-      const c = document.createElement('input');
-      c.type = 'checkbox';
-      c.checked = true;
-      c.value = key;
-      c.dataset.category = key;
-      c.addEventListener('change', () => {
-        if (c.checked) this.enabled.add(key); else this.enabled.delete(key);
-        this.render();
-      });
-      l.append(c, ` ${label}`);
-      boxes.append(l);
+      p.u.setData([this.rec.time.slice(), this.rec.plotCols[p.index].slice()], !p.zoomed);
     }
   }
 
-  log(category, text) {
-    const stamp = new Date().toISOString().slice(11, 23);
-    this.entries.push({ category, text: `${stamp} [${category}] ${text}` });
-    if (this.entries.length > 1000) this.entries.splice(0, 500);
-    if (this.enabled.has(category)) this.append(this.entries[this.entries.length - 1]);
-  }
-
-  append(e) {
-    const li = document.createElement('li');
-    li.dataset.category = e.category;
-    li.textContent = e.text;
-    this.list.prepend(li);
-    while (this.list.childElementCount > 300) this.list.lastChild.remove();
-  }
-
-  render() {
-    this.list.textContent = '';
-    this.entries.filter((e) => this.enabled.has(e.category)).slice(-300).forEach((e) => this.append(e));
+  /** After the recorder was reset: every plot empty and back to following
+   * the data, a zoomed or panned one too (it would keep the old window). */
+  reset() {
+    for (const p of this.plots) {
+      p.zoomed = false;
+      p.u.setSelect({ left: 0, top: 0, width: 0, height: 0 }, false);
+      p.u.setData([[], []], true);
+    }
   }
 }

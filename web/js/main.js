@@ -1,11 +1,13 @@
 // Neptunus operator interface: the wiring. Creates the session (session.js:
 // the WebSocket, no DOM), the view (view.js: renders what the server says)
 // and the controls (controls.js: what the operator does, sent at 20 Hz),
-// with the input devices (input.js) and the developer interface (dev.js),
-// and routes each server message to whoever shows it. Read this file first;
-// docs/ARCHITECTURE.md is the map of the whole program.
+// with the input devices (input.js) and the developer interface (the
+// recorder and logger of recorder.js from connection on; the plots of
+// dev.js loaded when the view first opens), and routes each server message
+// to whoever shows it. Read this file first; docs/ARCHITECTURE.md is the
+// map of the whole program.
 import { Input } from '/js/input.js';
-import { Recorder, Plots, Logger, CATEGORIES } from '/js/dev.js';
+import { Recorder, Logger, CATEGORIES, SIGNALS } from '/js/recorder.js';
 import { Session } from '/js/session.js';
 import { View } from '/js/view.js';
 import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
@@ -26,12 +28,43 @@ const session = new Session(wsUrl);
 const input = new Input();
 const recorder = new Recorder();
 const logger = new Logger($('log'), $('categories'));
-const plots = new Plots($('plots'), recorder, (text) => { $('plot-note').textContent = text; });
 const video = new Video($('video'));
 const view = new View({ session, video, logger, recorder });
-const controls = new Controls({ session, view, input, logger, recorder, plots });
-// Exposed for the browser tests and for poking around in the console.
-window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots, logger };
+const controls = new Controls({ session, view, input, logger });
+// Exposed for the browser tests and for poking around in the console
+// (`plots` once the developer view has been opened).
+window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots: null, logger };
+
+/** The developer view's plots (dev.js with uPlot, ~50 KB compressed): fetched
+ * on the first open only. The panel shows once they can be used. */
+let plots = null;
+let loading = null;
+async function toggleDev() {
+  const panel = $('dev');
+  if (!panel.hidden) {
+    panel.hidden = true;
+    $('dev-toggle').setAttribute('aria-expanded', 'false');
+    return;
+  }
+  if (!plots) {
+    loading ||= import('/js/dev.js').then((m) => m.bindPlots(recorder));
+    try {
+      plots = await loading;
+      window.neptunus.plots = plots;
+    } catch (e) {
+      loading = null; // a press retries
+      $('plot-note').textContent = `The plots could not be loaded (${e.message}): press Developer again to retry.`;
+    }
+  }
+  panel.hidden = false;
+  $('dev-toggle').setAttribute('aria-expanded', 'true');
+  if (plots) plots.refresh();
+  // It opens below the operator screen: bring it into view.
+  panel.scrollIntoView({ block: 'start' });
+}
+$('dev-toggle').onclick = toggleDev;
+// The signal list is the recorder's: there at once, the plots or not.
+for (const [key, label] of SIGNALS) $('signal').append(new Option(label, key));
 
 // Every server message, and who acts on it.
 session.on('open', () => view.connected());
@@ -69,5 +102,5 @@ view.labelTouchpad();
 video.start();
 session.connect();
 setInterval(() => controls.tick(), SEND_PERIOD_MS);
-setInterval(() => { if (view.devShown()) plots.refresh(); }, PLOT_REFRESH_MS);
+setInterval(() => { if (plots && view.devShown()) plots.refresh(); }, PLOT_REFRESH_MS);
 requestAnimationFrame(frame);

@@ -22,7 +22,7 @@ const BATTERY_CRITICAL_PCT = 15;
 export class View {
   /** `session`: read for the welcome, telemetry and modes (session.js);
    * `video`: the camera picture (video.js); `logger`, `recorder`: the
-   * developer interface's (dev.js). */
+   * developer interface's (recorder.js). */
   constructor({ session, video, logger, recorder }) {
     this.session = session;
     this.alerts = new Alerts($('messages'), $('alert-badge'), $('speak'));
