@@ -1,5 +1,6 @@
-// Takes the README's screenshots of the operator and developer interfaces
-// (docs/screenshots/*.png) from the real binary in --sim:
+// Takes the README's screenshots of the operator interface (laptop 1366×768,
+// tablet 768×1024) and the developer interface (docs/screenshots/*.png)
+// from the real binary in --sim:
 //   cargo build && (cd tests/browser && npm ci && node screenshots.js)
 import { mkdirSync } from 'node:fs';
 import { join } from 'node:path';
@@ -10,7 +11,12 @@ mkdirSync(out, { recursive: true });
 const v = await startVehicle();
 const browser = await launchBrowser();
 try {
-  const { page } = await openPage(browser, v.url, { width: 1280, height: 860 });
+  // The tablet in portrait first, watching (nobody in control yet).
+  const tablet = await openPage(browser, v.url, { width: 768, height: 1024 });
+  await tablet.page.waitForTimeout(1500);
+  await tablet.page.screenshot({ path: join(out, 'operator-tablet.png') });
+  await tablet.context.close();
+  const { page } = await openPage(browser, v.url, { width: 1366, height: 768 });
   await takeControlAndArm(page);
   // Drive forward and turn for a while so the readouts and plots have something to show.
   await page.keyboard.down('KeyW');
