@@ -95,7 +95,7 @@ test('the gamepad panel shows the connection, the axes and the buttons live', ()
 }));
 
 test('the button map starts as ArduSub\'s, is kept across a reload, and resets to ArduSub\'s', () => withVehicle(async (v) => {
-  const { page, context } = await open(v);
+  const { page, context, problems } = await open(v);
   await page.click('[data-testid=pad-map-toggle]');
   const value = (i) => page.inputValue(`[data-testid=pad-map] select[data-button="${i}"]`);
   // ArduSub's defaults, on the same physical buttons (W3C standard numbering).
@@ -127,6 +127,25 @@ test('the button map starts as ArduSub\'s, is kept across a reload, and resets t
   await until(async () => (await telemetry(page))?.vehicle_seen, 20000, 'telemetry after the second reload');
   await page.click('[data-testid=pad-map-toggle]');
   assert.equal(await value(9), 'arm');
+  // A damaged store is no crash: not JSON gives ArduSub's map; unknown
+  // functions and buttons are dropped, the rest kept.
+  const reopen = async (stored) => {
+    await page.evaluate((x) => localStorage.setItem('neptunus.gamepad.buttons.v1', x), stored);
+    await page.reload();
+    await until(async () => (await telemetry(page))?.vehicle_seen, 20000, 'telemetry after a reload');
+    await page.click('[data-testid=pad-map-toggle]');
+  };
+  await reopen('{not json');
+  assert.equal(await value(9), 'arm');
+  await reopen(JSON.stringify({ 9: 'launch', 3: 'laser', '-1': 'arm', x: 'arm', 2: 42, 1: 'mode:<b>', 0: 'mode:POSHOLD' }));
+  assert.equal(await value(9), 'none');
+  // A mode from another vehicle's map is kept, and said to be not offered here.
+  assert.equal(await value(0), 'mode:POSHOLD');
+  assert.match(await page.locator('[data-testid=pad-map] select[data-button="0"] option:checked').textContent(), /POSHOLD \(not offered here\)/);
+  assert.equal(await value(3), 'laser');
+  assert.equal(await value(2), 'none');
+  assert.equal(await value(1), 'none');
+  assert.deepEqual(problems, []);
   await context.close();
 }));
 
@@ -180,6 +199,7 @@ test('a remapped button does its new job', () => withVehicle(async (v) => {
   await page.selectOption('[data-testid=pad-map] select[data-button="0"]', 'lights_up');
   await page.click('[data-testid=pad-map-toggle]');
   await gamepadPilot(page);
+  await tap(page, 11); // the pad shows itself (unmapped: R stick click)
   await tap(page, 3);
   await until(async () => (await telemetry(page)).laser === true, 10000, 'laser on from Y');
   await tap(page, 3);
@@ -194,6 +214,7 @@ test('the owner hands control over with the LB + RB + A chord; no single button 
   const b = await openPage(browser, v.url);
   try {
     await gamepadPilot(a.page);
+    await tap(a.page, 11); // the pad shows itself (unmapped: R stick click)
     const tilt0 = (await telemetry(a.page)).tilt;
     await b.page.click('[data-testid=request-control]');
     await a.page.waitForSelector('[data-testid=request-dialog]:not([hidden])', { timeout: 10000 });

@@ -1,15 +1,17 @@
 // Neptunus operator interface: the wiring. Creates the session (session.js:
 // the WebSocket, no DOM), the view (view.js: renders what the server says)
 // and the controls (controls.js: what the operator does, sent at 20 Hz),
-// with the input devices (input.js) and the developer interface (dev.js),
-// and routes each server message to whoever shows it. Read this file first;
-// docs/ARCHITECTURE.md is the map of the whole program.
+// with the input devices (input.js; the gamepad's buttons: gamepad.js)
+// and the developer interface (dev.js), and routes each server message to
+// whoever shows it.
+// Read this file first; docs/ARCHITECTURE.md is the map of the whole program.
 import { Input } from '/js/input.js';
 import { Recorder, Plots, Logger, CATEGORIES } from '/js/dev.js';
 import { Session } from '/js/session.js';
 import { View } from '/js/view.js';
 import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
 import { Video } from '/js/video.js';
+import { Gamepad } from '/js/gamepad.js';
 
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
@@ -30,8 +32,9 @@ const plots = new Plots($('plots'), recorder, (text) => { $('plot-note').textCon
 const video = new Video($('video'));
 const view = new View({ session, video, logger, recorder });
 const controls = new Controls({ session, view, input, logger, recorder, plots });
+const gamepad = new Gamepad({ session, view, controls, input });
 // Exposed for the browser tests and for poking around in the console.
-window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots, logger };
+window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots, logger, gamepad };
 
 // Every server message, and who acts on it.
 session.on('open', () => view.connected());
@@ -39,6 +42,7 @@ session.on('down', () => view.disconnected());
 session.on('welcome', (m) => {
   view.welcome(m, (mode) => controls.pickMode(mode));
   controls.welcomed();
+  gamepad.welcomed();
 });
 session.on('telemetry', (t, prev) => {
   recorder.add(t, controls.lastCmd);
@@ -60,11 +64,13 @@ session.on('error', (m) => view.message(4, `server: ${m.message}`));
 function frame() {
   // Polled every animation frame: no gamepad event ordering to go wrong.
   input.pollGamepad();
+  gamepad.frame();
   view.frame();
   requestAnimationFrame(frame);
 }
 
 controls.bind();
+gamepad.bind();
 view.labelTouchpad();
 video.start();
 session.connect();
