@@ -1,9 +1,9 @@
 // Neptunus operator interface: the wiring. Creates the session (session.js:
 // the WebSocket, no DOM), the view (view.js: renders what the server says)
 // and the controls (controls.js: what the operator does, sent at 20 Hz),
-// with the input devices (input.js; the gamepad's buttons: gamepad.js)
-// and the developer interface (dev.js), and routes each server message to
-// whoever shows it.
+// with the input devices (input.js; the gamepad's buttons: gamepad.js),
+// snapshot, recording and the logs list (recording.js) and the developer
+// interface (dev.js), and routes each server message to whoever shows it.
 // Read this file first; docs/ARCHITECTURE.md is the map of the whole program.
 import { Input } from '/js/input.js';
 import { Recorder, Plots, Logger, CATEGORIES } from '/js/dev.js';
@@ -12,6 +12,7 @@ import { View } from '/js/view.js';
 import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
 import { Video } from '/js/video.js';
 import { Gamepad } from '/js/gamepad.js';
+import { Recording } from '/js/recording.js';
 
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
@@ -33,8 +34,9 @@ const video = new Video($('video'));
 const view = new View({ session, video, logger, recorder });
 const controls = new Controls({ session, view, input, logger, recorder, plots });
 const gamepad = new Gamepad({ session, view, controls, input });
+const recording = new Recording({ session, view, video });
 // Exposed for the browser tests and for poking around in the console.
-window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots, logger, gamepad };
+window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots, logger, gamepad, recording };
 
 // Every server message, and who acts on it.
 session.on('open', () => view.connected());
@@ -43,6 +45,7 @@ session.on('welcome', (m) => {
   view.welcome(m, (mode) => controls.pickMode(mode));
   controls.welcomed();
   gamepad.welcomed();
+  recording.listLogs();
 });
 session.on('telemetry', (t, prev) => {
   recorder.add(t, controls.lastCmd);
@@ -57,7 +60,7 @@ session.on('ack', (m) => view.ack(m));
 session.on('control', (m) => view.control(m));
 session.on('control_request', (m) => view.controlRequest(m));
 session.on('request_pending', (m) => view.setPending(m));
-session.on('identity', () => view.showRights());
+session.on('identity', () => { view.showRights(); recording.listLogs(); });
 session.on('login_result', (m) => view.message(m.ok ? 6 : 4, m.message));
 session.on('error', (m) => view.message(4, `server: ${m.message}`));
 
@@ -71,6 +74,7 @@ function frame() {
 
 controls.bind();
 gamepad.bind();
+recording.bind();
 view.labelTouchpad();
 video.start();
 session.connect();
