@@ -84,9 +84,12 @@ export async function launchBrowser() {
   });
 }
 
-/** A page on the HMI that records console errors and failed requests. */
-export async function openPage(browser, url, viewport = { width: 1280, height: 800 }) {
+/** A page on the HMI that records console errors and failed requests.
+ * `initScript`: run in the page before its own scripts (the gamepad tests'
+ * stand-in for `navigator.getGamepads`). */
+export async function openPage(browser, url, viewport = { width: 1280, height: 800 }, { initScript } = {}) {
   const context = await browser.newContext({ viewport, acceptDownloads: true });
+  if (initScript) await context.addInitScript(initScript);
   const page = await context.newPage();
   const problems = [];
   page.on('console', (m) => { if (m.type() === 'error') problems.push(`console: ${m.text()}`); });

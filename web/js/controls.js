@@ -184,6 +184,7 @@ export class Controls {
     document.querySelectorAll('input[name=run]').forEach((r) => r.addEventListener('change', () => {
       if (!r.checked) return;
       this.safetyStop(null);
+      view.pickedRun(r.value);
       send({ type: 'run_mode', mode: r.value });
     }));
     $('ap-form').onsubmit = (e) => {

@@ -1,7 +1,8 @@
 // Neptunus operator interface: the wiring. Creates the session (session.js:
 // the WebSocket, no DOM), the view (view.js: renders what the server says)
 // and the controls (controls.js: what the operator does, sent at 20 Hz),
-// with the input devices (input.js) and the developer interface (the
+// with the input devices (input.js; the gamepad's buttons: gamepad.js),
+// snapshot, recording and the logs list (recording.js) and the developer interface (the
 // recorder and logger of recorder.js from connection on; the plots of
 // dev.js loaded when the view first opens), and routes each server message
 // to whoever shows it. Read this file first; docs/ARCHITECTURE.md is the
@@ -12,6 +13,8 @@ import { Session } from '/js/session.js';
 import { View } from '/js/view.js';
 import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
 import { Video } from '/js/video.js';
+import { Gamepad } from '/js/gamepad.js';
+import { Recording } from '/js/recording.js';
 
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
@@ -31,9 +34,11 @@ const logger = new Logger($('log'), $('categories'));
 const video = new Video($('video'));
 const view = new View({ session, video, logger, recorder });
 const controls = new Controls({ session, view, input, logger });
+const gamepad = new Gamepad({ session, view, controls, input });
+const recording = new Recording({ session, view, video });
 // Exposed for the browser tests and for poking around in the console
 // (`plots` once the developer view has been opened).
-window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots: null, logger };
+window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots: null, logger, gamepad, recording };
 
 /** The developer view's plots (dev.js with uPlot, ~50 KB compressed): fetched
  * on the first open only. The panel shows once they can be used. */
@@ -72,6 +77,8 @@ session.on('down', () => view.disconnected());
 session.on('welcome', (m) => {
   view.welcome(m, (mode) => controls.pickMode(mode));
   controls.welcomed();
+  gamepad.welcomed();
+  recording.listLogs();
 });
 session.on('telemetry', (t, prev) => {
   recorder.add(t, controls.lastCmd);
@@ -86,18 +93,21 @@ session.on('ack', (m) => view.ack(m));
 session.on('control', (m) => view.control(m));
 session.on('control_request', (m) => view.controlRequest(m));
 session.on('request_pending', (m) => view.setPending(m));
-session.on('identity', () => view.showRights());
+session.on('identity', () => { view.showRights(); recording.listLogs(); });
 session.on('login_result', (m) => view.message(m.ok ? 6 : 4, m.message));
 session.on('error', (m) => view.message(4, `server: ${m.message}`));
 
 function frame() {
   // Polled every animation frame: no gamepad event ordering to go wrong.
   input.pollGamepad();
+  gamepad.frame();
   view.frame();
   requestAnimationFrame(frame);
 }
 
 controls.bind();
+gamepad.bind();
+recording.bind();
 view.labelTouchpad();
 video.start();
 session.connect();

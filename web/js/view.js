@@ -18,6 +18,8 @@ export const VIDEO_LOST_MS = 1000;
 /** Battery: the fraction left below which the widget warns, and turns red. */
 const BATTERY_LOW_PCT = 30;
 const BATTERY_CRITICAL_PCT = 15;
+/** How long a run-mode pick shows before the vehicle's own run mode wins again. */
+const RUN_PICK_MS = 3000;
 
 export class View {
   /** `session`: read for the welcome, telemetry and modes (session.js);
@@ -33,6 +35,12 @@ export class View {
     this.online = false;
     this.request = null; // the owner's prompt: { requester, deadline }
     this.pending = null; // this page's own request: { owner, deadline }
+    this.runPick = null; // a run mode the operator picked: { mode, until }
+  }
+
+  /** The operator picked run mode `mode`; the radios keep it until the vehicle answers. */
+  pickedRun(mode) {
+    this.runPick = { mode, until: performance.now() + RUN_PICK_MS };
   }
 
   // ---- connection and session --------------------------------------------
@@ -134,8 +142,12 @@ export class View {
     $('mode-name').textContent = label;
     $('state').className = t.armed ? 'armed' : 'disarmed';
     $('sim-banner').hidden = !t.simulated;
-    // The radios show the vehicle's run mode, whatever was clicked.
-    document.querySelectorAll('input[name=run]').forEach((r) => { r.checked = (r.value === 'simulator') === !!t.simulated; });
+    // The radios show the vehicle's run mode; a pick waits for the
+    // vehicle's answer (RUN_PICK_MS at most), then the vehicle's state wins.
+    const vehicleRun = t.simulated ? 'simulator' : 'normal';
+    const pick = this.runPick;
+    if (pick && (pick.mode === vehicleRun || performance.now() > pick.until)) this.runPick = null;
+    if (!this.runPick) document.querySelectorAll('input[name=run]').forEach((r) => { r.checked = r.value === vehicleRun; });
     const h = t.health;
     setPill('link', `board: ${!t.vehicle_seen ? 'no vehicle' : h ? (h.board_link ? 'link up' : 'LINK DOWN') : '—'}`, h && h.board_link && t.vehicle_seen ? 'ok' : 'bad');
     this.failsafe(t);

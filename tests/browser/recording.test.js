@@ -1,0 +1,109 @@
+// Snapshot, video recording and log downloads (issue 14 item 10), tested
+// against the real binary (`--sim`, whose synthetic camera streams MJPEG)
+// in Debian's headless Chromium. The files checked are the ones the
+// browser downloads. Waits poll a condition with a deadline.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync } from 'node:fs';
+import { startVehicle, launchBrowser, openPage, telemetry, until } from './harness.js';
+
+let browser;
+before(async () => { browser = await launchBrowser(); });
+after(async () => { await browser?.close(); });
+
+async function withVehicle(body, args = [], opts = {}) {
+  const v = await startVehicle(args, opts);
+  try {
+    await body(v);
+  } catch (e) {
+    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
+    throw e;
+  } finally {
+    await v.stop();
+  }
+}
+
+const hex = (buf, n) => [...buf.subarray(0, n)].map((b) => b.toString(16).padStart(2, '0')).join(' ');
+
+async function download(page, selector) {
+  const [d] = await Promise.all([page.waitForEvent('download', { timeout: 15000 }), page.click(selector)]);
+  return { name: d.suggestedFilename(), bytes: readFileSync(await d.path()) };
+}
+
+test('the snapshot button saves the picture as a JPEG named with the time and the depth', () => withVehicle(async (v) => {
+  const { page, context, problems } = await openPage(browser, v.url);
+  await until(() => page.evaluate(() => window.neptunus.video.frames > 2), 15000, 'video frames');
+  const t = await until(async () => { const x = await telemetry(page); return Number.isFinite(x.depth_m) && x; }, 10000, 'depth telemetry');
+  assert.ok(await page.isVisible('[data-testid=snapshot]'));
+  const before = new Date();
+  const { name, bytes } = await download(page, '[data-testid=snapshot]');
+  const m = /^neptunus-(\d{4}-\d\d-\d\dT\d\d-\d\d-\d\dZ)-depth-(-?\d+\.\d\d)m\.jpg$/.exec(name);
+  assert.ok(m, `file name ${name}`);
+  const stamp = new Date(m[1].replace(/T(\d\d)-(\d\d)-(\d\d)Z/, 'T$1:$2:$3Z'));
+  assert.ok(Math.abs(stamp - before) < 5000, `time in the name ${m[1]}, now ${before.toISOString()}`);
+  assert.ok(Math.abs(Number(m[2]) - t.depth_m) < 0.2, `depth in the name ${m[2]}, telemetry ${t.depth_m}`);
+  assert.equal(hex(bytes, 3), 'ff d8 ff', 'JPEG start of image');
+  assert.equal(hex(bytes.subarray(bytes.length - 2), 2), 'ff d9', 'JPEG end of image');
+  // The picture itself, at the camera's size, not a blank canvas.
+  const size = await page.evaluate(() => [document.getElementById('video').width, document.getElementById('video').height]);
+  assert.ok(size[0] > 0 && bytes.length > 2000, `${bytes.length} bytes for a ${size} picture`);
+  assert.deepEqual(problems, []);
+  await context.close();
+}));
+
+test('the record button records the displayed video as WebM, shows REC with the time, and downloads on stop', () => withVehicle(async (v) => {
+  const { page, context, problems } = await openPage(browser, v.url);
+  await until(() => page.evaluate(() => window.neptunus.video.frames > 2), 15000, 'video frames');
+  assert.ok(await page.isHidden('[data-testid=rec-indicator]'));
+  await page.click('[data-testid=record]');
+  await until(() => page.isVisible('[data-testid=rec-indicator]'), 5000, 'the REC indicator');
+  assert.match(await page.textContent('[data-testid=rec-indicator]'), /REC 0:0\d/);
+  assert.equal(await page.getAttribute('[data-testid=record]', 'aria-pressed'), 'true');
+  await until(async () => /REC 0:0[2-9]/.test(await page.textContent('[data-testid=rec-indicator]')), 10000, 'two seconds recorded');
+  const { name, bytes } = await download(page, '[data-testid=record]');
+  assert.match(name, /^neptunus-\d{4}-\d\d-\d\dT\d\d-\d\d-\d\dZ-\d+s\.webm$/);
+  assert.equal(hex(bytes, 4), '1a 45 df a3', 'EBML header (WebM)');
+  assert.ok(bytes.length > 4000, `${bytes.length} bytes of video`);
+  assert.ok(bytes.includes(Buffer.from('webm')), 'DocType webm');
+  assert.ok(await page.isHidden('[data-testid=rec-indicator]'));
+  assert.equal(await page.getAttribute('[data-testid=record]', 'aria-pressed'), 'false');
+  assert.deepEqual(problems, []);
+  await context.close();
+}));
+
+test('the logs list shows the vehicle\'s tlog and event log with sizes, and a link downloads the tlog', () => withVehicle(async (v) => {
+  const { page, context, problems } = await openPage(browser, v.url);
+  const api = await page.evaluate(async () => (await fetch('/api/logs')).json());
+  const tlog = api.logs.find((l) => l.kind === 'tlogs');
+  assert.ok(tlog, JSON.stringify(api));
+  await page.click('[data-testid=logs-refresh]');
+  const link = page.locator(`[data-testid=logs-list] a[href="${tlog.url}"]`);
+  await until(() => link.count(), 5000, 'the tlog in the list');
+  assert.equal((await link.textContent()).trim(), tlog.name);
+  const row = await link.locator('xpath=..').textContent();
+  assert.match(row, /\d+(\.\d)? (B|KiB|MiB)/, row);
+  if (api.logs.some((l) => l.kind === 'events')) {
+    assert.ok(await page.locator('[data-testid=logs-list] a[href^="/api/logs/events/"]').count() > 0);
+  }
+  const { name, bytes } = await download(page, `[data-testid=logs-list] a[href="${tlog.url}"]`);
+  assert.equal(name, tlog.name);
+  assert.ok(bytes.length > 0, 'the tlog has bytes');
+  // A tlog record: an 8-byte time, then a MAVLink 2 frame.
+  assert.equal(bytes[8], 0xfd, `first record ${hex(bytes, 12)}`);
+  assert.deepEqual(problems, []);
+  await context.close();
+}));
+
+test('a watcher is told the logs are for the pilot, and the page asks the server for nothing it would refuse', () => withVehicle(async (v) => {
+  const { page, context, problems } = await openPage(browser, v.url);
+  await until(async () => /watching/.test(await page.textContent('[data-testid=me]')), 10000, 'a watching session');
+  await until(async () => /log in/i.test(await page.textContent('[data-testid=logs]')), 5000, 'the note');
+  assert.equal(await page.locator('[data-testid=logs-list] a').count(), 0);
+  await page.click('[data-testid=logs-refresh]');
+  await page.waitForTimeout(300);
+  assert.deepEqual(problems, [], 'the page asked for nothing it may not have');
+  // The server's rule agrees: logs are the pilot's.
+  const status = await page.evaluate(async () => (await fetch('/api/logs')).status);
+  assert.equal(status, 401);
+  await context.close();
+}, [], { password: 'tide-pool-42', hmiToml: 'open_control = "none"' }));
