@@ -59,6 +59,7 @@ export async function startVehicle(extraArgs = [], { password, hmiToml, toml, ht
   }, 30000, 'the HMI address file');
   return {
     url: `http://${addr}/`,
+    pid: child.pid,
     dir,
     stderr: () => readFileSync(join(dir, 'stderr.txt'), 'utf8'),
     async stop() {

@@ -272,3 +272,27 @@ test('a failsafe shows its reason on the HUD and in the alerts, also to a pilot 
     await b.context.close();
   }
 }));
+
+test('a vehicle that hangs with its socket open: the HUD turns stale within 2 s and live again when it resumes', () => withVehicle(async (v) => {
+  const { page, context } = await openPage(browser, v.url);
+  await until(async () => !(await page.getAttribute('[data-testid=state]', 'class')).includes('stale')
+    && !(await page.getAttribute('[data-testid=battery]', 'class')).includes('stale'), 10000, 'live HUD');
+  const stale = () => page.evaluate(() => ({
+    state: document.querySelector('[data-testid=state]').classList.contains('stale'),
+    battery: document.querySelector('[data-testid=battery]').classList.contains('stale'),
+    attitudeAge: window.neptunus.view.ageOf('attitude'),
+  }));
+  process.kill(v.pid, 'SIGSTOP');
+  const frozen = Date.now();
+  try {
+    await until(async () => { const s = await stale(); return s.state && s.battery && s.attitudeAge > 1000; }, 3000, 'the HUD marked stale');
+    assert.ok(Date.now() - frozen <= 2000, `stale after ${Date.now() - frozen} ms`);
+    // The socket is still open: not DISCONNECTED, but the picture is lost too.
+    await until(() => page.isVisible('[data-testid=video-lost]'), 3000, 'the picture marked lost');
+  } finally {
+    process.kill(v.pid, 'SIGCONT');
+  }
+  await until(async () => { const s = await stale(); return !s.state && !s.battery && s.attitudeAge < 1000; }, 10000, 'the HUD live again');
+  await until(() => page.isHidden('[data-testid=video-lost]'), 10000, 'the picture back');
+  await context.close();
+}));
