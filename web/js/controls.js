@@ -155,9 +155,12 @@ export class Controls {
     };
     // A button clicked with the pointer gives the focus back, so the next
     // Space or Enter drives nothing by surprise and the keys keep driving.
+    // The same for radios, checkboxes and sliders (a focused slider would
+    // also stop following the vehicle's value).
     document.addEventListener('click', (e) => {
-      const b = e.target.closest && e.target.closest('button');
-      if (b && e.detail > 0) b.blur();
+      if (e.detail === 0) return;
+      const a = document.activeElement;
+      if (a && (a.tagName === 'BUTTON' || (a.tagName === 'INPUT' && ['radio', 'checkbox', 'range'].includes(a.type)))) a.blur();
     });
     $('login').onsubmit = (e) => {
       e.preventDefault();
