@@ -627,3 +627,62 @@ fn nobody_in_control_nobody_moves_the_gimbal_unless_allowed_to_claim() {
     );
     assert!(tilts(&out).is_empty());
 }
+
+#[test]
+fn a_pitch_rate_slews_while_repeated_and_stops_after_a_second() {
+    let mut r = owned();
+    let rate = |pitch_rate_dps: f32| {
+        MavMessage::GIMBAL_MANAGER_SET_PITCHYAW(GIMBAL_MANAGER_SET_PITCHYAW_DATA {
+            target_system: 1,
+            target_component: 1,
+            flags: GimbalManagerFlags::empty(),
+            gimbal_device_id: 0,
+            pitch: f32::NAN,
+            yaw: f32::NAN,
+            pitch_rate: pitch_rate_dps.to_radians(),
+            yaw_rate: f32::NAN,
+        })
+    };
+    // 18 deg/s = 100 us/s, repeated every 0.5 s for 2 s.
+    for _ in 0..4 {
+        r.msg(A, rate(18.0));
+        r.run(Duration::from_millis(500));
+    }
+    let moved = r.v.tilt_us();
+    assert!(
+        (1695..=1701).contains(&moved),
+        "after 2 s at 100 us/s: {moved}"
+    );
+    // No repeat: it stops within the hold (1 s).
+    r.run(Duration::from_secs(3));
+    let stopped = r.v.tilt_us();
+    assert!(stopped - moved <= 101, "{moved} -> {stopped}");
+    r.run(Duration::from_secs(1));
+    assert_eq!(
+        r.v.tilt_us(),
+        stopped,
+        "the rate must stop without its repeats"
+    );
+    // A stop (rate 0) stops at once; a non-owner's rate does nothing.
+    r.msg(A, rate(-18.0));
+    r.run(Duration::from_millis(300));
+    r.msg(A, rate(0.0));
+    let here = r.v.tilt_us();
+    r.run(Duration::from_millis(500));
+    assert_eq!(r.v.tilt_us(), here);
+    r.msg(B, rate(-90.0));
+    let out = r.run(Duration::from_millis(500));
+    assert!(tilts(&out).is_empty(), "a non-owner's rate moved the tilt");
+    // By command: p3 the pitch rate, p1 NaN.
+    let out = r.cmd(
+        A,
+        MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW,
+        &[f32::NAN, f32::NAN, -18.0],
+    );
+    assert_eq!(
+        ack_of(&out, MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    r.run(Duration::from_millis(500));
+    assert!(r.v.tilt_us() < here - 40, "{here} -> {}", r.v.tilt_us());
+}

@@ -287,7 +287,7 @@ impl Vehicle {
             resolution_v: h,
             bitrate,
             name: chars(STREAM_NAME),
-            uri: chars(&uri.chars().take(160).collect::<String>()),
+            uri: chars(uri),
             encoding: VideoStreamEncoding::VIDEO_STREAM_ENCODING_H264,
             ..Default::default()
         })

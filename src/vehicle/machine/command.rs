@@ -97,7 +97,7 @@ impl Vehicle {
             }
             C::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => {
                 only(match self.check_control(from, Control::Command, now, out) {
-                    Ok(()) => self.gimbal_pitchyaw_command(p, out),
+                    Ok(()) => self.gimbal_pitchyaw_command(p, now, out),
                     Err(why) => self.refuse_command(from, "gimbal pitch", why, now, out),
                 })
             }

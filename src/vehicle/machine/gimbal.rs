@@ -14,9 +14,15 @@
 //! after the authority check: a non-owner's command is refused with its
 //! reason, its messages are counted and ignored.
 //!
+//! A pitch rate (angle NaN, rate given: what QGC's gimbal buttons send)
+//! slews the tilt each tick while it is repeated, and stops 1 s after the
+//! last request.
+//!
 //! The tilt servo turns with the vehicle (it is not stabilised), so the
 //! gimbal "follows" in pitch; yaw and roll do not exist. Angles map to the
 //! servo as DO_MOUNT_CONTROL maps them: ±90° over ±500 µs around neutral.
+
+use std::time::Duration;
 
 use super::authority::Control;
 use super::{NEUTRAL_US, Now, Output, Sender, Vehicle, given};
@@ -27,6 +33,20 @@ use crate::dialect::neptunus::*;
 pub const GIMBAL_DEVICE_ID: u8 = 1;
 /// Pulse width per degree of tilt (±90° over ±500 µs).
 const US_PER_DEG: f64 = 500.0 / 90.0;
+/// A pitch rate holds this long after its last request (QGC repeats a held
+/// button's rate every 0.5 s), so a lost "stop" cannot slew the tilt away.
+const RATE_HOLD: Duration = Duration::from_secs(1);
+/// The fastest pitch rate accepted (deg/s).
+const MAX_RATE_DPS: f64 = 90.0;
+
+/// A pitch rate being applied.
+#[derive(Debug, Default)]
+pub(super) struct Gimbal {
+    rate_dps: f64,
+    until: Duration,
+    /// Fractional microseconds not yet applied.
+    accum_us: f64,
+}
 
 /// Tilt angle (degrees, up positive) of a servo pulse width.
 pub(super) fn tilt_deg(us: u16) -> f64 {
@@ -40,11 +60,13 @@ pub(super) fn tilt_us_of(deg: f64) -> f64 {
 
 impl Vehicle {
     /// MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW: p1 pitch (deg, NaN: unchanged),
-    /// p2 yaw (ignored: no yaw axis), p3/p4 rates (not supported), p5
-    /// flags, p7 gimbal device id (0 all, or ours). After the authority check.
+    /// p2 yaw (ignored: no yaw axis), p3 pitch rate (deg/s, used when p1
+    /// is NaN), p4 yaw rate (ignored), p5 flags, p7 gimbal device id (0 all,
+    /// or ours). After the authority check.
     pub(super) fn gimbal_pitchyaw_command(
         &mut self,
         p: [f32; 7],
+        now: Now,
         out: &mut Vec<Output>,
     ) -> MavResult {
         let device = given(p[6]).unwrap_or(0.0);
@@ -52,14 +74,17 @@ impl Vehicle {
             return MavResult::MAV_RESULT_DENIED;
         }
         let flags = given(p[4]).map_or(0, |f| f.max(0.0) as u32);
-        self.gimbal_pitch(given(p[0]), flags, out)
+        self.gimbal_pitch(given(p[0]), given(p[2]), flags, now, out)
     }
 
-    /// Pitch in degrees (or the neutral/retract flags), to the tilt servo.
+    /// Pitch in degrees (or the neutral/retract flags) to the tilt servo;
+    /// with no angle, a pitch rate in deg/s (applied by [`Vehicle::gimbal_tick`]).
     fn gimbal_pitch(
         &mut self,
         pitch_deg: Option<f32>,
+        rate_dps: Option<f32>,
         flags: u32,
+        now: Now,
         out: &mut Vec<Output>,
     ) -> MavResult {
         let neutral = GimbalManagerFlags::GIMBAL_MANAGER_FLAGS_NEUTRAL.bits()
@@ -69,13 +94,37 @@ impl Vehicle {
         } else {
             pitch_deg.filter(|d| d.is_finite()).map(f64::from)
         };
-        match deg {
-            Some(d) => {
+        let rate = rate_dps.filter(|r| r.is_finite()).map(f64::from);
+        match (deg, rate) {
+            (Some(d), _) => {
+                self.gimbal.rate_dps = 0.0;
                 self.set_tilt_us(tilt_us_of(d.clamp(-180.0, 180.0)).round(), out);
                 MavResult::MAV_RESULT_ACCEPTED
             }
-            // Rates only (or nothing): this servo has no rate control here.
-            None => MavResult::MAV_RESULT_UNSUPPORTED,
+            (None, Some(r)) => {
+                self.gimbal.rate_dps = r.clamp(-MAX_RATE_DPS, MAX_RATE_DPS);
+                self.gimbal.until = now.mono + RATE_HOLD;
+                MavResult::MAV_RESULT_ACCEPTED
+            }
+            (None, None) => MavResult::MAV_RESULT_DENIED,
+        }
+    }
+
+    /// Every tick: a pitch rate requested within [`RATE_HOLD`] moves the tilt.
+    pub(super) fn gimbal_tick(&mut self, now: Now, dt: Duration, out: &mut Vec<Output>) {
+        if self.gimbal.rate_dps == 0.0 {
+            return;
+        }
+        if now.mono >= self.gimbal.until {
+            self.gimbal.rate_dps = 0.0;
+            self.gimbal.accum_us = 0.0;
+            return;
+        }
+        self.gimbal.accum_us += self.gimbal.rate_dps * US_PER_DEG * dt.as_secs_f64();
+        if self.gimbal.accum_us.abs() >= 1.0 {
+            let delta = self.gimbal.accum_us.trunc();
+            self.gimbal.accum_us -= delta;
+            self.set_tilt_us(f64::from(self.payload.tilt_us) + delta, out);
         }
     }
 
@@ -89,7 +138,7 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        let (what, device, flags, pitch) = match msg {
+        let (what, device, flags, pitch, rate) = match msg {
             MavMessage::GIMBAL_MANAGER_SET_ATTITUDE(m) => {
                 let [w, x, y, z] = m.q;
                 // Pitch of the quaternion (aerospace order), NaN if it has none.
@@ -100,6 +149,7 @@ impl Vehicle {
                     m.gimbal_device_id,
                     m.flags.bits(),
                     pitch,
+                    m.angular_velocity_y.to_degrees(),
                 )
             }
             MavMessage::GIMBAL_MANAGER_SET_PITCHYAW(m) => (
@@ -107,6 +157,7 @@ impl Vehicle {
                 m.gimbal_device_id,
                 m.flags.bits(),
                 m.pitch.to_degrees(),
+                m.pitch_rate.to_degrees(),
             ),
             _ => return,
         };
@@ -117,7 +168,7 @@ impl Vehicle {
             self.refuse_input(from, what, why, now, out);
             return;
         }
-        self.gimbal_pitch(Some(pitch), flags, out);
+        self.gimbal_pitch(Some(pitch), Some(rate), flags, now, out);
     }
 
     /// The gimbal messages `build` makes (None for any other id).

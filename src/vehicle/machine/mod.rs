@@ -343,6 +343,7 @@ pub struct Vehicle {
     board: board::BoardState,
     payload: payload::Payload,
     camera: camera::Camera,
+    gimbal: gimbal::Gimbal,
     pilot: driving::Pilot,
     auth: authority::Authority,
     failsafes: failsafe::Failsafes,
@@ -408,6 +409,7 @@ impl Vehicle {
             board: board::BoardState::default(),
             payload: payload::Payload::default(),
             camera: camera::Camera::default(),
+            gimbal: gimbal::Gimbal::default(),
             pilot,
             auth: authority::Authority::default(),
             failsafes: failsafe::Failsafes::default(),
@@ -557,6 +559,7 @@ impl Vehicle {
             .map_or(Duration::ZERO, |t| now.mono.saturating_sub(t));
         self.clock.last_tick = Some(now.mono);
         self.drive_tick(now, dt, out);
+        self.gimbal_tick(now, dt, out);
         // Failsafes act before the owner is dropped for silence, so a pending
         // request is granted only after the GCS failsafe has acted.
         self.failsafe_tick(now, out);
