@@ -609,6 +609,16 @@ fn non_owner_cannot_move_the_gimbal() {
     assert_eq!(r.v.refused_inputs(), refused_before + 1, "counted");
     assert!(has_text(&out, "GIMBAL_MANAGER_SET_PITCHYAW"), "{out:?}");
     assert_eq!(r.v.tilt_us(), before);
+    // Taking gimbal control (what QGC sends first) is taking the vehicle's.
+    let configure = MavCmd::MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE;
+    let out = r.cmd(B, configure, &[-2.0, -2.0, -1.0, -1.0]);
+    assert_eq!(
+        ack_of(&out, configure),
+        MavResult::MAV_RESULT_NOT_IN_CONTROL
+    );
+    assert_eq!(r.v.owner(), Some(255));
+    let out = r.cmd(A, configure, &[-2.0, -2.0, -1.0, -1.0]);
+    assert_eq!(ack_of(&out, configure), MavResult::MAV_RESULT_ACCEPTED);
 }
 
 #[test]

@@ -95,6 +95,14 @@ impl Vehicle {
                     Err(why) => self.refuse_command(from, "command", why, now, out),
                 })
             }
+            // Taking the gimbal (QGC asks before moving it): gimbal control
+            // is vehicle control, so this only says whether the asker has it.
+            C::MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE => {
+                only(match self.check_control(from, Control::Command, now, out) {
+                    Ok(()) => R::MAV_RESULT_ACCEPTED,
+                    Err(why) => self.refuse_command(from, "gimbal control", why, now, out),
+                })
+            }
             C::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => {
                 only(match self.check_control(from, Control::Command, now, out) {
                     Ok(()) => self.gimbal_pitchyaw_command(p, now, out),
