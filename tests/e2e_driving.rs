@@ -98,7 +98,7 @@ impl Sim {
         let end = Instant::now() + within;
         while Instant::now() < end {
             for fr in self.frames() {
-                if fr.sysid == 1 && f(&fr.msg) {
+                if fr.sysid == 1 && fr.compid == 1 && f(&fr.msg) {
                     return Some(fr.msg);
                 }
             }
@@ -146,7 +146,7 @@ impl Sim {
             seen.extend(
                 self.frames()
                     .into_iter()
-                    .filter(|f| f.sysid == 1)
+                    .filter(|f| f.sysid == 1 && f.compid == 1)
                     .map(|f| f.msg),
             );
         }
@@ -257,7 +257,7 @@ fn per_thruster_message_spins_only_that_thruster() {
         seen.extend(
             sim.frames()
                 .into_iter()
-                .filter(|f| f.sysid == 1)
+                .filter(|f| f.sysid == 1 && f.compid == 1)
                 .map(|f| f.msg),
         );
     }

@@ -156,7 +156,7 @@ fn recv_udp(sock: &UdpSocket) -> Vec<MavMessage> {
         decode_datagram(&buf[..n], &mut FrameStats::default(), &mut out);
     }
     out.into_iter()
-        .filter(|f| f.sysid == 1)
+        .filter(|f| f.sysid == 1 && f.compid == 1)
         .map(|f| f.msg)
         .collect()
 }
@@ -222,7 +222,7 @@ impl TcpGcs {
             }
             let msgs: Vec<MavMessage> = frames
                 .into_iter()
-                .filter(|f| f.sysid == 1)
+                .filter(|f| f.sysid == 1 && f.compid == 1)
                 .map(|f| f.msg)
                 .collect();
             if done(&msgs) {

@@ -81,8 +81,16 @@ impl Io {
                 Output::Text { to, topic, msg } => {
                     self.send_message(to, &msg, Some(topic), sysid, now)
                 }
+                // Another component of ours (the camera): the browser HMI
+                // talks to the autopilot alone, so on the wire only.
+                Output::SendAs { to, compid, msg } => {
+                    if !self.hmi.only_hmi(to) {
+                        self.send_frame(to, now, |seq| encode_v2(sysid, compid, seq, &msg));
+                    }
+                }
                 Output::AckUnknown {
                     to,
+                    compid,
                     command,
                     result,
                     target_system,
@@ -90,7 +98,7 @@ impl Io {
                 } => self.send_frame(to, now, |seq| {
                     encode_command_ack_raw(
                         sysid,
-                        COMPONENT_ID,
+                        compid,
                         seq,
                         command,
                         result,

@@ -90,7 +90,8 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let z_centered = crate::hmi::z_centered_by(profiles.clone());
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
         .with_profiles(profiles)
-        .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max);
+        .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
+        .with_camera(camera_spec(&settings.camera));
     let (event_log, log_problem) =
         EventLog::start_or_degraded(EventLogConfig::new(settings.data_dir.join("events")));
     if let Some(e) = log_problem {
@@ -189,4 +190,15 @@ impl Tasks {
             board.shutdown().await;
         }
     }
+}
+
+/// The MAVLink camera component exists when a camera source is configured;
+/// its nominal picture is the configured size and rate (the running
+/// stream's, once the stream reports it).
+fn camera_spec(c: &crate::camera::CameraConfig) -> Option<crate::vehicle::machine::CameraSpec> {
+    (c.source != crate::camera::SourceKind::None).then(|| crate::vehicle::machine::CameraSpec {
+        width: u16::try_from(c.width).unwrap_or(u16::MAX),
+        height: u16::try_from(c.height).unwrap_or(u16::MAX),
+        fps: c.fps as f32,
+    })
 }

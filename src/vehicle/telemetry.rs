@@ -35,6 +35,9 @@ pub const STREAMABLE: &[(u32, f64)] = &[
     (NEPTUNUS_ESTIMATE_DATA::ID, 10.0),
     // Setpoints and controller outputs.
     (NEPTUNUS_AUTOPILOT_DATA::ID, 4.0),
+    // The camera tilt as a gimbal (protocol v2): QGC needs both to show it.
+    (GIMBAL_MANAGER_STATUS_DATA::ID, 1.0),
+    (GIMBAL_DEVICE_ATTITUDE_STATUS_DATA::ID, 5.0),
 ];
 
 /// Legacy REQUEST_DATA_STREAM groups, as ArduPilot maps them for a submarine.
@@ -96,7 +99,7 @@ pub struct Schedule {
 /// No message is streamed faster than 50 Hz, whoever asks: the board
 /// reports navigation at 10 Hz, so faster only repeats values, and 50 Hz is
 /// the top of ArduPilot's own SRn_* stream-rate range. It bounds what one
-/// request can cost an endpoint (15 messages at 50 Hz is about 30 kB/s).
+/// request can cost an endpoint (17 messages at 50 Hz is about 35 kB/s).
 pub const MIN_INTERVAL: Duration = Duration::from_millis(20);
 
 /// The slowest a message may be made, if it must be sent at all: HEARTBEAT

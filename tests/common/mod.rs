@@ -404,7 +404,8 @@ impl Gcs {
         }
     }
 
-    /// The vehicle's messages in one datagram, or none after a short wait.
+    /// The vehicle's (its autopilot's, component 1: not the camera
+    /// component's) messages in one datagram, or none after a short wait.
     pub fn recv(&self) -> Vec<MavMessage> {
         let mut buf = [0u8; 4096];
         let mut out = Vec::new();
@@ -412,7 +413,7 @@ impl Gcs {
             decode_datagram(&buf[..n], &mut FrameStats::default(), &mut out);
         }
         out.into_iter()
-            .filter(|f| f.sysid == VEHICLE_SYSID)
+            .filter(|f| f.sysid == VEHICLE_SYSID && f.compid == 1)
             .map(|f| f.msg)
             .collect()
     }

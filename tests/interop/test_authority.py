@@ -178,7 +178,7 @@ def test_request_forwarded_to_owner_who_hands_over(make_vehicle, stations, accep
     statustext(g254.inbox, r"centre the sticks", first_neutral._idx, what="the pick-up hint to 254")
     servo_samples(g254.inbox, WINDOW, g254.inbox.mark(), what="samples while 254 has not centred")
     assert_all(g254.inbox.select("SERVO_OUTPUT_RAW", from_vehicle, first_neutral._idx), is_neutral, "neutral until 254 centres its sticks")
-    assert is_armed(g254.inbox.last("HEARTBEAT")), "the armed state is kept across the transfer"
+    assert is_armed(g254.inbox.select("HEARTBEAT", from_vehicle)[-1]), "the armed state is kept across the transfer"
 
     g254.sticks(CENTRED, repeat_now=3)  # pick-up
     m_drive = g254.inbox.mark()

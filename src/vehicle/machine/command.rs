@@ -95,6 +95,20 @@ impl Vehicle {
                     Err(why) => self.refuse_command(from, "command", why, now, out),
                 })
             }
+            // Taking the gimbal (QGC asks before moving it): gimbal control
+            // is vehicle control, so this only says whether the asker has it.
+            C::MAV_CMD_DO_GIMBAL_MANAGER_CONFIGURE => {
+                only(match self.check_control(from, Control::Command, now, out) {
+                    Ok(()) => R::MAV_RESULT_ACCEPTED,
+                    Err(why) => self.refuse_command(from, "gimbal control", why, now, out),
+                })
+            }
+            C::MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW => {
+                only(match self.check_control(from, Control::Command, now, out) {
+                    Ok(()) => self.gimbal_pitchyaw_command(p, now, out),
+                    Err(why) => self.refuse_command(from, "gimbal pitch", why, now, out),
+                })
+            }
             _ => only(R::MAV_RESULT_UNSUPPORTED),
         }
     }
@@ -160,9 +174,10 @@ pub(super) fn ack_set_mode(result: MavResult, from: Sender) -> MavMessage {
 }
 
 /// COMMAND_ACK (UNSUPPORTED) for a command number the dialect cannot represent.
-pub(super) fn ack_unknown(from: Sender, command: u16) -> Output {
+pub(super) fn ack_unknown(from: Sender, command: u16, compid: u8) -> Output {
     Output::AckUnknown {
         to: To::Peer(from.endpoint, from.peer),
+        compid,
         command,
         result: MavResult::MAV_RESULT_UNSUPPORTED,
         target_system: from.sysid,

@@ -2,7 +2,8 @@
 //! handler from here. Two checks are made here and nowhere else:
 //!
 //! - **addressing**: a message with a target (system, component) is ours
-//!   when each is 0 (broadcast) or our own id, as ArduPilot routes;
+//!   when each is 0 (broadcast) or our own id, as ArduPilot routes; what
+//!   names the camera component (100) goes to `camera.rs` first;
 //! - **control input** (sticks, RC override, per-thruster commands,
 //!   setpoints): from the station in control, else refused, counted and
 //!   answered; accepted input is a sign of the owner's life.
@@ -14,7 +15,7 @@ use mavlink_core::Message;
 
 use super::authority::Control;
 use super::command::ack_set_mode;
-use super::{COMPONENT_ID, HmiEvent, Now, Output, Sender, Vehicle};
+use super::{CAMERA_COMPONENT_ID, COMPONENT_ID, HmiEvent, Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
 
 impl Vehicle {
@@ -23,6 +24,14 @@ impl Vehicle {
     pub(super) fn for_us(&self, target_system: u8, target_component: u8) -> bool {
         (target_system == 0 || target_system == self.sysid())
             && (target_component == 0 || target_component == COMPONENT_ID)
+    }
+
+    /// Whether a target (system, component) names this vehicle's camera
+    /// component (which exists only when the vehicle has a camera).
+    pub(super) fn for_camera(&self, target_system: u8, target_component: u8) -> bool {
+        self.has_camera()
+            && (target_system == 0 || target_system == self.sysid())
+            && target_component == CAMERA_COMPONENT_ID
     }
 
     /// Whether `msg`'s targets, where it has them, name us or everyone.
@@ -66,7 +75,9 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if !self.addressed_to_us(&msg) {
+        // The camera component answers what is aimed at it, and camera
+        // requests broadcast to component 0 (the autopilot then stays silent).
+        if self.on_camera_message(from, &msg, now, out) || !self.addressed_to_us(&msg) {
             return;
         }
         match msg {
@@ -117,6 +128,10 @@ impl Vehicle {
             // An answer to our own request: it names us, not everyone.
             MavMessage::COMMAND_ACK(a) if a.target_system == self.sysid() => {
                 self.on_gcs_ack(from, &a, out);
+            }
+            MavMessage::GIMBAL_MANAGER_SET_ATTITUDE(_)
+            | MavMessage::GIMBAL_MANAGER_SET_PITCHYAW(_) => {
+                self.on_gimbal_message(from, &msg, now, out);
             }
             MavMessage::SETUP_SIGNING(k) => self.setup_signing(from, &k, now, out),
             MavMessage::SET_MODE(m) => {

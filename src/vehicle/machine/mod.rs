@@ -23,6 +23,8 @@
 //! | `arming.rs` | arm, disarm, pre-arm checks |
 //! | `board.rs` | board link and readings |
 //! | `payload.rs` | lights, laser, camera tilt, servo outputs |
+//! | `gimbal.rs` | the camera tilt as a MAVLink gimbal (protocol v2, manager on component 1) |
+//! | `camera.rs` | the MAVLink camera component (id 100): heartbeat, camera and video-stream information |
 //! | `modes.rs` | flight mode changes, AVAILABLE_MODES |
 //! | `run_mode.rs` | real board or built-in simulator |
 //! | `driving.rs` | sticks, buttons, motor test → one `go()` |
@@ -47,9 +49,11 @@ use mavlink_core::types::CharArray;
 mod arming;
 mod authority;
 mod board;
+mod camera;
 mod command;
 mod driving;
 mod failsafe;
+mod gimbal;
 mod handover;
 mod holds;
 mod inbound;
@@ -63,6 +67,8 @@ mod stubs;
 mod telemetry;
 mod texts;
 
+pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
+pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 pub use run_mode::RunMode;
 pub use texts::{Topic, ascii_text};
@@ -181,6 +187,8 @@ pub enum Input {
         target_system: u8,
         target_component: u8,
     },
+    /// The video stream the camera component advertises (None: none runs).
+    VideoStream(Option<VideoStreamInfo>),
 }
 
 /// Events of a browser HMI session that matter for safety.
@@ -220,6 +228,14 @@ pub enum Output {
         to: To,
         msg: MavMessage,
     },
+    /// A message sent like [`Output::Send`] but from another component of
+    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire only
+    /// (the browser HMI talks to the autopilot alone).
+    SendAs {
+        to: To,
+        compid: u8,
+        msg: MavMessage,
+    },
     /// A STATUSTEXT (or one chunk of a long one), sent like
     /// [`Output::Send`], with what it is about (the browser HMI files it
     /// under that category).
@@ -254,9 +270,11 @@ pub enum Output {
         key: [u8; 32],
         initial_timestamp: u64,
     },
-    /// COMMAND_ACK for a command number the dialect cannot represent.
+    /// COMMAND_ACK for a command number the dialect cannot represent, from
+    /// component `compid` of this system.
     AckUnknown {
         to: To,
+        compid: u8,
         command: u16,
         result: MavResult,
         target_system: u8,
@@ -324,6 +342,8 @@ pub struct Vehicle {
     motors_us: [u16; 3],
     board: board::BoardState,
     payload: payload::Payload,
+    camera: camera::Camera,
+    gimbal: gimbal::Gimbal,
     pilot: driving::Pilot,
     auth: authority::Authority,
     failsafes: failsafe::Failsafes,
@@ -388,6 +408,8 @@ impl Vehicle {
             motors_us: [NEUTRAL_US; 3],
             board: board::BoardState::default(),
             payload: payload::Payload::default(),
+            camera: camera::Camera::default(),
+            gimbal: gimbal::Gimbal::default(),
             pilot,
             auth: authority::Authority::default(),
             failsafes: failsafe::Failsafes::default(),
@@ -500,9 +522,12 @@ impl Vehicle {
                 target_component,
             } => {
                 if self.for_us(target_system, target_component) {
-                    out.push(command::ack_unknown(from, command));
+                    out.push(command::ack_unknown(from, command, COMPONENT_ID));
+                } else if self.for_camera(target_system, target_component) {
+                    out.push(command::ack_unknown(from, command, CAMERA_COMPONENT_ID));
                 }
             }
+            Input::VideoStream(stream) => self.set_video_stream(stream),
         }
     }
 
@@ -534,6 +559,7 @@ impl Vehicle {
             .map_or(Duration::ZERO, |t| now.mono.saturating_sub(t));
         self.clock.last_tick = Some(now.mono);
         self.drive_tick(now, dt, out);
+        self.gimbal_tick(now, dt, out);
         // Failsafes act before the owner is dropped for silence, so a pending
         // request is granted only after the GCS failsafe has acted.
         self.failsafe_tick(now, out);
@@ -548,6 +574,7 @@ impl Vehicle {
             out.push(Output::Healthy);
         }
         self.stream_tick(now, out);
+        self.camera_tick(now, out);
         self.param_stream_tick(out);
     }
 }

@@ -341,7 +341,10 @@ impl Vehicle {
                     theta: t.pitch_rad as f32,
                 })]
             }
-            _ => self.build_holds(id, now).into_iter().collect(),
+            _ => match self.build_gimbal(id, now) {
+                Some(m) => vec![m],
+                None => self.build_holds(id, now).into_iter().collect(),
+            },
         }
     }
 
