@@ -696,3 +696,35 @@ fn a_pitch_rate_slews_while_repeated_and_stops_after_a_second() {
     r.run(Duration::from_millis(500));
     assert!(r.v.tilt_us() < here - 40, "{here} -> {}", r.v.tilt_us());
 }
+
+#[test]
+fn a_pitch_rate_ends_at_a_safety_stop() {
+    let mut r = owned();
+    r.msg(
+        A,
+        MavMessage::GIMBAL_MANAGER_SET_PITCHYAW(GIMBAL_MANAGER_SET_PITCHYAW_DATA {
+            target_system: 1,
+            target_component: 1,
+            flags: GimbalManagerFlags::empty(),
+            gimbal_device_id: 0,
+            pitch: f32::NAN,
+            yaw: f32::NAN,
+            pitch_rate: 18.0_f32.to_radians(),
+            yaw_rate: f32::NAN,
+        }),
+    );
+    r.run(Duration::from_millis(300));
+    let moving = r.v.tilt_us();
+    assert!(moving > 1500, "the rate moves the tilt: {moving}");
+    // The owner lets go: a safety stop, so its rate ends with it.
+    let release = MavCmd::MAV_CMD_REQUEST_OPERATOR_CONTROL;
+    let out = r.cmd(A, release, &[0.0]);
+    assert_eq!(ack_of(&out, release), MavResult::MAV_RESULT_ACCEPTED);
+    let here = r.v.tilt_us();
+    r.run(Duration::from_millis(800));
+    assert_eq!(
+        r.v.tilt_us(),
+        here,
+        "the tilt kept slewing after the release"
+    );
+}

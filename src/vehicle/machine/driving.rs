@@ -373,6 +373,8 @@ impl Vehicle {
         self.pilot.thrusters = [0.0; 3];
         self.pilot.motor_test = None;
         self.pilot.tilt_rate = 0.0;
+        // A gimbal pitch rate is the pilot's input too.
+        self.gimbal_stop();
     }
 
     fn on_buttons(

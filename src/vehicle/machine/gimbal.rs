@@ -110,6 +110,11 @@ impl Vehicle {
         }
     }
 
+    /// Ends a pitch rate (a safety stop: mode change, disarm, transfer).
+    pub(super) fn gimbal_stop(&mut self) {
+        self.gimbal.rate_dps = 0.0;
+    }
+
     /// Every tick: a pitch rate requested within [`RATE_HOLD`] moves the tilt.
     pub(super) fn gimbal_tick(&mut self, now: Now, dt: Duration, out: &mut Vec<Output>) {
         if self.gimbal.rate_dps == 0.0 {
