@@ -152,7 +152,7 @@ pub enum H264ConfigError {
 
 impl H264Config {
     pub fn validate(&self) -> Result<(), H264ConfigError> {
-        let side = |v: u32| (16..=4096).contains(&v) && v % 2 == 0;
+        let side = |v: u32| (16..=4096).contains(&v) && v.is_multiple_of(2);
         if !((self.width == 0 && self.height == 0) || (side(self.width) && side(self.height))) {
             return Err(H264ConfigError::Size(self.width, self.height));
         }

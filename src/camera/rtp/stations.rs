@@ -65,6 +65,10 @@ mod tests {
         Duration::from_millis(ms)
     }
 
+    fn ip(s: &str) -> IpAddr {
+        s.parse().expect("ip")
+    }
+
     fn addr(s: &str) -> SocketAddr {
         s.parse().expect("addr")
     }
@@ -75,21 +79,15 @@ mod tests {
         assert_eq!(g.target(None, at(0)), None);
         g.heard(255, addr("10.0.0.2:14550"), at(0));
         g.heard(200, addr("10.0.0.3:14550"), at(10));
-        assert_eq!(g.target(None, at(20)), Some("10.0.0.2".parse().unwrap()));
-        assert_eq!(
-            g.target(Some(200), at(20)),
-            Some("10.0.0.3".parse().unwrap())
-        );
+        assert_eq!(g.target(None, at(20)), Some(ip("10.0.0.2")));
+        assert_eq!(g.target(Some(200), at(20)), Some(ip("10.0.0.3")));
         // An owner heard only elsewhere (TCP): the first UDP station.
-        assert_eq!(g.target(Some(7), at(20)), Some("10.0.0.2".parse().unwrap()));
+        assert_eq!(g.target(Some(7), at(20)), Some(ip("10.0.0.2")));
         // The first one moves: video follows it.
         g.heard(255, addr("10.0.0.9:40000"), at(5_000));
-        assert_eq!(g.target(None, at(5_000)), Some("10.0.0.9".parse().unwrap()));
+        assert_eq!(g.target(None, at(5_000)), Some(ip("10.0.0.9")));
         // 200 goes silent and is forgotten; then 255 too.
-        assert_eq!(
-            g.target(Some(200), at(10_010)),
-            Some("10.0.0.9".parse().unwrap())
-        );
+        assert_eq!(g.target(Some(200), at(10_010)), Some(ip("10.0.0.9")));
         assert_eq!(g.target(None, at(15_000)), None);
     }
 }
