@@ -1,5 +1,5 @@
-//! One run of the RTP encoder: an `ffmpeg` child reading the camera's JPEG
-//! frames on its stdin and sending H.264 over RTP to every destination.
+//! One run of the RTP encoder: an `ffmpeg` child reading the camera's
+//! frames, decoded to raw pictures, on its stdin and sending H.264 over RTP to every destination.
 //!
 //! The run ends when the child exits, its stdin breaks, the camera stops or
 //! the destinations change; the restart schedule is the caller's. The child
@@ -39,6 +39,10 @@ pub enum RtpError {
     },
     #[error("RTP video: the camera stopped")]
     CameraGone,
+    #[error(
+        "RTP video: the camera's pictures changed from {from:?} to {to:?} — restarting the encoder"
+    )]
+    SizeChanged { from: Raw, to: Raw },
 }
 
 /// What one run encodes and where it sends it.
@@ -70,8 +74,9 @@ impl Encode {
         (self.fps.floor() as u32).max(1)
     }
 
-    /// ffmpeg's arguments after the program name.
-    pub fn args(&self) -> Vec<String> {
+    /// ffmpeg's arguments after the program name, for raw pictures of
+    /// `input` on its stdin.
+    pub fn args(&self, input: &Raw) -> Vec<String> {
         let mut a: Vec<String> = [
             "-hide_banner",
             "-nostdin",
@@ -88,14 +93,16 @@ impl Encode {
             "-use_wallclock_as_timestamps",
             "1",
             "-f",
-            "mjpeg",
-            "-i",
-            "pipe:0",
-            "-an",
+            "rawvideo",
+            "-pix_fmt",
+            input.pix_fmt,
         ]
         .iter()
         .map(|s| (*s).to_owned())
         .collect();
+        a.push("-video_size".into());
+        a.push(format!("{}x{}", input.width, input.height));
+        a.extend(["-i", "pipe:0", "-an"].map(String::from));
         if self.scale {
             a.push("-vf".into());
             a.push(format!("scale={}:{}", self.width, self.height));
@@ -157,6 +164,33 @@ impl Encode {
     }
 }
 
+/// The raw pictures ffmpeg reads: one decoded JPEG each.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Raw {
+    pub width: u32,
+    pub height: u32,
+    pub pix_fmt: &'static str,
+}
+
+/// Decodes a JPEG to the pixels ffmpeg reads; `None` for a picture it
+/// cannot decode or a pixel format other than RGB and grey.
+fn decode(jpeg: &[u8]) -> Option<(Raw, Vec<u8>)> {
+    let mut d = jpeg_decoder::Decoder::new(jpeg);
+    let pixels = d.decode().ok()?;
+    let info = d.info()?;
+    let pix_fmt = match info.pixel_format {
+        jpeg_decoder::PixelFormat::RGB24 => "rgb24",
+        jpeg_decoder::PixelFormat::L8 => "gray",
+        _ => return None,
+    };
+    let raw = Raw {
+        width: u32::from(info.width),
+        height: u32::from(info.height),
+        pix_fmt,
+    };
+    Some((raw, pixels))
+}
+
 /// The RTP destinations of a configuration and an `auto` address, in
 /// order, without repeats.
 pub fn destinations(
@@ -181,16 +215,55 @@ pub fn destinations(
     out
 }
 
-/// Runs `program` once for `enc`, feeding it `frames`. `started(pid, size)`
-/// is called once the first frame went in.
+/// The next frame due (at most `fps` a second, with a quarter period of
+/// slack for a source's jitter), decoded; `None` when the camera stopped.
+async fn next_picture(
+    frames: &mut watch::Receiver<Option<Frame>>,
+    next_due: &mut Option<tokio::time::Instant>,
+    period: Duration,
+) -> Option<(Raw, Vec<u8>, Frame)> {
+    loop {
+        frames.changed().await.ok()?;
+        let Some(frame) = frames.borrow_and_update().clone() else {
+            continue;
+        };
+        if next_due.is_some_and(|due| frame.at + period / 4 < due) {
+            continue;
+        }
+        let due = next_due.map_or(frame.at, |d| d + period);
+        *next_due = Some(if due + period < frame.at {
+            frame.at
+        } else {
+            due
+        });
+        let jpeg = frame.jpeg.clone();
+        // Decoding takes milliseconds of CPU: off the runtime's workers.
+        match tokio::task::spawn_blocking(move || decode(&jpeg)).await {
+            Ok(Some((raw, pixels))) => return Some((raw, pixels, frame)),
+            Ok(None) => tracing::debug!("RTP video: a frame could not be decoded, skipped"),
+            Err(_) => return None,
+        }
+    }
+}
+
+/// Runs `program` once for `enc`, feeding it `frames` decoded.
+/// `started(pid, size)` is called once the first picture went in. The run
+/// also ends (to start again) when the camera's picture size changes.
 pub async fn run(
     program: &str,
     enc: &Encode,
     frames: &mut watch::Receiver<Option<Frame>>,
     mut started: impl FnMut(Option<u32>, (u32, u32)),
 ) -> RtpError {
+    let period = Duration::from_secs_f64(1.0 / enc.fps);
+    let mut next_due = None;
+    frames.mark_changed();
+    // ffmpeg is told the picture's size up front: start it with the first.
+    let Some((raw, first, _)) = next_picture(frames, &mut next_due, period).await else {
+        return RtpError::CameraGone;
+    };
     let mut cmd = Command::new(program);
-    cmd.args(enc.args())
+    cmd.args(enc.args(&raw))
         .stdin(Stdio::piped())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -212,34 +285,31 @@ pub async fn run(
     let Some(mut stdin) = child.stdin.take() else {
         return exited(child, stderr, program).await;
     };
-    let period = Duration::from_secs_f64(1.0 / enc.fps);
-    let mut next_due: Option<tokio::time::Instant> = None;
-    let mut announced = false;
-    frames.mark_changed();
+    if stdin.write_all(&first).await.is_err() {
+        drop(stdin);
+        return exited(child, stderr, program).await;
+    }
+    let size = if enc.scale {
+        (enc.width, enc.height)
+    } else {
+        (raw.width, raw.height)
+    };
+    started(pid, size);
     loop {
         tokio::select! {
             _ = child.wait() => break,
             () = stderr.next() => {}
-            changed = frames.changed() => {
-                if changed.is_err() {
+            picture = next_picture(frames, &mut next_due, period) => {
+                let Some((this, pixels, _)) = picture else {
                     let _ = child.kill().await;
                     return RtpError::CameraGone;
+                };
+                if this != raw {
+                    let _ = child.kill().await;
+                    return RtpError::SizeChanged { from: raw, to: this };
                 }
-                let Some(frame) = frames.borrow_and_update().clone() else { continue };
-                // At most `fps` frames a second, with a quarter period of
-                // slack for a source's jitter.
-                if next_due.is_some_and(|due| frame.at + period / 4 < due) {
-                    continue;
-                }
-                let due = next_due.map_or(frame.at, |d| d + period);
-                next_due = Some(if due + period < frame.at { frame.at } else { due });
-                if stdin.write_all(&frame.jpeg).await.is_err() {
+                if stdin.write_all(&pixels).await.is_err() {
                     break;
-                }
-                if !announced {
-                    announced = true;
-                    let size = if enc.scale { (enc.width, enc.height) } else { (frame.width, frame.height) };
-                    started(pid, size);
                 }
             }
         }
@@ -272,8 +342,17 @@ mod tests {
     #[test]
     fn one_destination_is_plain_rtp_several_go_through_tee() {
         let cfg = H264Config::default();
+        let raw = Raw {
+            width: 640,
+            height: 480,
+            pix_fmt: "rgb24",
+        };
         let one = Encode::new(&cfg, 15.0, vec![("127.0.0.1".into(), 5600)]);
-        let a = one.args().join(" ");
+        let a = one.args(&raw).join(" ");
+        assert!(
+            a.contains("-f rawvideo -pix_fmt rgb24 -video_size 640x480 -i pipe:0"),
+            "{a}"
+        );
         assert!(a.contains("-g 15 "), "{a}");
         assert!(a.contains("repeat-headers=1"), "{a}");
         assert!(
@@ -285,7 +364,7 @@ mod tests {
             10.0,
             vec![("::1".into(), 5600), ("10.0.0.2".into(), 5602)],
         );
-        let a = two.args().join(" ");
+        let a = two.args(&raw).join(" ");
         assert!(
             a.ends_with("-f tee [f=rtp:payload_type=96]rtp://[::1]:5600?pkt_size=1200|[f=rtp:payload_type=96]rtp://10.0.0.2:5602?pkt_size=1200"),
             "{a}"
