@@ -340,6 +340,53 @@ async fn frame_rate_and_age_are_measured() {
     assert_eq!(latest.seq, t.frames_total);
 }
 
+/// Started on demand (as the vehicle starts it), the synthetic camera
+/// draws nothing until someone wants frames, and stops a few seconds after
+/// the last one left.
+#[tokio::test(start_paused = true)]
+async fn a_camera_on_demand_draws_only_while_frames_are_wanted() {
+    let (_scene_tx, scene) = watch::channel(Scene::default());
+    let camera = Camera::start_on_demand(synthetic(160, 120, 10.0), scene);
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let s = camera.status();
+    assert_eq!((s.state, s.frames_total), (CameraState::Idle, 0), "{s:?}");
+
+    let wanted = camera.demand();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let s = camera.status();
+    assert_eq!(s.state, CameraState::Streaming);
+    assert!((19..=22).contains(&s.frames_total), "{s:?}");
+
+    drop(wanted);
+    // A moment later (a page reload) it still runs ...
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    assert_eq!(camera.status().state, CameraState::Streaming);
+    // ... and then stops: no more frames are drawn.
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let stopped = camera.status();
+    assert_eq!(stopped.state, CameraState::Idle, "{stopped:?}");
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    assert_eq!(camera.status().frames_total, stopped.frames_total);
+}
+
+/// A `/video.mjpg` viewer is someone who wants frames.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_viewer_starts_a_camera_on_demand() {
+    let (_scene_tx, scene) = watch::channel(Scene::default());
+    let camera = Camera::start_on_demand(synthetic(160, 120, 10.0), scene);
+    let addr = serve(camera.routes()).await;
+    let (_, status) = get_json(addr, "/camera/status").await;
+    assert_eq!(status["state"], "idle", "{status}");
+    let mut video = MjpegReader::open(addr).await;
+    let part = video.next_part().await;
+    assert_eq!(decode(&part.jpeg).width, 160);
+    let (_, status) = get_json(addr, "/camera/status").await;
+    assert_eq!(
+        (&status["state"], &status["viewers"]),
+        (&Value::from("streaming"), &Value::from(1))
+    );
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_picture_follows_heading_roll_and_pitch() {
     let (scene_tx, scene) = watch::channel(Scene::default());

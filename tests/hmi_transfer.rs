@@ -264,11 +264,12 @@ fn an_etag_round_trip_costs_a_304_with_no_body() {
 fn the_mjpeg_stream_is_never_compressed_and_still_streams() {
     let dir = tempfile::tempdir().unwrap();
     let (mut vehicle, http) = sim(dir.path());
-    // The synthetic camera runs with --sim; wait for its first frame.
+    // The synthetic camera of --sim runs while someone watches: the stream
+    // below starts it. Wait for the server.
     let end = Instant::now() + GENEROUS;
-    while get(http, "/snapshot.jpg", "").status != 200 {
+    while get(http, "/camera/status", "").status != 200 {
         vehicle.check_running().unwrap();
-        assert!(Instant::now() < end, "no camera frame within {GENEROUS:?}");
+        assert!(Instant::now() < end, "no camera status within {GENEROUS:?}");
         std::thread::sleep(Duration::from_millis(50));
     }
     let mut s = TcpStream::connect(http).unwrap();

@@ -18,6 +18,15 @@ if ! command -v ffmpeg >/dev/null 2>&1; then
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q ffmpeg
 fi
 ffmpeg -hide_banner -version | sed -n 1p
+# The RTP video tests receive with QGroundControl's own GStreamer pipeline
+# (tests/video_rtp.rs): udpsrc, rtph264depay (good), h264parse (bad),
+# avdec_h264 (libav).
+if ! gst-inspect-1.0 avdec_h264 >/dev/null 2>&1 || ! gst-inspect-1.0 h264parse >/dev/null 2>&1; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
+        gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav
+fi
+gst-launch-1.0 --version | sed -n 1p
 
 echo "== formatting and lints"
 cargo fmt --all -- --check

@@ -1,6 +1,6 @@
 //! Starting the tasks around the vehicle, in order, and stopping them in
 //! order: the board (real or emulated), the MAVLink endpoints, the serial
-//! link, the event log, the camera and the browser HMI.
+//! link, the event log, the camera (and its RTP video) and the browser HMI.
 
 use tokio::sync::{mpsc, watch};
 use tokio::time::{Duration, Instant, Interval};
@@ -31,6 +31,10 @@ pub(super) struct Tasks {
     /// The board emulator's ground truth (`--sim`); None on a real board.
     pub(super) truth: Option<watch::Receiver<BoardSnapshot>>,
     camera: crate::camera::Camera,
+    /// H.264 over RTP to ground stations; its
+    /// [`stream`](crate::camera::rtp::RtpVideo::stream) is what the
+    /// MAVLink camera component announces.
+    pub(super) rtp: crate::camera::rtp::RtpVideo,
     router: RouterHandle,
     event_log: EventLog,
     board: Option<PtyBoard>,
@@ -108,7 +112,10 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let t0 = Instant::now();
     // The camera: its picture follows the vehicle (the synthetic source draws it).
     let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
-    let camera = crate::camera::Camera::start(settings.camera.clone(), scene_rx);
+    // It runs only while a browser watches or RTP video has a destination.
+    let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
+    let (video_to, station_rx) = watch::channel(None);
+    let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx);
     let hmi = crate::hmi::Hmi::start(
         &settings.hmi,
         hmi_ep,
@@ -145,11 +152,13 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         inbound,
         truth,
         camera,
+        rtp,
         router,
         event_log,
         board,
     };
-    Ok((tasks, VehicleTask::new(vehicle, io, t0, scene_tx, trusted)))
+    let vt = VehicleTask::new(vehicle, io, t0, scene_tx, trusted, video_to);
+    Ok((tasks, vt))
 }
 
 /// The emulator's next ground truth; never, without an emulator (or once it
@@ -181,6 +190,7 @@ impl Tasks {
         // Give the link a moment to put the neutral command on the wire.
         tokio::time::sleep(Duration::from_millis(50)).await;
         self.hmi.shutdown().await;
+        self.rtp.shutdown().await;
         self.camera.shutdown().await;
         self.router.shutdown().await;
         vehicle_task.io.signing.persist();

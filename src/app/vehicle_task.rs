@@ -3,13 +3,15 @@
 //! not carry a time up to a tick period old), and the core's outputs go to
 //! [`Io`]. The 5-s log line is built from the core's own state.
 
+use std::net::IpAddr;
 use std::time::Duration;
 
 use tokio::sync::watch;
 use tokio::time::Instant;
 
 use super::io::Io;
-use crate::dialect::neptunus::MavMessage;
+use crate::camera::rtp::GroundStations;
+use crate::dialect::neptunus::{MavMessage, MavType};
 use crate::firmware::codec::Event;
 use crate::firmware::emulator::SimSnapshot;
 use crate::firmware::link::LinkEvent;
@@ -31,6 +33,9 @@ pub(super) struct VehicleTask {
     last_scene: Option<Duration>,
     /// Per MAVLink endpoint: its stations are trusted (configuration).
     trusted: Vec<bool>,
+    /// Where `auto` RTP video goes: ground stations heard on UDP.
+    stations: GroundStations,
+    video_to: watch::Sender<Option<IpAddr>>,
 }
 
 impl VehicleTask {
@@ -40,6 +45,7 @@ impl VehicleTask {
         t0: Instant,
         scene: watch::Sender<crate::camera::Scene>,
         trusted: Vec<bool>,
+        video_to: watch::Sender<Option<IpAddr>>,
     ) -> Self {
         Self {
             vehicle,
@@ -50,6 +56,8 @@ impl VehicleTask {
             scene,
             last_scene: None,
             trusted,
+            stations: GroundStations::default(),
+            video_to,
         }
     }
 
@@ -68,7 +76,8 @@ impl VehicleTask {
     }
 
     /// The 10-ms tick: the built-in simulator (run mode SIMULATOR) steps on
-    /// it, then the core; the camera's scene follows.
+    /// it, then the core; the camera's scene and the `auto` video
+    /// destination follow.
     pub(super) fn tick(&mut self) {
         let now = self.clock();
         if let Some(sim) = self.io.simulator.as_mut() {
@@ -88,6 +97,9 @@ impl VehicleTask {
         {
             self.last_scene = Some(now.mono);
             self.scene.send_replace(scene(&self.vehicle, now));
+            let to = self.stations.target(self.vehicle.owner(), now.mono);
+            self.video_to
+                .send_if_modified(|old| std::mem::replace(old, to) != to);
         }
     }
 
@@ -103,6 +115,7 @@ impl VehicleTask {
         let Inbound {
             endpoint,
             peer,
+            udp_from,
             frame,
             standing,
         } = inbound;
@@ -115,6 +128,13 @@ impl VehicleTask {
             trusted: self.trusted.get(endpoint).copied().unwrap_or(false),
             ..Sender::new(endpoint, peer, frame.sysid, frame.compid)
         };
+        // A ground station's address on UDP: where `auto` video may go.
+        if let (Some(addr), MavMessage::HEARTBEAT(h)) = (udp_from, &frame.msg)
+            && h.mavtype == MavType::MAV_TYPE_GCS
+            && frame.undecodable.is_none()
+        {
+            self.stations.heard(frame.sysid, addr, now.mono);
+        }
         let Some(input) = input_of(frame, from) else {
             return;
         };

@@ -10,6 +10,8 @@ use std::time::Duration;
 use axum::http::Uri;
 use serde::{Deserialize, Serialize};
 
+use super::rtp::config::{H264Config, RtpDest, check_dests};
+
 /// Where the camera's frames come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -83,6 +85,11 @@ pub struct CameraConfig {
     /// The stream read by `source = "url"`, e.g.
     /// `http://rov.local:8080/?action=stream`.
     pub url: Option<String>,
+    /// Where H.264 over RTP goes: `auto`, `off` or `udp://HOST:PORT`
+    /// entries (`--video-rtp`).
+    pub rtp: Vec<RtpDest>,
+    /// How the RTP stream is encoded.
+    pub h264: H264Config,
 }
 
 impl Default for CameraConfig {
@@ -100,6 +107,8 @@ impl Default for CameraConfig {
             ffmpeg: FfmpegConfig::default(),
             mjpg_streamer: MjpgStreamerConfig::default(),
             url: None,
+            rtp: vec![RtpDest::Auto],
+            h264: H264Config::default(),
         }
     }
 }
@@ -145,6 +154,10 @@ impl CameraConfig {
             return Err(CameraConfigError::StallTimeout(self.stall_timeout_s));
         }
         self.backoff.validate()?;
+        check_dests(&self.rtp).map_err(|e| CameraConfigError::Rtp(e.to_string()))?;
+        self.h264
+            .validate()
+            .map_err(|e| CameraConfigError::Rtp(e.to_string()))?;
         match self.source {
             SourceKind::None | SourceKind::Synthetic => {}
             SourceKind::Ffmpeg => {
@@ -277,6 +290,9 @@ impl Default for MjpgStreamerConfig {
 /// A configuration value out of range, with the fix.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CameraConfigError {
+    /// `rtp` or `[camera.h264]` (the message names the key and the fix).
+    #[error("{0}")]
+    Rtp(String),
     #[error(
         "camera.width × camera.height = {width}×{height} is out of range — use 16 to 4096 pixels on each side (default 640×480)"
     )]

@@ -22,7 +22,7 @@ use tokio::time::Instant;
 
 use super::config::SourceKind;
 use super::frame::Frame;
-use super::shared::{CameraState, Shared};
+use super::shared::{CameraState, DemandGuard, Shared};
 
 /// The multipart boundary of `/video.mjpg`.
 pub const BOUNDARY: &str = "neptunusframe";
@@ -134,13 +134,18 @@ fn no_store(r: &mut Response) {
     );
 }
 
-/// Counts a viewer for as long as its stream exists.
-struct Viewer(Arc<Shared>);
+/// Counts a viewer for as long as its stream exists; a viewer wants
+/// frames (a camera started on demand runs for it).
+struct Viewer(
+    Arc<Shared>,
+    #[allow(dead_code, reason = "held for its Drop")] DemandGuard,
+);
 
 impl Viewer {
     fn new(shared: Arc<Shared>) -> Self {
         shared.lock().viewers += 1;
-        Viewer(shared)
+        let demand = DemandGuard::new(&shared);
+        Viewer(shared, demand)
     }
 }
 

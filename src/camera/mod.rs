@@ -32,6 +32,7 @@ mod meter;
 mod process;
 mod publisher;
 mod render;
+pub mod rtp;
 mod shared;
 mod source;
 pub mod splitter;
@@ -52,7 +53,7 @@ pub use error::SourceError;
 pub use frame::{Frame, Scene};
 pub use meter::FPS_WINDOW;
 pub use render::{RenderError, SyntheticRenderer};
-pub use shared::{CameraState, CameraStatus};
+pub use shared::{CameraState, CameraStatus, DemandGuard};
 pub use splitter::{JpegFrame, JpegSplitter, SplitterStats};
 
 use publisher::Publisher;
@@ -87,6 +88,22 @@ impl Camera {
     /// # Panics
     /// Outside a tokio runtime.
     pub fn start(cfg: CameraConfig, scene: watch::Receiver<Scene>) -> Camera {
+        Camera::start_with(cfg, scene, false)
+    }
+
+    /// Like [`start`](Camera::start), but the source runs only while
+    /// someone wants frames: a `/video.mjpg` viewer or a [`DemandGuard`]
+    /// from [`demand`](Camera::demand) (the RTP stream holds one while it
+    /// has a destination). In between it is `idle`: no picture is drawn,
+    /// no camera program runs, and `/snapshot.jpg` has no new frame.
+    ///
+    /// # Panics
+    /// Outside a tokio runtime.
+    pub fn start_on_demand(cfg: CameraConfig, scene: watch::Receiver<Scene>) -> Camera {
+        Camera::start_with(cfg, scene, true)
+    }
+
+    fn start_with(cfg: CameraConfig, scene: watch::Receiver<Scene>, on_demand: bool) -> Camera {
         let shared = Arc::new(Shared::new(&cfg));
         let (tx, frames) = watch::channel(None);
         let task = match cfg.validate() {
@@ -102,8 +119,13 @@ impl Camera {
                 None
             }
             Ok(()) => {
-                let publisher = Publisher::new(shared.clone(), tx);
-                Some(tokio::spawn(source::run(cfg, scene, publisher)))
+                let mut publisher = Publisher::new(shared.clone(), tx);
+                Some(if on_demand {
+                    let demand = shared.demand();
+                    tokio::spawn(source::run_on_demand(cfg, scene, publisher, demand))
+                } else {
+                    tokio::spawn(async move { source::run(cfg, scene, &mut publisher).await })
+                })
             }
         };
         Camera {
@@ -138,6 +160,20 @@ impl Camera {
         self.frames.clone()
     }
 
+    /// Wants frames until dropped: a camera started on demand runs its
+    /// source meanwhile.
+    pub fn demand(&self) -> DemandGuard {
+        DemandGuard::new(&self.shared)
+    }
+
+    /// What the RTP sender needs of the camera: its frames and its demand.
+    pub(crate) fn clone_handle(&self) -> CameraHandle {
+        CameraHandle {
+            shared: self.shared.clone(),
+            frames: self.frames.clone(),
+        }
+    }
+
     /// `GET /video.mjpg`, `GET /snapshot.jpg` and `GET /camera/status`, with
     /// their state: merge into the HMI's router.
     pub fn routes(&self) -> axum::Router {
@@ -152,6 +188,23 @@ impl Camera {
             let _ = task.await;
         }
         self.shared.stopped();
+    }
+}
+
+/// The frames and the demand of a [`Camera`], without its lifetime.
+#[derive(Debug, Clone)]
+pub(crate) struct CameraHandle {
+    shared: Arc<Shared>,
+    frames: watch::Receiver<Option<Frame>>,
+}
+
+impl CameraHandle {
+    pub(crate) fn demand(&self) -> DemandGuard {
+        DemandGuard::new(&self.shared)
+    }
+
+    pub(crate) fn subscribe(&self) -> watch::Receiver<Option<Frame>> {
+        self.frames.clone()
     }
 }
 

@@ -215,14 +215,14 @@ fn free_loopback_port() -> std::io::Result<u16> {
 
 /// The last lines a child printed on stderr (each also logged at debug
 /// level), for the message when it exits.
-struct StderrTail {
+pub(super) struct StderrTail {
     lines: Option<Lines<BufReader<ChildStderr>>>,
     tail: VecDeque<String>,
     program: String,
 }
 
 impl StderrTail {
-    fn new(stderr: Option<ChildStderr>, program: &str) -> Self {
+    pub(super) fn new(stderr: Option<ChildStderr>, program: &str) -> Self {
         StderrTail {
             lines: stderr.map(|s| BufReader::new(s).lines()),
             tail: VecDeque::new(),
@@ -232,7 +232,7 @@ impl StderrTail {
 
     /// Reads one line; never completes once stderr is closed, so it can sit
     /// in a `select!` without spinning.
-    async fn next(&mut self) {
+    pub(super) async fn next(&mut self) {
         let Some(lines) = &mut self.lines else {
             return std::future::pending().await;
         };
@@ -254,7 +254,7 @@ impl StderrTail {
 
     /// Reads what is left, for at most `limit` (a grandchild may hold the
     /// pipe open).
-    async fn drain(&mut self, limit: Duration) {
+    pub(super) async fn drain(&mut self, limit: Duration) {
         let _ = timeout(limit, async {
             while self.lines.is_some() {
                 self.next().await;
@@ -263,7 +263,7 @@ impl StderrTail {
         .await;
     }
 
-    fn tail(&self) -> String {
+    pub(super) fn tail(&self) -> String {
         if self.tail.is_empty() {
             String::new()
         } else {

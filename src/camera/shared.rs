@@ -8,6 +8,7 @@
 use std::sync::{Mutex, MutexGuard};
 
 use serde::Serialize;
+use tokio::sync::watch;
 use tokio::time::Instant;
 
 use super::config::{CameraConfig, SourceKind};
@@ -29,6 +30,9 @@ pub enum CameraState {
     Failed,
     /// The camera was shut down.
     Stopped,
+    /// Started on demand and nobody wants frames now (no `/video.mjpg`
+    /// viewer, no RTP destination): the source is not running.
+    Idle,
 }
 
 /// `GET /camera/status`.
@@ -66,6 +70,27 @@ pub(crate) struct Shared {
     source: SourceKind,
     rotation_deg: u16,
     inner: Mutex<Inner>,
+    /// How many want frames now: open `/video.mjpg` streams and
+    /// [`DemandGuard`]s (an RTP stream with a destination).
+    demand: watch::Sender<usize>,
+}
+
+/// Wants the camera's frames for as long as it lives (see
+/// [`Camera::demand`](super::Camera::demand)).
+#[derive(Debug)]
+pub struct DemandGuard(watch::Sender<usize>);
+
+impl DemandGuard {
+    pub(crate) fn new(shared: &Shared) -> Self {
+        shared.demand.send_modify(|n| *n += 1);
+        DemandGuard(shared.demand.clone())
+    }
+}
+
+impl Drop for DemandGuard {
+    fn drop(&mut self) {
+        self.0.send_modify(|n| *n = n.saturating_sub(1));
+    }
 }
 
 #[derive(Debug)]
@@ -103,7 +128,13 @@ impl Shared {
                 retry_at: None,
                 viewers: 0,
             }),
+            demand: watch::Sender::new(0),
         }
+    }
+
+    /// How many want frames, as it changes.
+    pub(crate) fn demand(&self) -> watch::Receiver<usize> {
+        self.demand.subscribe()
     }
 
     pub(crate) fn lock(&self) -> MutexGuard<'_, Inner> {

@@ -129,14 +129,19 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
         profiles_dir: args.profiles.clone().or(file.profiles_dir.clone()),
         simulator: file.emulator.clone(),
         hmi: resolve_hmi(args.http, args.tls, &file.hmi, sim)?,
-        camera: match &file.camera {
-            Some(c) => {
-                c.validate()
-                    .map_err(|e| ConfigError::Invalid(format!("camera: {e}")))?;
-                c.clone()
+        camera: {
+            let mut camera = match &file.camera {
+                Some(c) => c.clone(),
+                None if sim => crate::camera::CameraConfig::synthetic(),
+                None => crate::camera::CameraConfig::default(),
+            };
+            if !args.video_rtp.is_empty() {
+                camera.rtp = args.video_rtp.clone();
             }
-            None if sim => crate::camera::CameraConfig::synthetic(),
-            None => crate::camera::CameraConfig::default(),
+            camera
+                .validate()
+                .map_err(|e| ConfigError::Invalid(format!("camera: {e}")))?;
+            camera
         },
     })
 }

@@ -226,6 +226,7 @@ impl EndpointCtx {
     pub(super) fn deliver(
         &self,
         peer: PeerId,
+        udp_from: Option<SocketAddr>,
         standing: &PeerStanding,
         bytes_in: usize,
         frames: &mut Vec<Frame>,
@@ -290,6 +291,7 @@ impl EndpointCtx {
             let inbound = Inbound {
                 endpoint: self.id,
                 peer,
+                udp_from,
                 frame,
                 standing: standing.clone(),
             };

@@ -90,7 +90,7 @@ pub(super) async fn run_stream<S>(
                     if !frames.is_empty() {
                         last_frame = Instant::now();
                     }
-                    ctx.deliver(peer, &standing, n, &mut frames, &delta);
+                    ctx.deliver(peer, None, &standing, n, &mut frames, &delta);
                 }
                 Err(e) => return Err(e),
             }

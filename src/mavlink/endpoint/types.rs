@@ -26,6 +26,9 @@ pub type PeerId = u64;
 pub struct Inbound {
     pub endpoint: EndpointId,
     pub peer: PeerId,
+    /// The sender's address, on UDP endpoints (where video can be sent
+    /// back to it); `None` on TCP and serial.
+    pub udp_from: Option<SocketAddr>,
     pub frame: Frame,
     /// The peer's standing with the router; the vehicle side marks it once a
     /// station that may control speaks through this peer.

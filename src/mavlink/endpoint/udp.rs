@@ -108,13 +108,13 @@ pub(super) async fn run_udp(
                         }
                     };
                     match peer {
-                        Some((peer, standing)) => ctx.deliver(peer, &standing, n, &mut frames, &delta),
+                        Some((peer, standing)) => ctx.deliver(peer, Some(from), &standing, n, &mut frames, &delta),
                         None => {
                             if !frames.is_empty() {
                                 ctx.refuse_peer(&from.to_string(), frames.len());
                                 frames.clear();
                             }
-                            ctx.deliver(0, &PeerStanding::default(), n, &mut frames, &delta);
+                            ctx.deliver(0, None, &PeerStanding::default(), n, &mut frames, &delta);
                         }
                     }
                 }

@@ -1,0 +1,194 @@
+//! H.264 over RTP for ground stations (QGroundControl's "UDP h.264 video
+//! stream"): the camera's JPEG frames, encoded by a supervised `ffmpeg`
+//! child, sent to each destination (`--video-rtp`, `[camera] rtp`).
+//!
+//! `auto` follows the address the app publishes in a `watch` (the ground
+//! station in control, else the first heard on a UDP endpoint: see
+//! [`GroundStations`]). The encoder runs only while there is a destination:
+//! with none, no child runs and the camera is not asked for frames. The
+//! stream's current shape is published as [`RtpStream`] for the MAVLink
+//! camera component.
+//!
+//! Every camera source gives JPEG today, so the stream is always an encode;
+//! a source that gives H.264 itself would be passed through (`-c:v copy`)
+//! here. This module must never send to an address nobody configured or
+//! heard from, nor panic on what the child does.
+
+pub(super) mod config;
+mod encoder;
+mod stations;
+
+use std::net::IpAddr;
+
+use tokio::sync::watch;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+pub use config::{H264Config, H264ConfigError, RtpDest, RtpDestError, check_dests};
+pub use encoder::{RTP_PACKET_BYTES, RtpError};
+pub use stations::{GroundStations, STATION_TIMEOUT};
+
+use super::Camera;
+use super::backoff::Backoff;
+use super::config::CameraConfig;
+use encoder::{Encode, destinations};
+
+/// The RTP stream being sent, for the MAVLink camera component
+/// (VIDEO_STREAM_INFORMATION).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RtpStream {
+    /// `udp://HOST:PORT` the (first) receiver listens on.
+    pub uri: String,
+    pub width: u16,
+    pub height: u16,
+    pub fps: f32,
+    pub bitrate_kbps: u32,
+}
+
+/// The running RTP sender. Dropping it (or [`shutdown`](RtpVideo::shutdown))
+/// kills its child.
+#[derive(Debug)]
+pub struct RtpVideo {
+    stream: watch::Receiver<Option<RtpStream>>,
+    pid: watch::Receiver<Option<u32>>,
+    task: Option<JoinHandle<()>>,
+}
+
+impl RtpVideo {
+    /// Starts sending `camera`'s frames to `cfg.rtp`; `auto` destinations
+    /// take their address from `station`.
+    ///
+    /// # Panics
+    /// Outside a tokio runtime.
+    pub fn start(
+        cfg: &CameraConfig,
+        camera: &Camera,
+        station: watch::Receiver<Option<IpAddr>>,
+    ) -> RtpVideo {
+        let (stream_tx, stream) = watch::channel(None);
+        let (pid_tx, pid) = watch::channel(None);
+        let off = cfg.rtp.iter().all(|d| *d == RtpDest::Off);
+        let task = (!off).then(|| {
+            let sup = Supervisor {
+                dests: cfg.rtp.clone(),
+                h264: cfg.h264.clone(),
+                camera_fps: cfg.fps,
+                backoff: Backoff::from_config(&cfg.backoff),
+                station,
+                stream: stream_tx,
+                pid: pid_tx,
+            };
+            tokio::spawn(sup.run(camera.clone_handle()))
+        });
+        RtpVideo { stream, pid, task }
+    }
+
+    /// The stream as it is sent now; `None` while nothing is sent.
+    pub fn stream(&self) -> watch::Receiver<Option<RtpStream>> {
+        self.stream.clone()
+    }
+
+    /// The encoder child's process id while it runs.
+    pub fn pid(&self) -> Option<u32> {
+        *self.pid.borrow()
+    }
+
+    pub async fn shutdown(mut self) {
+        if let Some(t) = self.task.take() {
+            t.abort();
+            let _ = t.await;
+        }
+    }
+}
+
+impl Drop for RtpVideo {
+    fn drop(&mut self) {
+        if let Some(t) = self.task.take() {
+            t.abort();
+        }
+    }
+}
+
+struct Supervisor {
+    dests: Vec<RtpDest>,
+    h264: H264Config,
+    camera_fps: f64,
+    backoff: Backoff,
+    station: watch::Receiver<Option<IpAddr>>,
+    stream: watch::Sender<Option<RtpStream>>,
+    pid: watch::Sender<Option<u32>>,
+}
+
+impl Supervisor {
+    fn current(&mut self) -> Vec<(String, u16)> {
+        let auto = *self.station.borrow_and_update();
+        destinations(&self.dests, auto, self.h264.auto_port)
+    }
+
+    async fn run(mut self, camera: super::CameraHandle) {
+        let mut logged_not_found = false;
+        loop {
+            let dests = self.current();
+            if dests.is_empty() {
+                self.stream.send_replace(None);
+                self.pid.send_replace(None);
+                tracing::info!("RTP video: no destination, not sending");
+                if self.station.changed().await.is_err() {
+                    return;
+                }
+                continue;
+            }
+            let enc = Encode::new(&self.h264, self.camera_fps, dests.clone());
+            tracing::info!(to = ?dests, fps = enc.fps, "RTP video: starting the H.264 encoder");
+            // Frames are wanted while the encoder runs.
+            let _demand = camera.demand();
+            let mut frames = camera.subscribe();
+            let started = Instant::now();
+            let (stream, pid) = (&self.stream, &self.pid);
+            let uri = RtpDest::udp_uri(&dests[0].0, dests[0].1);
+            let run = encoder::run(&self.h264.program, &enc, &mut frames, |p, (w, h)| {
+                pid.send_replace(p);
+                stream.send_replace(Some(RtpStream {
+                    uri: uri.clone(),
+                    width: u16::try_from(w).unwrap_or(u16::MAX),
+                    height: u16::try_from(h).unwrap_or(u16::MAX),
+                    fps: enc.fps as f32,
+                    bitrate_kbps: enc.bitrate_kbps,
+                }));
+            });
+            let station = &mut self.station;
+            let (cfg_dests, auto_port) = (&self.dests, self.h264.auto_port);
+            let moved = async {
+                loop {
+                    if station.changed().await.is_err() {
+                        return std::future::pending().await;
+                    }
+                    let auto = *station.borrow();
+                    if destinations(cfg_dests, auto, auto_port) != dests {
+                        return;
+                    }
+                }
+            };
+            let err = tokio::select! {
+                e = run => e,
+                () = moved => {
+                    tracing::info!("RTP video: the destination changed");
+                    continue;
+                }
+            };
+            self.stream.send_replace(None);
+            self.pid.send_replace(None);
+            let wait = self.backoff.after_run(started.elapsed());
+            match err {
+                RtpError::CameraGone => return,
+                RtpError::NotFound(_) if logged_not_found => tracing::debug!("{err}"),
+                RtpError::NotFound(_) => {
+                    logged_not_found = true;
+                    tracing::error!("{err}");
+                }
+                _ => tracing::warn!("{err} (in {:.1} s)", wait.as_secs_f64()),
+            }
+            tokio::time::sleep(wait).await;
+        }
+    }
+}
