@@ -59,6 +59,8 @@ pub enum AppError {
 pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Result<(), AppError> {
     let (mut t, mut vehicle) = tasks::start(settings).await?;
     let mut shutdown = std::pin::pin!(shutdown);
+    // The RTP sender says what it sends; the camera component advertises it.
+    let mut video_stream = t.rtp.stream();
     loop {
         tokio::select! {
             () = &mut shutdown => break,
@@ -75,11 +77,26 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             },
             truth = tasks::board_truth(&mut t.truth) => vehicle.board_truth(&truth),
             _ = t.report.tick() => vehicle.report(),
+            Ok(()) = video_stream.changed() => {
+                let stream = video_stream.borrow_and_update().clone().map(video_stream_info);
+                vehicle.handle(Input::VideoStream(stream));
+            }
         }
         vehicle.flush();
     }
     t.shutdown(vehicle).await;
     Ok(())
+}
+
+/// The RTP sender's stream as the vehicle core's camera component describes it.
+fn video_stream_info(s: crate::camera::rtp::RtpStream) -> crate::vehicle::machine::VideoStreamInfo {
+    crate::vehicle::machine::VideoStreamInfo {
+        uri: s.uri,
+        width: s.width,
+        height: s.height,
+        fps: s.fps,
+        bitrate_kbps: s.bitrate_kbps,
+    }
 }
 
 /// `neptunus emulate-board`: runs the emulator until `shutdown`, printing the

@@ -18,6 +18,7 @@ stays.
 from __future__ import annotations
 
 import math
+import time
 
 from mavhelpers import (
     ACCEPTED,
@@ -43,14 +44,10 @@ VIDEO_STREAM_ENCODING_H264 = 1
 NAN = float("nan")
 
 
-def expected_video_uri(vehicle) -> str | None:
-    """The uri QGC should be told to receive on. None while the RTP sender
-    (issue 15 items 1 and 4) does not report its stream to the core
-    (`Input::VideoStream`): the stream is then described as not running,
-    with an empty uri. When the RTP side lands, return the destination it
-    sends to (for a local ground station with the `auto` default:
-    `udp://127.0.0.1:5600`), and the test checks RUNNING and this uri."""
-    return None
+def expected_video_uri(vehicle) -> str:
+    """The uri QGC is told to receive on: with the `auto` default, port 5600
+    at the address the (local) ground station is heard from."""
+    return "udp://127.0.0.1:5600"
 
 
 def from_camera(m) -> bool:
@@ -99,19 +96,25 @@ def test_qgc_camera_discovery(make_vehicle, stations):
     assert text(info.vendor_name) == "Neptunus" and text(info.model_name) == "OpenROV camera"
     assert info.resolution_h > 0 and info.resolution_v > 0
 
-    ack, mark = camera_request(qgc, mavlink.MAV_CMD_REQUEST_MESSAGE, VIDEO_STREAM_INFORMATION, 0)
-    assert ack.result == ACCEPTED, f"REQUEST_MESSAGE(269): {result_name(ack.result)}"
-    vs = answered_after_ack(qgc, "VIDEO_STREAM_INFORMATION", ack, mark)
-    assert (vs.stream_id, vs.count) == (1, 1)
-    assert vs.type == VIDEO_STREAM_TYPE_RTPUDP, f"stream type {vs.type}"
-    assert vs.encoding == VIDEO_STREAM_ENCODING_H264, f"encoding {vs.encoding}"
+    # The RTP sender starts once a station is heard and its first picture is
+    # in the encoder; QGC asks again until the stream runs, and so does this.
     uri = expected_video_uri(v)
-    if uri is None:
-        assert not vs.flags & VIDEO_STREAM_STATUS_FLAGS_RUNNING, f"flags {vs.flags}: RUNNING with no stream"
+    deadline = time.monotonic() + 20
+    while True:
+        ack, mark = camera_request(qgc, mavlink.MAV_CMD_REQUEST_MESSAGE, VIDEO_STREAM_INFORMATION, 0)
+        assert ack.result == ACCEPTED, f"REQUEST_MESSAGE(269): {result_name(ack.result)}"
+        vs = answered_after_ack(qgc, "VIDEO_STREAM_INFORMATION", ack, mark)
+        assert (vs.stream_id, vs.count) == (1, 1)
+        assert vs.type == VIDEO_STREAM_TYPE_RTPUDP, f"stream type {vs.type}"
+        assert vs.encoding == VIDEO_STREAM_ENCODING_H264, f"encoding {vs.encoding}"
+        if vs.flags & VIDEO_STREAM_STATUS_FLAGS_RUNNING:
+            break
+        # Not running yet: described, but with no uri.
         assert text(vs.uri) == "", f"uri {vs.uri!r} with no stream"
-    else:
-        assert vs.flags & VIDEO_STREAM_STATUS_FLAGS_RUNNING, f"flags {vs.flags}: not RUNNING"
-        assert text(vs.uri) == uri, f"uri {vs.uri!r}, expected {uri!r}"
+        assert time.monotonic() < deadline, "the video stream never ran (is ffmpeg installed?)"
+        time.sleep(1.0)
+    assert text(vs.uri) == uri, f"uri {vs.uri!r}, expected {uri!r}"
+    assert vs.resolution_h > 0 and vs.resolution_v > 0 and vs.framerate > 0 and vs.bitrate > 0, str(vs)
 
     # The legacy request QGC 4.x may send instead.
     ack, mark = camera_request(qgc, mavlink.MAV_CMD_REQUEST_CAMERA_INFORMATION, 1)
