@@ -18,6 +18,7 @@ stays.
 from __future__ import annotations
 
 import math
+import socket
 import time
 
 from mavhelpers import (
@@ -115,6 +116,16 @@ def test_qgc_camera_discovery(make_vehicle, stations):
         time.sleep(1.0)
     assert text(vs.uri) == uri, f"uri {vs.uri!r}, expected {uri!r}"
     assert vs.resolution_h > 0 and vs.resolution_v > 0 and vs.framerate > 0 and vs.bitrate > 0, str(vs)
+    # And the video really arrives there: RTP version 2, payload type 96.
+    host, port = uri.removeprefix("udp://").rsplit(":", 1)
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        rx.bind((host, int(port)))
+        rx.settimeout(10)
+        packet, _ = rx.recvfrom(2048)
+        assert packet[0] >> 6 == 2 and packet[1] & 0x7F == 96, f"not H.264 RTP: {packet[:12].hex()}"
+    finally:
+        rx.close()
 
     # The legacy request QGC 4.x may send instead.
     ack, mark = camera_request(qgc, mavlink.MAV_CMD_REQUEST_CAMERA_INFORMATION, 1)
