@@ -5,23 +5,11 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { startVehicle, launchBrowser, telemetry, takeControlAndArm, until } from './harness.js';
+import { launchBrowser, telemetry, takeControlAndArm, until, withVehicle } from './harness.js';
 
 let browser;
 before(async () => { browser = await launchBrowser(); });
 after(async () => { await browser?.close(); });
-
-async function withVehicle(body) {
-  const v = await startVehicle();
-  try {
-    await body(v);
-  } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
-  } finally {
-    await v.stop();
-  }
-}
 
 /** The page, with every request it makes recorded from the first one on
  * (harness.openPage attaches its listeners after nothing; these must be

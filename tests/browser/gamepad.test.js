@@ -6,23 +6,11 @@
 // the real thing. Waits poll a condition with a deadline.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { startVehicle, launchBrowser, openPage, telemetry, until } from './harness.js';
+import { launchBrowser, openPage, telemetry, until, withVehicle } from './harness.js';
 
 let browser;
 before(async () => { browser = await launchBrowser(); });
 after(async () => { await browser?.close(); });
-
-async function withVehicle(body, args = [], opts = {}) {
-  const v = await startVehicle(args, opts);
-  try {
-    await body(v);
-  } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
-  } finally {
-    await v.stop();
-  }
-}
 
 /** Runs in the page before its scripts: a standard-mapping pad that, as in
  * Chromium, is only listed once one of its buttons was pressed. */

@@ -105,6 +105,20 @@ export async function openPage(browser, url, viewport = { width: 1280, height: 8
   return { context, page, problems };
 }
 
+/** Runs `body` with a fresh `startVehicle(args, opts)`; adds the vehicle's
+ * log tail to a failure, and stops the vehicle whatever happens. */
+export async function withVehicle(body, args = [], opts = {}) {
+  const v = await startVehicle(args, opts);
+  try {
+    await body(v);
+  } catch (e) {
+    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
+    throw e;
+  } finally {
+    await v.stop();
+  }
+}
+
 /** The latest telemetry the page holds. */
 export const telemetry = (page) => page.evaluate(() => window.neptunus.state.t);
 

@@ -5,24 +5,11 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
 import { createServer } from 'node:http';
-import { startVehicle, launchBrowser, openPage, telemetry, takeControlAndArm, until } from './harness.js';
+import { launchBrowser, openPage, telemetry, takeControlAndArm, until, withVehicle } from './harness.js';
 
 let browser;
 before(async () => { browser = await launchBrowser(); });
 after(async () => { await browser?.close(); });
-
-/** Runs `body` with a fresh vehicle; shows its log if the test fails. */
-async function withVehicle(body, args = [], opts = {}) {
-  const v = await startVehicle(args, opts);
-  try {
-    await body(v);
-  } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
-  } finally {
-    await v.stop();
-  }
-}
 
 test('the page loads with no console errors and shows the video', () => withVehicle(async (v) => {
   const { page, problems, context } = await openPage(browser, v.url);

@@ -5,23 +5,11 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { createServer } from 'node:http';
 import { spawnSync } from 'node:child_process';
-import { startVehicle, launchBrowser, openPage, telemetry, takeControlAndArm, until } from './harness.js';
+import { startVehicle, launchBrowser, openPage, telemetry, takeControlAndArm, until, withVehicle } from './harness.js';
 
 let browser;
 before(async () => { browser = await launchBrowser(); });
 after(async () => { await browser?.close(); });
-
-async function withVehicle(body, args = [], opts = {}) {
-  const v = await startVehicle(args, opts);
-  try {
-    await body(v);
-  } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
-  } finally {
-    await v.stop();
-  }
-}
 
 const inside = (box, vp) => box && box.x >= 0 && box.y >= 0 && box.x + box.width <= vp.width + 0.5 && box.y + box.height <= vp.height + 0.5;
 

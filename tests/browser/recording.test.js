@@ -5,23 +5,11 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync } from 'node:fs';
-import { startVehicle, launchBrowser, openPage, telemetry, until } from './harness.js';
+import { launchBrowser, openPage, telemetry, until, withVehicle } from './harness.js';
 
 let browser;
 before(async () => { browser = await launchBrowser(); });
 after(async () => { await browser?.close(); });
-
-async function withVehicle(body, args = [], opts = {}) {
-  const v = await startVehicle(args, opts);
-  try {
-    await body(v);
-  } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
-  } finally {
-    await v.stop();
-  }
-}
 
 const hex = (buf, n) => [...buf.subarray(0, n)].map((b) => b.toString(16).padStart(2, '0')).join(' ');
 
