@@ -178,8 +178,14 @@ pub(super) async fn board_truth(truth: &mut Option<watch::Receiver<BoardSnapshot
 impl Tasks {
     /// Thrusters to neutral, unsaved parameters saved, then every task
     /// stopped in order.
-    pub(super) async fn shutdown(self, mut vehicle_task: VehicleTask) {
+    pub(super) async fn shutdown(
+        self,
+        mut vehicle_task: VehicleTask,
+        notify: &mut super::notify::Notify,
+    ) {
         tracing::info!("shutting down: thrusters to neutral");
+        let written = vehicle_task.io.link.subscribe();
+        let before = written.borrow().thrust_written;
         vehicle_task.io.neutral();
         // Changes acknowledged but not yet on disk (the debounce, a save in
         // flight, a failing disk) get one last try.
@@ -187,8 +193,10 @@ impl Tasks {
         let unsaved = vehicle.params_unsaved().then(|| vehicle.params().clone());
         let saver = std::mem::replace(&mut vehicle_task.io.params, ParamSaver::stopped());
         let _ = tokio::task::spawn_blocking(move || saver.finish(unsaved)).await;
-        // Give the link a moment to put the neutral command on the wire.
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        // Give the link a moment to put the neutral command on the wire
+        // (at once when the board is up; a link that is down never will).
+        neutral_written(written, before).await;
+        notify.stopping();
         self.hmi.shutdown().await;
         self.rtp.shutdown().await;
         self.camera.shutdown().await;
@@ -199,6 +207,21 @@ impl Tasks {
         if let Some(board) = self.board {
             board.shutdown().await;
         }
+    }
+}
+
+/// Waits until the link has written a thruster command after `before`
+/// (the neutral one: nothing else is sent after it), at most 200 ms.
+async fn neutral_written(
+    mut stats: watch::Receiver<crate::firmware::link::LinkStats>,
+    before: u64,
+) {
+    let wait = stats.wait_for(|s| s.thrust_written > before);
+    if tokio::time::timeout(Duration::from_millis(200), wait)
+        .await
+        .is_err()
+    {
+        tracing::warn!("the neutral command was not written within 200 ms (board link down?)");
     }
 }
 
