@@ -31,3 +31,4 @@ pub mod mavlink;
 pub mod scenario;
 pub mod sim;
 pub mod vehicle;
+pub mod wallclock;

@@ -61,6 +61,8 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         &mut storage_problems,
     );
 
+    // The logs' clock: the system's, until the station in control sets it.
+    let clock = crate::wallclock::WallClock::system();
     let (in_tx, inbound) = mpsc::channel(4096);
     let router_cfg = RouterConfig {
         peer_timeout: settings.mavlink.peer_timeout,
@@ -68,6 +70,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             dir: settings.data_dir.join("tlogs"),
             max_bytes: settings.mavlink.tlog_max_bytes,
             total_bytes: settings.mavlink.tlog_total_bytes,
+            clock: clock.clone(),
         }),
     };
     let endpoints = &settings.mavlink.endpoints;
@@ -95,7 +98,11 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
-        .with_camera(camera_spec(&settings.camera));
+        .with_camera(camera_spec(&settings.camera))
+        .with_wall_clock(
+            crate::wallclock::system_sync(),
+            crate::wallclock::BUILD_UNIX_S * 1_000_000,
+        );
     let (event_log, log_problem) =
         EventLog::start_or_degraded(EventLogConfig::new(settings.data_dir.join("events")));
     if let Some(e) = log_problem {
@@ -134,6 +141,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         event_log.clone(),
         signing,
         settings.simulator.clone(),
+        clock,
     );
     let mut tick = tokio::time::interval(Duration::from_millis(10));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
