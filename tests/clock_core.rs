@@ -64,10 +64,19 @@ fn the_owner_sets_a_clock_before_the_build_once_with_a_text_and_an_event() {
     take_control(&mut r, OWNER);
     let out = r.msg(OWNER, system_time(GCS_US));
     assert_eq!(set_to(&out), Some(GCS_US));
-    assert!(has_text(&out, "Clock set from GCS 255: 2026-11-25T06:00:00Z"), "{out:?}");
-    assert!(has_event(&out, "clock_set", Some(255)), "{:?}", events(&out));
+    assert!(
+        has_text(&out, "Clock set from GCS 255: 2026-11-25T06:00:00Z"),
+        "{out:?}"
+    );
+    assert!(
+        has_event(&out, "clock_set", Some(255)),
+        "{:?}",
+        events(&out)
+    );
     // The order matters: the event line after the clock is set carries the new time.
-    let set_at = out.iter().position(|o| matches!(o, Output::SetWallClock { .. }));
+    let set_at = out
+        .iter()
+        .position(|o| matches!(o, Output::SetWallClock { .. }));
     let log_at = out.iter().position(|o| matches!(o, Output::Log(_)));
     assert!(set_at < log_at, "{out:?}");
     assert_eq!(r.v.clock_set_by(), Some(255));

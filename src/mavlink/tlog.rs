@@ -407,7 +407,6 @@ fn session_name(unix_us: u64) -> String {
     )
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

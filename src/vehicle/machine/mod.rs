@@ -285,7 +285,9 @@ pub enum Output {
     },
     /// The ground station in control gave the time: from now on the wall
     /// clock (logs, `Now::unix_us`) is `unix_us`, carried forward.
-    SetWallClock { unix_us: u64 },
+    SetWallClock {
+        unix_us: u64,
+    },
 }
 
 impl Output {
