@@ -3,6 +3,11 @@
 //! unreadable, silent or speaks the other framing (and the camera, ports and
 //! data directory checks when theirs are wrong); `--json` parses.
 
+#![allow(
+    clippy::unwrap_used,
+    reason = "a test fails at the first unwrap, with its place"
+)]
+
 use std::io::{BufRead as _, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

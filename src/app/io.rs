@@ -44,7 +44,6 @@ impl Io {
         events: EventLog,
         signing: LinkSigning,
         simulator_opts: EmulatorOptions,
-        clock: std::sync::Arc<crate::wallclock::WallClock>,
     ) -> Self {
         Self {
             hmi,
@@ -55,10 +54,16 @@ impl Io {
             signing,
             simulator: None,
             simulator_opts,
-            clock,
+            clock: crate::wallclock::WallClock::system(),
             seq: 0,
             last_healthy: None,
         }
+    }
+
+    /// The wall clock shared with the telemetry log (default: a new one).
+    pub(super) fn with_clock(mut self, clock: std::sync::Arc<crate::wallclock::WallClock>) -> Self {
+        self.clock = clock;
+        self
     }
 
     /// A message to the HMI sessions it is for, and on the wire to the

@@ -141,8 +141,8 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         event_log.clone(),
         signing,
         settings.simulator.clone(),
-        clock,
-    );
+    )
+    .with_clock(clock);
     let mut tick = tokio::time::interval(Duration::from_millis(10));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let report = tokio::time::interval_at(

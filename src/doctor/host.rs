@@ -283,6 +283,10 @@ pub fn data_dir(dir: &Path) -> Check {
     }
     match nix::sys::statvfs::statvfs(dir) {
         Ok(s) => {
+            #[allow(
+                clippy::useless_conversion,
+                reason = "the counts are u32 on 32-bit ARM (the BeagleBone)"
+            )]
             let free = u64::from(s.blocks_available()).saturating_mul(u64::from(s.fragment_size()));
             let mib = free / (1024 * 1024);
             if free < MIN_FREE_BYTES {
