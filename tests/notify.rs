@@ -6,6 +6,9 @@
 //! period while its loop runs, say nothing while it is stopped (SIGSTOP: a
 //! hung vehicle must let systemd's watchdog fire), and on SIGTERM say
 //! STOPPING=1 only after the board has been given a neutral `go()`.
+//! With the vehicle task alone hung (the debug build's
+//! `NEPTUNUS_TEST_STALL_AFTER_S` hook) while the rest of the process runs,
+//! the watchdog starves and the board's dead-man switch stops the thrusters.
 
 mod common;
 
@@ -45,6 +48,18 @@ impl Systemd {
                 ));
             }
         }
+        got
+    }
+
+    /// The messages waiting now, without blocking.
+    fn drain(&self) -> Vec<String> {
+        let mut got = Vec::new();
+        let mut buf = [0u8; 4096];
+        let _ = self.sock.set_nonblocking(true);
+        while let Ok(n) = self.sock.recv(&mut buf) {
+            got.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+        }
+        let _ = self.sock.set_nonblocking(false);
         got
     }
 
@@ -182,5 +197,83 @@ fn ready_watchdog_and_stopping_after_neutral() -> anyhow::Result<()> {
             control.snapshot().motors_us
         ),
     }
+    Ok(())
+}
+
+#[test]
+fn a_hung_vehicle_task_starves_the_watchdog_and_the_board_stops_the_thrusters() -> anyhow::Result<()>
+{
+    let dir = tempfile::tempdir()?;
+    let sock_path = dir.path().join("notify.sock");
+    let systemd = Systemd::bind(&sock_path)?;
+    let rt = board_runtime()?;
+    let board = spawn_board(&rt, None)?;
+    let (mut gcs, port) = Gcs::bind()?;
+    let serial = board.path().to_string_lossy().into_owned();
+    let endpoint = format!("udpout:127.0.0.1:{port}");
+    let usec = WATCHDOG.as_micros().to_string();
+    let mut vehicle = Vehicle::spawn_env(
+        Path::new(env!("CARGO_BIN_EXE_neptunus")),
+        &["--serial", &serial, "--mavlink", &endpoint],
+        dir.path(),
+        "",
+        &[
+            ("NOTIFY_SOCKET", sock_path.to_str().context("socket path")?),
+            ("WATCHDOG_USEC", &usec),
+            ("NEPTUNUS_TEST_STALL_AFTER_S", "8"),
+        ],
+    )?;
+    systemd.wait_for("READY=1", Duration::from_secs(30), &mut vehicle)?;
+    gcs.await_vehicle(&mut vehicle, Duration::from_secs(30))?;
+    gcs.wait_ready(&mut vehicle)?;
+    gcs.arm(&mut vehicle)?;
+    // Drive on, as a pilot would, until the watchdog has been silent for a
+    // whole period: the vehicle task hangs (8 s after start).
+    let control = board.control();
+    let mut last_watchdog = Instant::now();
+    let mut moved = false;
+    let starved = gcs.run_until(
+        &mut vehicle,
+        Traffic::Drive(600),
+        Duration::from_secs(30),
+        |_| {
+            moved |= control.snapshot().motors_us != NEUTRAL_US;
+            if systemd
+                .drain()
+                .iter()
+                .any(|m| m.lines().any(|l| l == "WATCHDOG=1"))
+            {
+                last_watchdog = Instant::now();
+            }
+            last_watchdog.elapsed() > 2 * WATCHDOG
+        },
+    )?;
+    assert!(moved, "the thrusters never moved before the stall");
+    assert!(
+        starved,
+        "WATCHDOG=1 never stopped: the hook did not hang the vehicle task"
+    );
+    // The process is alive (sockets, the link still run): only systemd's
+    // watchdog can tell, and the board's dead-man has acted on its own.
+    vehicle.check_running()?;
+    let stopped = gcs.run_until(
+        &mut vehicle,
+        Traffic::Drive(600),
+        Duration::from_secs(5),
+        |_| {
+            let s = control.snapshot();
+            s.dead_man_tripped && s.motors_us == NEUTRAL_US
+        },
+    )?;
+    assert!(
+        stopped,
+        "the board's dead-man did not stop the thrusters: {:?}",
+        control.snapshot()
+    );
+    let late: Vec<String> = systemd.drain();
+    assert!(
+        late.iter().all(|m| !m.lines().any(|l| l == "WATCHDOG=1")),
+        "WATCHDOG=1 from a hung vehicle task: {late:?}"
+    );
     Ok(())
 }

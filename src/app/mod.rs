@@ -64,6 +64,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
     // The RTP sender says what it sends; the camera component advertises it.
     let mut video_stream = t.rtp.stream();
     let mut notify = notify::Notify::from_env();
+    let stall = notify::StallHook::from_env();
     notify.ready();
     loop {
         tokio::select! {
@@ -88,6 +89,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
         }
         vehicle.flush();
         // The watchdog is fed by this loop alone: a hung vehicle task starves it.
+        stall.check();
         notify.alive();
     }
     t.shutdown(vehicle, &mut notify).await;

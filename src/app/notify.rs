@@ -84,3 +84,36 @@ impl Notify {
         }
     }
 }
+
+/// A test hook, in debug builds only: `NEPTUNUS_TEST_STALL_AFTER_S=N` makes
+/// the vehicle task's loop hang N seconds after it started — a stuck core —
+/// while every other task (sockets, the serial link, the HMI) runs on.
+/// `tests/notify.rs` shows that the watchdog then starves and the board's
+/// dead-man switch stops the thrusters. Release builds read no such variable.
+pub(super) struct StallHook {
+    at: Option<Instant>,
+}
+
+impl StallHook {
+    pub(super) fn from_env() -> Self {
+        #[cfg(debug_assertions)]
+        let at = std::env::var("NEPTUNUS_TEST_STALL_AFTER_S")
+            .ok()
+            .and_then(|s| s.parse::<f64>().ok())
+            .filter(|s| s.is_finite() && (0.0..=3600.0).contains(s))
+            .map(|s| Instant::now() + Duration::from_secs_f64(s));
+        #[cfg(not(debug_assertions))]
+        let at = None;
+        Self { at }
+    }
+
+    /// Hangs the calling loop for good once the time has come.
+    pub(super) fn check(&self) {
+        if self.at.is_some_and(|t| Instant::now() >= t) {
+            tracing::error!("NEPTUNUS_TEST_STALL_AFTER_S: the vehicle task hangs now (test hook)");
+            loop {
+                std::thread::park();
+            }
+        }
+    }
+}
