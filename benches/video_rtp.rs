@@ -14,7 +14,11 @@
 //!    the packet": exact while the delay is under one frame period (100 ms
 //!    at 10 fps, 67 ms at 15); the table shows the frames and pictures
 //!    counted, which agree when no frame was dropped.
-//! 3. **Nobody watching**: the vehicle binary (`$NEPTUNUS_BIN`, else
+//! 3. **Pass-through** (`[camera.h264] passthrough`): a 640×480 15 fps
+//!    H.264 clip read in real time stands for a camera that gives H.264;
+//!    CPU of this process and of the ffmpeg child that copies it into RTP,
+//!    next to the encode at the same size and rate.
+//! 4. **Nobody watching**: the vehicle binary (`$NEPTUNUS_BIN`, else
 //!    target/release, else target/debug) with `--sim --video-rtp off`, its
 //!    CPU over the soak without a viewer and then with one `/video.mjpg`
 //!    viewer reading.
@@ -174,6 +178,67 @@ async fn encode_path(fps: f64, soak: Duration) -> anyhow::Result<Row> {
     })
 }
 
+/// CPU of the pass-through path (this process, the ffmpeg child) over
+/// `soak`, and the RTP packets received.
+async fn passthrough_path(soak: Duration) -> anyhow::Result<(f64, f64, usize)> {
+    let dir = tempfile::tempdir()?;
+    let clip = dir.path().join("camera.mp4");
+    let secs = (soak.as_secs() + 30).to_string();
+    let made = std::process::Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-y", "-f", "lavfi"])
+        .args(["-i", "testsrc2=size=640x480:rate=15", "-t", &secs])
+        .args(["-c:v", "libx264", "-preset", "ultrafast", "-g", "15"])
+        .args(["-pix_fmt", "yuv420p", "-b:v", "1000k"])
+        .arg(&clip)
+        .status()?;
+    if !made.success() {
+        bail!("ffmpeg could not make the pass-through clip");
+    }
+    let rx = tokio::net::UdpSocket::bind("127.0.0.1:0").await?;
+    let port = rx.local_addr()?.port();
+    let mut cfg = CameraConfig {
+        rtp: vec![RtpDest::Udp {
+            host: "127.0.0.1".into(),
+            port,
+        }],
+        ..CameraConfig::none()
+    };
+    cfg.h264.passthrough = ["-re", "-i"]
+        .map(String::from)
+        .into_iter()
+        .chain([clip.display().to_string()])
+        .collect();
+    let (_scene_tx, scene) = watch::channel(Scene::default());
+    let camera = Camera::start_on_demand(cfg.clone(), scene);
+    let (_station_tx, station) = watch::channel(None);
+    let rtp = RtpVideo::start(&cfg, &camera, station);
+    let mut stream = rtp.stream();
+    tokio::time::timeout(Duration::from_secs(20), stream.wait_for(|s| s.is_some()))
+        .await
+        .context("the pass-through stream did not start in 20 s")??;
+    let pid = rtp.pid().context("no pass-through pid")?;
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let mut buf = [0u8; 2048];
+    while rx.try_recv(&mut buf).is_ok() {}
+    let (cpu0, ff0, wall0) = (self_cpu_s()?, proc_cpu_s(pid)?, Instant::now());
+    let mut packets = 0;
+    while wall0.elapsed() < soak {
+        if let Ok(Ok(_)) = tokio::time::timeout(Duration::from_millis(200), rx.recv(&mut buf)).await
+        {
+            packets += 1;
+        }
+    }
+    let wall = wall0.elapsed().as_secs_f64();
+    let (cpu1, ff1) = (self_cpu_s()?, proc_cpu_s(pid)?);
+    rtp.shutdown().await;
+    camera.shutdown().await;
+    Ok((
+        (cpu1 - cpu0) / wall * 100.0,
+        (ff1 - ff0) / wall * 100.0,
+        packets,
+    ))
+}
+
 /// The vehicle process's CPU share over `soak`, with or without one
 /// `/video.mjpg` viewer.
 fn vehicle_cpu(soak: Duration) -> anyhow::Result<(f64, f64, String)> {
@@ -237,6 +302,10 @@ fn main() -> anyhow::Result<()> {
             r.fps, r.self_pct, r.ffmpeg_pct, r.p50_ms, r.p99_ms, r.frames, r.pictures
         );
     }
+    let (own, ff, packets) = rt.block_on(passthrough_path(soak))?;
+    println!(
+        "| 15 fps pass-through (`-c:v copy`) | {own:.1} % | {ff:.1} % | — | — | {packets} RTP packets |"
+    );
     let (idle, watched, bin) = vehicle_cpu(soak)?;
     println!();
     println!("vehicle process `--sim --video-rtp off` ({bin}), CPU of one core:");

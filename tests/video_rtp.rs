@@ -3,7 +3,9 @@
 //! h264parse ! avdec_h264` (Debian's gst-launch-1.0), counting decoded
 //! frames; the `auto` destination following a ground station (a bare UDP
 //! socket sending GCS HEARTBEATs) from one loopback address to another; a
-//! killed ffmpeg restarted; no destination, no ffmpeg child.
+//! killed ffmpeg restarted; no destination, no ffmpeg child; a camera
+//! that gives H.264 itself passed through (`-c:v copy`) to two receivers,
+//! one joining late.
 //!
 //! Real processes and real time: every wait is for a condition with a
 //! generous deadline. Missing tools fail the test with the install command
@@ -185,6 +187,109 @@ fn qgc_receive_pipeline_decodes_at_least_80_percent_of_the_frame_rate() {
         in_window >= 80,
         "{in_window} frames decoded in 10 s ({total} in all), want ≥ 80 (80 % of 10 fps)\n{}",
         v.stderr_tail()
+    );
+}
+
+/// The command line of process `pid`, arguments joined by spaces.
+fn cmdline(pid: u32) -> String {
+    std::fs::read(format!("/proc/{pid}/cmdline"))
+        .map(|b| String::from_utf8_lossy(&b).replace('\0', " "))
+        .unwrap_or_default()
+}
+
+/// A camera that gives H.264 itself, as ffmpeg reads it: an MP4 file (the
+/// SPS/PPS only in its header, never in the stream: the hard case for a
+/// receiver that joins late) played in real time.
+#[test]
+fn a_camera_giving_h264_is_passed_through_to_every_receiver_and_a_late_one_decodes() {
+    need("ffmpeg", &["-version"], "apt install ffmpeg");
+    need(
+        "gst-inspect-1.0",
+        &["avdec_h264"],
+        "apt install gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let clip = dir.path().join("camera.mp4");
+    let made = Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-y", "-f", "lavfi"])
+        .args(["-i", "testsrc2=size=640x480:rate=15", "-t", "40"])
+        .args(["-c:v", "libx264", "-preset", "ultrafast", "-g", "15"])
+        .args(["-pix_fmt", "yuv420p"])
+        .arg(&clip)
+        .status()
+        .unwrap();
+    assert!(made.success(), "ffmpeg could not make the test clip");
+    let (late, early) = (free_udp_port().unwrap(), free_udp_port().unwrap());
+    let early_rx = UdpSocket::bind(("127.0.0.1", early)).unwrap();
+    let mav = free_udp_port().unwrap();
+    let cfg = dir.path().join("neptunus.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[camera]\nsource = \"synthetic\"\nrtp = [\"udp://127.0.0.1:{late}\", \"udp://127.0.0.1:{early}\"]\n\
+             [camera.h264]\npassthrough = [\"-re\", \"-i\", {:?}]\n",
+            clip.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let mav_url = format!("udpin:127.0.0.1:{mav}");
+    let args = [
+        "--sim",
+        "--http",
+        "off",
+        "--mavlink",
+        &mav_url,
+        "--config",
+        cfg.to_str().unwrap(),
+    ];
+    let v = Vehicle::spawn(bin(), &args, dir.path(), "").unwrap();
+    wait_for("RTP at the second destination", &v, || {
+        rtp_packets(&early_rx, Duration::from_millis(200)) > 0
+    });
+    let pids = ffmpeg_children(v.pid());
+    assert_eq!(pids.len(), 1, "one ffmpeg for both receivers: {pids:?}");
+    let line = cmdline(pids[0]);
+    assert!(
+        line.contains("-c:v copy") && !line.contains("libx264"),
+        "the camera's H.264 is copied, not encoded again: {line}"
+    );
+    // The first receiver joins seconds into the stream.
+    std::thread::sleep(Duration::from_secs(3));
+    let caps = "application/x-rtp,media=video,clock-rate=90000,encoding-name=H264";
+    let mut gst = Command::new("gst-launch-1.0")
+        .args([
+            "-v",
+            "udpsrc",
+            &format!("port={late}"),
+            &format!("caps={caps}"),
+        ])
+        .args(["!", "rtph264depay", "!", "h264parse", "!", "avdec_h264"])
+        .args([
+            "!",
+            "identity",
+            "silent=false",
+            "!",
+            "fakesink",
+            "sync=false",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("gst-launch-1.0");
+    std::thread::sleep(Duration::from_secs(13));
+    let _ = gst.kill();
+    let mut log = String::new();
+    gst.stdout.take().unwrap().read_to_string(&mut log).unwrap();
+    let _ = gst.wait();
+    let (in_window, total) = frames_in_ten_seconds(&log);
+    assert!(
+        in_window >= 120,
+        "{in_window} frames decoded in 10 s by the late receiver ({total} in all), want ≥ 120 (80 % of 15 fps)\n{}",
+        v.stderr_tail()
+    );
+    assert!(
+        rtp_packets(&early_rx, Duration::from_secs(1)) > 0,
+        "the second receiver stopped getting RTP"
     );
 }
 

@@ -233,13 +233,23 @@ async fn neutral_written(
     }
 }
 
-/// The MAVLink camera component exists when a camera source is configured;
-/// its nominal picture is the configured size and rate (the running
-/// stream's, once the stream reports it).
+/// The MAVLink camera component exists when a camera source is configured
+/// or the camera's own H.264 is passed through to RTP; its nominal picture
+/// is the configured size and rate (the running stream's, once the stream
+/// reports it).
 fn camera_spec(c: &crate::camera::CameraConfig) -> Option<crate::vehicle::machine::CameraSpec> {
-    (c.source != crate::camera::SourceKind::None).then(|| crate::vehicle::machine::CameraSpec {
-        width: u16::try_from(c.width).unwrap_or(u16::MAX),
-        height: u16::try_from(c.height).unwrap_or(u16::MAX),
-        fps: c.fps as f32,
+    use crate::camera::rtp::RtpDest;
+    let passthrough = !c.h264.passthrough.is_empty() && !c.rtp.iter().all(|d| *d == RtpDest::Off);
+    let (width, height, fps) = if passthrough {
+        c.h264.passthrough_shape()
+    } else {
+        (c.width, c.height, c.fps)
+    };
+    (c.source != crate::camera::SourceKind::None || passthrough).then(|| {
+        crate::vehicle::machine::CameraSpec {
+            width: u16::try_from(width).unwrap_or(u16::MAX),
+            height: u16::try_from(height).unwrap_or(u16::MAX),
+            fps: fps as f32,
+        }
     })
 }

@@ -118,6 +118,13 @@ pub struct H264Config {
     pub bitrate_kbps: u32,
     /// The port `auto` sends to (QGroundControl listens on 5600).
     pub auto_port: u16,
+    /// For a camera that gives H.264 itself: ffmpeg's input arguments for
+    /// it, ending with `-i SOURCE` (e.g. `["-f", "v4l2", "-input_format",
+    /// "h264", "-video_size", "1280x720", "-framerate", "30", "-i",
+    /// "/dev/video2"]`). The stream is then copied, not encoded: `width`,
+    /// `height`, `fps` and `bitrate_kbps` only describe it to the ground
+    /// station. Empty (the default): the camera's pictures are encoded.
+    pub passthrough: Vec<String>,
 }
 
 impl Default for H264Config {
@@ -129,6 +136,7 @@ impl Default for H264Config {
             fps: 0.0,
             bitrate_kbps: 1000,
             auto_port: 5600,
+            passthrough: Vec::new(),
         }
     }
 }
@@ -148,6 +156,10 @@ pub enum H264ConfigError {
     Port,
     #[error("camera.h264.program is empty — name the ffmpeg program (default \"ffmpeg\")")]
     Program,
+    #[error(
+        "camera.h264.passthrough = {0:?} does not name its source — end it with \"-i\", \"SOURCE\" (e.g. [\"-f\", \"v4l2\", \"-input_format\", \"h264\", \"-i\", \"/dev/video2\"])"
+    )]
+    Passthrough(Vec<String>),
 }
 
 impl H264Config {
@@ -168,7 +180,42 @@ impl H264Config {
         if self.program.trim().is_empty() {
             return Err(H264ConfigError::Program);
         }
+        let names_source = self
+            .passthrough
+            .windows(2)
+            .any(|w| w[0] == "-i" && !w[1].trim().is_empty());
+        if !self.passthrough.is_empty() && !names_source {
+            return Err(H264ConfigError::Passthrough(self.passthrough.clone()));
+        }
         Ok(())
+    }
+
+    /// The size and rate a pass-through stream is announced with: the
+    /// configured ones, else what its input arguments ask the camera for
+    /// (`-video_size WxH`, `-framerate N`), else unknown (0).
+    pub fn passthrough_shape(&self) -> (u32, u32, f64) {
+        let arg = |name: &str| {
+            self.passthrough
+                .windows(2)
+                .find(|w| w[0] == name)
+                .map(|w| w[1].as_str())
+        };
+        let (mut w, mut h) = (self.width, self.height);
+        if w == 0
+            && let Some((aw, ah)) = arg("-video_size").and_then(|s| s.split_once('x'))
+        {
+            w = aw.parse().unwrap_or(0);
+            h = ah.parse().unwrap_or(0);
+        }
+        let fps = if self.fps > 0.0 {
+            self.fps
+        } else {
+            arg("-framerate")
+                .or_else(|| arg("-r"))
+                .and_then(|s| s.parse().ok())
+                .unwrap_or(0.0)
+        };
+        (w, h, fps)
     }
 }
 
@@ -222,5 +269,30 @@ mod tests {
         assert!(bad(&|c| c.fps = 0.5).contains("h264.fps = 0.5"));
         assert!(bad(&|c| c.bitrate_kbps = 1).contains("bitrate_kbps = 1"));
         assert!(bad(&|c| c.auto_port = 0).contains("5600"));
+        let no_source = |c: &mut H264Config| c.passthrough = vec!["-f".into(), "v4l2".into()];
+        assert!(bad(&no_source).contains("end it with \"-i\""));
+    }
+
+    #[test]
+    fn a_passthrough_stream_is_described_by_its_input_arguments() {
+        let mut c = H264Config {
+            passthrough: ["-f", "v4l2", "-video_size", "1280x720", "-framerate", "30"]
+                .into_iter()
+                .chain(["-i", "/dev/video2"])
+                .map(String::from)
+                .collect(),
+            ..H264Config::default()
+        };
+        assert!(c.validate().is_ok());
+        assert_eq!(c.passthrough_shape(), (1280, 720, 30.0));
+        c.width = 640;
+        c.height = 480;
+        c.fps = 15.0;
+        assert_eq!(c.passthrough_shape(), (640, 480, 15.0));
+        c.passthrough = vec!["-i".into(), "x.mp4".into()];
+        c.width = 0;
+        c.height = 0;
+        c.fps = 0.0;
+        assert_eq!(c.passthrough_shape(), (0, 0, 0.0));
     }
 }

@@ -40,6 +40,10 @@ pub enum RtpError {
     #[error("RTP video: the camera stopped")]
     CameraGone,
     #[error(
+        "RTP video: no frame from `{program}` for {secs:.1} s — restarting it (check camera.h264.passthrough and the camera; camera.stall_timeout_s)"
+    )]
+    Stalled { program: String, secs: f64 },
+    #[error(
         "RTP video: the camera's pictures changed from {from:?} to {to:?} — restarting the encoder"
     )]
     SizeChanged { from: Raw, to: Raw },
@@ -139,29 +143,36 @@ impl Encode {
         ] {
             a.push(s.to_owned());
         }
-        let url = |h: &str, p: u16| {
-            let h = if h.contains(':') {
-                format!("[{h}]")
-            } else {
-                h.to_owned()
-            };
-            format!("rtp://{h}:{p}?pkt_size={RTP_PACKET_BYTES}")
-        };
-        if let [(h, p)] = self.dests.as_slice() {
-            a.extend(["-f", "rtp", "-payload_type", "96"].map(String::from));
-            a.push(url(h, *p));
-        } else {
-            // One encode, several receivers.
-            let outs: Vec<String> = self
-                .dests
-                .iter()
-                .map(|(h, p)| format!("[f=rtp:payload_type=96]{}", url(h, *p)))
-                .collect();
-            a.extend(["-map", "0:v", "-f", "tee"].map(String::from));
-            a.push(outs.join("|"));
-        }
+        a.extend(rtp_output(&self.dests));
         a
     }
+}
+
+/// ffmpeg's output arguments for `dests`: plain RTP to one receiver, a
+/// `tee` of one stream to several.
+pub fn rtp_output(dests: &[(String, u16)]) -> Vec<String> {
+    let url = |h: &str, p: u16| {
+        let h = if h.contains(':') {
+            format!("[{h}]")
+        } else {
+            h.to_owned()
+        };
+        format!("rtp://{h}:{p}?pkt_size={RTP_PACKET_BYTES}")
+    };
+    let mut a = Vec::new();
+    if let [(h, p)] = dests {
+        a.extend(["-f", "rtp", "-payload_type", "96"].map(String::from));
+        a.push(url(h, *p));
+    } else {
+        // One stream, several receivers.
+        let outs: Vec<String> = dests
+            .iter()
+            .map(|(h, p)| format!("[f=rtp:payload_type=96]{}", url(h, *p)))
+            .collect();
+        a.extend(["-map", "0:v", "-f", "tee"].map(String::from));
+        a.push(outs.join("|"));
+    }
+    a
 }
 
 /// The raw pictures ffmpeg reads: one decoded JPEG each.
@@ -318,7 +329,7 @@ pub async fn run(
     exited(child, stderr, program).await
 }
 
-async fn exited(mut child: Child, mut stderr: StderrTail, program: &str) -> RtpError {
+pub(super) async fn exited(mut child: Child, mut stderr: StderrTail, program: &str) -> RtpError {
     let status = match tokio::time::timeout(Duration::from_secs(2), child.wait()).await {
         Ok(Ok(s)) => s.to_string(),
         Ok(Err(e)) => format!("wait failed: {e}"),

@@ -9,17 +9,21 @@
 //! stream's current shape is published as [`RtpStream`] for the MAVLink
 //! camera component.
 //!
-//! Every camera source gives JPEG today, so the stream is always an encode;
-//! a source that gives H.264 itself would be passed through (`-c:v copy`)
-//! here. This module must never send to an address nobody configured or
-//! heard from, nor panic on what the child does.
+//! Two ways to make the stream: the camera's JPEG pictures encoded
+//! (`encoder`, the synthetic camera and MJPEG cameras), or, when
+//! `[camera.h264] passthrough` names a camera that gives H.264 itself, its
+//! stream copied without decoding (`passthrough`, `-c:v copy`). This module
+//! must never send to an address nobody configured or heard from, nor panic
+//! on what the child does.
 
 pub(super) mod config;
 mod encoder;
+mod passthrough;
 mod stations;
 
 use std::net::IpAddr;
 
+use futures_util::FutureExt;
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
@@ -32,6 +36,7 @@ use super::Camera;
 use super::backoff::Backoff;
 use super::config::CameraConfig;
 use encoder::{Encode, destinations};
+use passthrough::Copy;
 
 /// The RTP stream being sent, for the MAVLink camera component
 /// (VIDEO_STREAM_INFORMATION).
@@ -73,12 +78,12 @@ impl RtpVideo {
                 dests: cfg.rtp.clone(),
                 h264: cfg.h264.clone(),
                 camera_fps: cfg.fps,
+                stall: cfg.stall_timeout(),
                 backoff: Backoff::from_config(&cfg.backoff),
-                station,
                 stream: stream_tx,
                 pid: pid_tx,
             };
-            tokio::spawn(sup.run(camera.clone_handle()))
+            tokio::spawn(sup.run(camera.clone_handle(), station))
         });
         RtpVideo { stream, pid, task }
     }
@@ -113,50 +118,85 @@ struct Supervisor {
     dests: Vec<RtpDest>,
     h264: H264Config,
     camera_fps: f64,
+    stall: std::time::Duration,
     backoff: Backoff,
-    station: watch::Receiver<Option<IpAddr>>,
     stream: watch::Sender<Option<RtpStream>>,
     pid: watch::Sender<Option<u32>>,
 }
 
 impl Supervisor {
-    fn current(&mut self) -> Vec<(String, u16)> {
-        let auto = *self.station.borrow_and_update();
+    fn current(&self, station: &mut watch::Receiver<Option<IpAddr>>) -> Vec<(String, u16)> {
+        let auto = *station.borrow_and_update();
         destinations(&self.dests, auto, self.h264.auto_port)
     }
 
-    async fn run(mut self, camera: super::CameraHandle) {
+    /// One run encoding the camera's pictures.
+    async fn encode(&self, camera: &super::CameraHandle, dests: &[(String, u16)]) -> RtpError {
+        let enc = Encode::new(&self.h264, self.camera_fps, dests.to_vec());
+        tracing::info!(to = ?dests, fps = enc.fps, "RTP video: starting the H.264 encoder");
+        // Frames are wanted while the encoder runs.
+        let _demand = camera.demand();
+        let mut frames = camera.subscribe();
+        let uri = RtpDest::udp_uri(&dests[0].0, dests[0].1);
+        encoder::run(&self.h264.program, &enc, &mut frames, |p, (w, h)| {
+            self.announce(p, uri.clone(), (w, h), enc.fps);
+        })
+        .await
+    }
+
+    /// One run copying the H.264 the camera gives: the camera's pictures
+    /// are not asked for.
+    async fn copy(&self, dests: &[(String, u16)]) -> RtpError {
+        let copy = Copy {
+            input: self.h264.passthrough.clone(),
+            dests: dests.to_vec(),
+            stall: self.stall,
+        };
+        tracing::info!(to = ?dests, "RTP video: passing the camera's H.264 through");
+        let uri = RtpDest::udp_uri(&dests[0].0, dests[0].1);
+        let (w, h, fps) = self.h264.passthrough_shape();
+        passthrough::run(&self.h264.program, &copy, |p| {
+            self.announce(p, uri.clone(), (w, h), fps);
+        })
+        .await
+    }
+
+    /// The stream runs: say so to the camera component.
+    fn announce(&self, pid: Option<u32>, uri: String, (w, h): (u32, u32), fps: f64) {
+        self.pid.send_replace(pid);
+        self.stream.send_replace(Some(RtpStream {
+            uri,
+            width: u16::try_from(w).unwrap_or(u16::MAX),
+            height: u16::try_from(h).unwrap_or(u16::MAX),
+            fps: fps as f32,
+            bitrate_kbps: self.h264.bitrate_kbps,
+        }));
+    }
+
+    async fn run(
+        mut self,
+        camera: super::CameraHandle,
+        mut station: watch::Receiver<Option<IpAddr>>,
+    ) {
         let mut logged_not_found = false;
         loop {
-            let dests = self.current();
+            let dests = self.current(&mut station);
             if dests.is_empty() {
                 self.stream.send_replace(None);
                 self.pid.send_replace(None);
                 tracing::info!("RTP video: no destination, not sending");
-                if self.station.changed().await.is_err() {
+                if station.changed().await.is_err() {
                     return;
                 }
                 continue;
             }
-            let enc = Encode::new(&self.h264, self.camera_fps, dests.clone());
-            tracing::info!(to = ?dests, fps = enc.fps, "RTP video: starting the H.264 encoder");
-            // Frames are wanted while the encoder runs.
-            let _demand = camera.demand();
-            let mut frames = camera.subscribe();
             let started = Instant::now();
-            let (stream, pid) = (&self.stream, &self.pid);
-            let uri = RtpDest::udp_uri(&dests[0].0, dests[0].1);
-            let run = encoder::run(&self.h264.program, &enc, &mut frames, |p, (w, h)| {
-                pid.send_replace(p);
-                stream.send_replace(Some(RtpStream {
-                    uri: uri.clone(),
-                    width: u16::try_from(w).unwrap_or(u16::MAX),
-                    height: u16::try_from(h).unwrap_or(u16::MAX),
-                    fps: enc.fps as f32,
-                    bitrate_kbps: enc.bitrate_kbps,
-                }));
-            });
-            let station = &mut self.station;
+            let run = if self.h264.passthrough.is_empty() {
+                self.encode(&camera, &dests).boxed()
+            } else {
+                self.copy(&dests).boxed()
+            };
+            let station = &mut station;
             let (cfg_dests, auto_port) = (&self.dests, self.h264.auto_port);
             let moved = async {
                 loop {
