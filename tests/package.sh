@@ -26,7 +26,7 @@ echo "== package: cargo deb (release build)"
 rm -f target/debian/neptunus_*.deb
 cargo deb --locked
 deb=$(ls target/debian/neptunus_*.deb)
-echo "$deb: $(stat -c %s "$deb") bytes"
+echo "$deb: $(stat -c %s "$deb") bytes (the binary: $(stat -c %s target/release/neptunus) bytes)"
 
 echo "== package: control data"
 info=$(dpkg-deb -I "$deb")
@@ -95,6 +95,10 @@ awk -v s="$score" 'BEGIN { exit !(s <= 2.0) }' || fail "exposure $score is above
 
 echo "== package: the packaged configuration"
 "$bin" --config "$conf" --check || fail "the packaged configuration does not parse"
+# Its commented examples ([camera.ffmpeg], [camera.h264]) parse once uncommented.
+sed 's/^# \(\[camera\.\|input_args\|passthrough\)/\1/' "$conf" >"$work/examples.toml"
+cmp -s "$conf" "$work/examples.toml" && fail "no commented example found in the packaged configuration"
+"$bin" --config "$work/examples.toml" --check >/dev/null || fail "a commented example in the packaged configuration does not parse"
 
 echo "== package: the packaged binary runs --sim with the packaged configuration"
 data="$work/data"
