@@ -18,6 +18,7 @@ fn main() {
     let manifest_dir =
         PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     web_dependencies(&manifest_dir.join("web"));
+    build_date();
     let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     let dialect_dir = manifest_dir.join("dialect");
     println!("cargo:rerun-if-changed={}", dialect_dir.display());
@@ -147,4 +148,20 @@ fn web_dependencies(web: &Path) {
             web.display()
         ),
     }
+}
+
+/// `NEPTUNUS_BUILD_UNIX_S` for `wallclock::BUILD_UNIX_S`: a vehicle clock
+/// before it is certainly wrong. `SOURCE_DATE_EPOCH` wins (reproducible
+/// builds); otherwise the time this script ran, which is never after the build.
+fn build_date() {
+    println!("cargo:rerun-if-env-changed=SOURCE_DATE_EPOCH");
+    let secs = env::var("SOURCE_DATE_EPOCH")
+        .ok()
+        .and_then(|s| s.trim().parse::<u64>().ok())
+        .unwrap_or_else(|| {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs())
+        });
+    println!("cargo:rustc-env=NEPTUNUS_BUILD_UNIX_S={secs}");
 }

@@ -9,6 +9,8 @@
 //!   and the telemetry log.
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
+//! - [`doctor`]: `neptunus doctor`, the pool-side checks of the machine.
+//! - [`wallclock`]: the logs' clock (set by the station in control when the ROV's is wrong).
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`logfile`]: `neptunus.log`, rotated by size.
 //! - [`app`]: wiring of tasks and shutdown.
@@ -23,6 +25,7 @@ pub mod app;
 pub mod camera;
 pub mod config;
 pub mod dialect;
+pub mod doctor;
 pub mod eventlog;
 pub mod firmware;
 pub mod hmi;
@@ -31,3 +34,4 @@ pub mod mavlink;
 pub mod scenario;
 pub mod sim;
 pub mod vehicle;
+pub mod wallclock;

@@ -10,7 +10,7 @@ use neptunus::vehicle::input::{Profile, Profiles, ZConvention};
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     match real_main(cli) {
-        Ok(()) => std::process::ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => {
             // One clear line (plus causes) rather than a backtrace.
             let mut msg = format!("neptunus: {e}");
@@ -23,7 +23,7 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-fn real_main(cli: Cli) -> anyhow::Result<()> {
+fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
     let runtime = || {
         tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
@@ -45,6 +45,18 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
             }
             let written = neptunus::scenario::report::write(&dir, &outcomes)?;
             writeln!(out, "wrote {} files to {}", written.len(), dir.display())?;
+        }
+        Some(CliCommand::Doctor { json }) => {
+            let report = neptunus::doctor::run(&cli.run);
+            let mut out = std::io::stdout();
+            if json {
+                writeln!(out, "{}", serde_json::to_string_pretty(&report)?)?;
+            } else {
+                write!(out, "{}", report.text())?;
+            }
+            if !report.ok {
+                return Ok(std::process::ExitCode::FAILURE);
+            }
         }
         Some(CliCommand::Signing { command }) => {
             let data_dir = config::resolve(&cli.run)?.data_dir;
@@ -68,6 +80,10 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
                 shutdown_signal(),
             ))?;
         }
+        None if cli.run.check => {
+            let settings = config::resolve(&cli.run)?;
+            check_summary(&cli.run, &settings)?;
+        }
         None => {
             let settings = config::resolve(&cli.run)?;
             // A broken data directory degrades (app::run says how, loudly);
@@ -80,6 +96,46 @@ fn real_main(cli: Cli) -> anyhow::Result<()> {
             runtime()?.block_on(neptunus::app::run(settings, shutdown_signal()))?;
         }
     }
+    Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// `--check`: what the configuration resolves to, for the operator to read.
+fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result<()> {
+    let mut out = std::io::stdout().lock();
+    match &args.config {
+        Some(p) => writeln!(out, "configuration {} is valid", p.display())?,
+        None => writeln!(
+            out,
+            "no configuration file: flags and built-in defaults are valid"
+        )?,
+    }
+    match &s.board {
+        config::BoardSource::Simulated(_) => writeln!(
+            out,
+            "board:     simulated (board emulator on a pseudo-terminal)"
+        )?,
+        config::BoardSource::Serial => writeln!(
+            out,
+            "board:     {} at {} baud, framing {}",
+            s.link.device.display(),
+            s.link.baud,
+            s.link.framing
+        )?,
+    }
+    writeln!(out, "data:      {}", s.data_dir.display())?;
+    for e in &s.mavlink.endpoints {
+        writeln!(out, "mavlink:   {e}")?;
+    }
+    match s.hmi.http {
+        Some(a) => writeln!(out, "hmi:       http://{a}/")?,
+        None => writeln!(out, "hmi:       off")?,
+    }
+    writeln!(
+        out,
+        "camera:    {} (rotation {}°)",
+        s.camera.source.as_str(),
+        s.camera.rotation_deg
+    )?;
     Ok(())
 }
 

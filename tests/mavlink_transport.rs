@@ -1012,6 +1012,7 @@ fn tlog_rotates_by_size_and_never_overwrites() {
         dir: dir.path().join("logs"),
         max_bytes: 100,
         total_bytes: u64::MAX,
+        clock: neptunus::wallclock::WallClock::system(),
     };
     let frame = encode_v2(1, 1, 0, &heartbeat(0)); // 21 bytes: 29 per record
     assert_eq!(frame.len(), 21);
@@ -1309,6 +1310,7 @@ fn tlog_total_cap_deletes_the_oldest_of_our_files_first_and_nothing_else() {
         dir: tlogs.clone(),
         max_bytes: 64 * 1024 * 1024,
         total_bytes: 1024 * 1024,
+        clock: neptunus::wallclock::WallClock::system(),
     };
     // Files rotate at half the total: room for the live one is kept.
     assert_eq!(cfg.file_bytes(), 512 * 1024);

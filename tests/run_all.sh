@@ -27,6 +27,11 @@ if ! gst-inspect-1.0 avdec_h264 >/dev/null 2>&1 || ! gst-inspect-1.0 h264parse >
         gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav
 fi
 gst-launch-1.0 --version | sed -n 1p
+# The clock test runs the vehicle under libfaketime (tests/clock.rs).
+if ! command -v faketime >/dev/null 2>&1; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q faketime
+fi
 
 echo "== formatting and lints"
 cargo fmt --all -- --check
@@ -85,6 +90,11 @@ rm -f target/browser-junit.xml
     --test-reporter=junit --test-reporter-destination=../../target/browser-junit.xml \
     ./*.test.js) || status=1
 
+echo "== Debian package (built for this machine and checked: tests/package.sh)"
+pk_pass=0
+pk_fail=0
+if bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
+
 # Summarise as one plain line for CI: cargo prints one result line per test
 # binary; pytest's and node's counts come from their JUnit XML.
 junit_counts() {
@@ -103,7 +113,7 @@ PY
 }
 read -r py_pass py_fail py_skip < <(junit_counts target/interop-junit.xml)
 read -r br_pass br_fail br_skip < <(junit_counts target/browser-junit.xml)
-awk -v pp="$((py_pass + br_pass))" -v pf="$((py_fail + br_fail))" -v ps="$((py_skip + br_skip))" \
+awk -v pp="$((py_pass + br_pass + pk_pass))" -v pf="$((py_fail + br_fail + pk_fail))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
 exit "$status"

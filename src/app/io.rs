@@ -29,6 +29,8 @@ pub(super) struct Io {
     /// The built-in simulator while the run mode is SIMULATOR.
     pub(super) simulator: Option<BuiltinSim>,
     pub(super) simulator_opts: EmulatorOptions,
+    /// The wall clock the logs and the core use (set by the station in control).
+    pub(super) clock: std::sync::Arc<crate::wallclock::WallClock>,
     seq: u8,
     last_healthy: Option<Duration>,
 }
@@ -52,9 +54,16 @@ impl Io {
             signing,
             simulator: None,
             simulator_opts,
+            clock: crate::wallclock::WallClock::system(),
             seq: 0,
             last_healthy: None,
         }
+    }
+
+    /// The wall clock shared with the telemetry log (default: a new one).
+    pub(super) fn with_clock(mut self, clock: std::sync::Arc<crate::wallclock::WallClock>) -> Self {
+        self.clock = clock;
+        self
     }
 
     /// A message to the HMI sessions it is for, and on the wire to the
@@ -73,7 +82,7 @@ impl Io {
         }
     }
 
-    pub(super) fn apply(&mut self, outputs: &mut Vec<Output>, vehicle: &Vehicle, now: Now) {
+    pub(super) fn apply(&mut self, outputs: &mut Vec<Output>, vehicle: &Vehicle, mut now: Now) {
         let sysid = vehicle.sysid();
         for out in outputs.drain(..) {
             match out {
@@ -140,6 +149,16 @@ impl Io {
                     }
                 }
                 Output::SaveParams => self.params.save(vehicle.params().clone()),
+                Output::SetWallClock { unix_us } => {
+                    tracing::warn!(
+                        was = %crate::eventlog::rfc3339_utc(now.unix_us),
+                        now = %crate::eventlog::rfc3339_utc(unix_us),
+                        "wall clock set by the ground station in control"
+                    );
+                    self.clock.set_unix_us(unix_us);
+                    // What follows (the event line saying so) carries the new time.
+                    now.unix_us = self.clock.unix_us();
+                }
                 Output::Healthy => {
                     // The link only needs to hear this every few hundred ms.
                     if self

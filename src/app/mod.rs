@@ -9,12 +9,14 @@
 //! - `io`: the core's outputs carried out (one send path for frames);
 //! - `signing`: message signing and its files;
 //! - `params`: parameter saving off the vehicle task;
-//! - `storage`: the data directory's problems at start.
+//! - `storage`: the data directory's problems at start;
+//! - `notify`: systemd's READY/WATCHDOG/STOPPING, fed from the vehicle task's loop.
 //!
 //! `docs/ARCHITECTURE.md` follows a stick input and a telemetry line
 //! through these files.
 
 mod io;
+mod notify;
 mod params;
 mod signing;
 mod storage;
@@ -61,6 +63,9 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
     let mut shutdown = std::pin::pin!(shutdown);
     // The RTP sender says what it sends; the camera component advertises it.
     let mut video_stream = t.rtp.stream();
+    let mut notify = notify::Notify::from_env();
+    let stall = notify::StallHook::from_env();
+    notify.ready();
     loop {
         tokio::select! {
             () = &mut shutdown => break,
@@ -83,8 +88,11 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             }
         }
         vehicle.flush();
+        // The watchdog is fed by this loop alone: a hung vehicle task starves it.
+        stall.check();
+        notify.alive();
     }
-    t.shutdown(vehicle).await;
+    t.shutdown(vehicle, &mut notify).await;
     Ok(())
 }
 

@@ -61,6 +61,8 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         &mut storage_problems,
     );
 
+    // The logs' clock: the system's, until the station in control sets it.
+    let clock = crate::wallclock::WallClock::system();
     let (in_tx, inbound) = mpsc::channel(4096);
     let router_cfg = RouterConfig {
         peer_timeout: settings.mavlink.peer_timeout,
@@ -68,6 +70,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             dir: settings.data_dir.join("tlogs"),
             max_bytes: settings.mavlink.tlog_max_bytes,
             total_bytes: settings.mavlink.tlog_total_bytes,
+            clock: clock.clone(),
         }),
     };
     let endpoints = &settings.mavlink.endpoints;
@@ -95,7 +98,11 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
-        .with_camera(camera_spec(&settings.camera));
+        .with_camera(camera_spec(&settings.camera))
+        .with_wall_clock(
+            crate::wallclock::system_sync(),
+            crate::wallclock::BUILD_UNIX_S * 1_000_000,
+        );
     let (event_log, log_problem) =
         EventLog::start_or_degraded(EventLogConfig::new(settings.data_dir.join("events")));
     if let Some(e) = log_problem {
@@ -134,7 +141,8 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         event_log.clone(),
         signing,
         settings.simulator.clone(),
-    );
+    )
+    .with_clock(clock);
     let mut tick = tokio::time::interval(Duration::from_millis(10));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let report = tokio::time::interval_at(
@@ -178,8 +186,14 @@ pub(super) async fn board_truth(truth: &mut Option<watch::Receiver<BoardSnapshot
 impl Tasks {
     /// Thrusters to neutral, unsaved parameters saved, then every task
     /// stopped in order.
-    pub(super) async fn shutdown(self, mut vehicle_task: VehicleTask) {
+    pub(super) async fn shutdown(
+        self,
+        mut vehicle_task: VehicleTask,
+        notify: &mut super::notify::Notify,
+    ) {
         tracing::info!("shutting down: thrusters to neutral");
+        let written = vehicle_task.io.link.subscribe();
+        let before = written.borrow().thrust_written;
         vehicle_task.io.neutral();
         // Changes acknowledged but not yet on disk (the debounce, a save in
         // flight, a failing disk) get one last try.
@@ -187,8 +201,10 @@ impl Tasks {
         let unsaved = vehicle.params_unsaved().then(|| vehicle.params().clone());
         let saver = std::mem::replace(&mut vehicle_task.io.params, ParamSaver::stopped());
         let _ = tokio::task::spawn_blocking(move || saver.finish(unsaved)).await;
-        // Give the link a moment to put the neutral command on the wire.
-        tokio::time::sleep(Duration::from_millis(50)).await;
+        // Give the link a moment to put the neutral command on the wire
+        // (at once when the board is up; a link that is down never will).
+        neutral_written(written, before).await;
+        notify.stopping();
         self.hmi.shutdown().await;
         self.rtp.shutdown().await;
         self.camera.shutdown().await;
@@ -199,6 +215,21 @@ impl Tasks {
         if let Some(board) = self.board {
             board.shutdown().await;
         }
+    }
+}
+
+/// Waits until the link has written a thruster command after `before`
+/// (the neutral one: nothing else is sent after it), at most 200 ms.
+async fn neutral_written(
+    mut stats: watch::Receiver<crate::firmware::link::LinkStats>,
+    before: u64,
+) {
+    let wait = stats.wait_for(|s| s.thrust_written > before);
+    if tokio::time::timeout(Duration::from_millis(200), wait)
+        .await
+        .is_err()
+    {
+        tracing::warn!("the neutral command was not written within 200 ms (board link down?)");
     }
 }
 

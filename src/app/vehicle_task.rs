@@ -64,9 +64,7 @@ impl VehicleTask {
     fn clock(&self) -> Now {
         Now {
             mono: self.t0.elapsed(),
-            unix_us: std::time::SystemTime::now()
-                .duration_since(std::time::UNIX_EPOCH)
-                .map_or(0, |d| d.as_micros() as u64),
+            unix_us: self.io.clock.unix_us(),
         }
     }
 

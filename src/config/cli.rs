@@ -75,6 +75,10 @@ pub struct RunArgs {
     /// `off` [default: auto].
     #[arg(long = "video-rtp", value_name = "udp://HOST:PORT|auto|off")]
     pub video_rtp: Vec<crate::camera::rtp::RtpDest>,
+    /// Check the configuration (file and flags), print what it resolves
+    /// to, and exit: 0 when it is valid.
+    #[arg(long)]
+    pub check: bool,
 }
 
 /// `--tls` and `[hmi] tls`.
@@ -139,6 +143,16 @@ pub enum CliCommand {
     Hmi {
         #[command(subcommand)]
         command: HmiCommand,
+    },
+    /// Check what the vehicle needs on this machine — the configuration, the
+    /// serial device and a board answering on it (framing crc8 or plain),
+    /// the camera, the ports, the data directory, the clock — one line each
+    /// with the fix; exit status 0 only when all pass. Stop the service
+    /// first: the vehicle holds the serial port.
+    Doctor {
+        /// One JSON object (`ok`, `checks`: name, ok, detail, fix) for scripts.
+        #[arg(long)]
+        json: bool,
     },
     /// Run the autopilot step-response scenarios on the simulator (simulated
     /// time, fixed seeds) and write a CSV and a PNG plot per scenario to DIR.

@@ -18,10 +18,12 @@ use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
-/// Where and how big.
-#[derive(Debug, Clone, PartialEq, Eq)]
+use crate::wallclock::WallClock;
+
+/// Where and how big, and by which clock.
+#[derive(Debug, Clone)]
 pub struct TlogConfig {
     pub dir: PathBuf,
     /// A new file is started before a record would take the current one past
@@ -31,6 +33,9 @@ pub struct TlogConfig {
     /// The tlog files in `dir` (ours, by name) add up to at most this: the
     /// oldest are deleted at start and at each rotation.
     pub total_bytes: u64,
+    /// Names and time stamps come from it; once the ground station in
+    /// control sets it, the log goes on in a file named with the new time.
+    pub clock: Arc<WallClock>,
 }
 
 impl TlogConfig {
@@ -42,6 +47,7 @@ impl TlogConfig {
             dir: dir.into(),
             max_bytes: Self::DEFAULT_MAX_BYTES,
             total_bytes: Self::DEFAULT_TOTAL_BYTES,
+            clock: WallClock::system(),
         }
     }
 
@@ -114,6 +120,24 @@ impl TlogWriter {
     /// The file being written now.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Goes on in `{session}.tlog` (the clock was set: the old name is wrong).
+    pub fn new_session(&mut self, session: &str) -> io::Result<()> {
+        self.file.flush()?;
+        let (index, path, file) = open_next(&self.dir, session, 1)?;
+        tracing::info!(path = %path.display(), "telemetry log goes on under the corrected time");
+        self.session = session.to_owned();
+        self.index = index;
+        self.path = path;
+        self.file = BufWriter::new(file);
+        self.written = 0;
+        prune(
+            &self.dir,
+            Some(&self.path),
+            self.total_bytes.saturating_sub(self.max_bytes),
+        );
+        Ok(())
     }
 
     fn rotate(&mut self) -> io::Result<()> {
@@ -254,10 +278,13 @@ enum TlogMsg {
 pub(super) struct TlogSender {
     tx: std::sync::mpsc::SyncSender<TlogMsg>,
     dropped: Arc<AtomicU64>,
+    clock: Arc<WallClock>,
 }
 
 impl TlogSender {
-    pub(super) fn record(&self, unix_time_us: u64, raw: Arc<[u8]>) {
+    /// Records `raw`, stamped now.
+    pub(super) fn record(&self, raw: Arc<[u8]>) {
+        let unix_time_us = self.clock.unix_us();
         if let Err(std::sync::mpsc::TrySendError::Full(_)) =
             self.tx.try_send(TlogMsg::Frame(unix_time_us, raw))
             && self.dropped.fetch_add(1, Ordering::Relaxed) == 0
@@ -275,18 +302,24 @@ pub(super) struct TlogHandle {
 impl TlogHandle {
     /// Creates the session's first file and starts the thread writing it.
     pub(super) fn spawn(cfg: &TlogConfig) -> io::Result<Self> {
-        let writer = TlogWriter::create(cfg, &session_name(SystemTime::now()))?;
+        let clock = Arc::clone(&cfg.clock);
+        let generation = clock.generation();
+        let writer = TlogWriter::create(cfg, &session_name(clock.unix_us()))?;
         tracing::info!(path = %writer.path().display(), "telemetry log started");
         let (tx, rx) = std::sync::mpsc::sync_channel(TLOG_QUEUE);
         // A thread, not a task: file writes may block, and must not hold up
         // a runtime worker that is serving sockets.
         let thread = std::thread::Builder::new()
             .name("neptunus-tlog".into())
-            .spawn(move || run_tlog(writer, rx))?;
+            .spawn({
+                let clock = Arc::clone(&clock);
+                move || run_tlog(writer, rx, &clock, generation)
+            })?;
         Ok(Self {
             sender: TlogSender {
                 tx,
                 dropped: Arc::new(AtomicU64::new(0)),
+                clock,
             },
             thread: Mutex::new(Some(thread)),
         })
@@ -312,7 +345,12 @@ impl TlogHandle {
     }
 }
 
-fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
+fn run_tlog(
+    mut writer: TlogWriter,
+    rx: std::sync::mpsc::Receiver<TlogMsg>,
+    clock: &WallClock,
+    mut generation: u64,
+) {
     use std::sync::mpsc::RecvTimeoutError;
     let mut next_flush = std::time::Instant::now() + TLOG_FLUSH_PERIOD;
     let mut dirty = false;
@@ -328,6 +366,12 @@ fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
         let wait = next_flush.saturating_duration_since(std::time::Instant::now());
         match rx.recv_timeout(wait) {
             Ok(TlogMsg::Frame(time_us, raw)) => {
+                let now_generation = clock.generation();
+                if now_generation != generation {
+                    generation = now_generation;
+                    let result = writer.new_session(&session_name(clock.unix_us()));
+                    report(result, writer.path());
+                }
                 let result = writer.write_frame(time_us, &raw);
                 report(result, writer.path());
                 dirty = true;
@@ -351,8 +395,8 @@ fn run_tlog(mut writer: TlogWriter, rx: std::sync::mpsc::Receiver<TlogMsg>) {
 
 /// `neptunus-YYYYMMDD-HHMMSS` in UTC: sorts by time, and reads the same on
 /// the ROV (which may have no time zone set) and on the laptop.
-fn session_name(now: SystemTime) -> String {
-    let secs = now.duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
+fn session_name(unix_us: u64) -> String {
+    let secs = unix_us / 1_000_000;
     let rem = secs % 86_400;
     let (y, m, d) = crate::eventlog::civil_from_days(secs / 86_400);
     format!(
@@ -361,14 +405,6 @@ fn session_name(now: SystemTime) -> String {
         (rem / 60) % 60,
         rem % 60
     )
-}
-
-/// The time a record is stamped with: microseconds since the Unix epoch.
-pub(super) fn unix_time_us() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map(|d| u64::try_from(d.as_micros()).unwrap_or(u64::MAX))
-        .unwrap_or(0)
 }
 
 #[cfg(test)]
@@ -419,10 +455,10 @@ mod tests {
 
     #[test]
     fn session_names_are_utc_dates() {
-        let t = UNIX_EPOCH + Duration::from_secs(1_700_000_000);
+        let t = 1_700_000_000 * 1_000_000;
         assert_eq!(session_name(t), "neptunus-20231114-221320");
-        assert_eq!(session_name(UNIX_EPOCH), "neptunus-19700101-000000");
-        let leap = UNIX_EPOCH + Duration::from_secs(951_782_400); // 2000-02-29
+        assert_eq!(session_name(0), "neptunus-19700101-000000");
+        let leap = 951_782_400 * 1_000_000; // 2000-02-29
         assert_eq!(session_name(leap), "neptunus-20000229-000000");
     }
 }

@@ -156,6 +156,17 @@ impl Vehicle {
     /// Without `--http` in `args`, the browser HMI listens on a free
     /// loopback port (never the default 8080: tests run side by side).
     pub fn spawn(bin: &Path, args: &[&str], dir: &Path, params_toml: &str) -> anyhow::Result<Self> {
+        Self::spawn_env(bin, args, dir, params_toml, &[])
+    }
+
+    /// [`spawn`](Self::spawn) with extra environment variables.
+    pub fn spawn_env(
+        bin: &Path,
+        args: &[&str],
+        dir: &Path,
+        params_toml: &str,
+        env: &[(&str, &str)],
+    ) -> anyhow::Result<Self> {
         let data = dir.join("data");
         if !params_toml.is_empty() {
             std::fs::create_dir_all(&data)?;
@@ -172,6 +183,7 @@ impl Vehicle {
             .arg("--data-dir")
             .arg(&data)
             .env("RUST_LOG", "warn")
+            .envs(env.iter().copied())
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(stderr)

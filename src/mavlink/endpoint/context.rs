@@ -19,7 +19,7 @@ use tokio::time::Instant;
 
 use super::types::{EndpointId, EndpointStats, Inbound, PeerId, PeerStanding};
 use crate::mavlink::frame::{Frame, FrameStats};
-use crate::mavlink::tlog::{TlogSender, unix_time_us};
+use crate::mavlink::tlog::TlogSender;
 
 /// Peers per endpoint (UDP addresses or TCP clients). When full, the least
 /// recently heard peer that may not control makes room for a newcomer;
@@ -193,7 +193,7 @@ impl EndpointCtx {
     pub(super) fn log_reply(&self, standing: &PeerStanding, bytes: &Arc<[u8]>) {
         let Some(tlog) = &self.tlog else { return };
         if standing.may_control() || self.tlog_allows_stranger(Instant::now()) {
-            tlog.record(unix_time_us(), Arc::clone(bytes));
+            tlog.record(Arc::clone(bytes));
         }
     }
 
@@ -267,7 +267,6 @@ impl EndpointCtx {
         if frames.is_empty() {
             return;
         }
-        let now_us = unix_time_us();
         let may_control = standing.may_control();
         let now = Instant::now();
         standing.heard(self.epoch);
@@ -275,7 +274,7 @@ impl EndpointCtx {
             if let Some(tlog) = &self.tlog
                 && (may_control || self.tlog_allows_stranger(now))
             {
-                tlog.record(now_us, Arc::from(frame.raw.as_slice()));
+                tlog.record(Arc::from(frame.raw.as_slice()));
             }
             // Strangers may not crowd out the stations that may control.
             let (num, den) = INBOUND_STRANGER_SHARE;

@@ -26,7 +26,7 @@ use super::tcp::{connect_tcp, run_tcp_in};
 use super::types::{EndpointId, EndpointStats, Inbound, Outbound, Route};
 use super::udp::run_udp;
 use super::url::EndpointSpec;
-use crate::mavlink::tlog::{TlogConfig, TlogHandle, unix_time_us};
+use crate::mavlink::tlog::{TlogConfig, TlogHandle};
 
 /// Router settings.
 #[derive(Debug, Clone)]
@@ -202,7 +202,7 @@ impl RouterHandle {
         if let Some(tlog) = &self.inner.tlog
             && !matches!(out.route, Route::Peer(..))
         {
-            tlog.sender.record(unix_time_us(), Arc::clone(&out.bytes));
+            tlog.sender.record(Arc::clone(&out.bytes));
         }
         let (slots, target) = match out.route {
             Route::All => (&self.inner.endpoints[..], Target::All),

@@ -134,6 +134,7 @@ impl Vehicle {
                 self.on_gimbal_message(from, &msg, now, out);
             }
             MavMessage::SETUP_SIGNING(k) => self.setup_signing(from, &k, now, out),
+            MavMessage::SYSTEM_TIME(t) => self.on_system_time(from, &t, now, out),
             MavMessage::SET_MODE(m) => {
                 let result = self.set_mode_by(from, m.custom_mode, now, out);
                 out.push(Output::Send {

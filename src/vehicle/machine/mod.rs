@@ -36,6 +36,7 @@
 //! | `signing.rs` | SETUP_SIGNING |
 //! | `stubs.rs` | missions, FTP, TIMESYNC, PING answered without implementing them |
 //! | `texts.rs` | STATUSTEXT to all or to one asker, with a topic |
+//! | `wall_time.rs` | SYSTEM_TIME from the station in control sets a wrong clock |
 
 // Ground stations still send the legacy messages and commands MAVLink has
 // deprecated (SET_MODE, REQUEST_DATA_STREAM, PING, GET_MESSAGE_INTERVAL …);
@@ -66,12 +67,14 @@ mod signing;
 mod stubs;
 mod telemetry;
 mod texts;
+mod wall_time;
 
 pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
 pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 pub use run_mode::RunMode;
 pub use texts::{Topic, ascii_text};
+pub use wall_time::ClockSync;
 
 use super::input::Profiles;
 pub use super::mode::Mode;
@@ -280,6 +283,11 @@ pub enum Output {
         target_system: u8,
         target_component: u8,
     },
+    /// The ground station in control gave the time: from now on the wall
+    /// clock (logs, `Now::unix_us`) is `unix_us`, carried forward.
+    SetWallClock {
+        unix_us: u64,
+    },
 }
 
 impl Output {
@@ -352,6 +360,7 @@ pub struct Vehicle {
     texts: texts::Texts,
     persist: persist::Persist,
     signing_active: bool,
+    wall_time: wall_time::WallTime,
     counters: Counters,
 }
 
@@ -418,6 +427,7 @@ impl Vehicle {
             texts: texts::Texts::default(),
             persist: persist::Persist::default(),
             signing_active: false,
+            wall_time: wall_time::WallTime::default(),
             counters: Counters::default(),
         }
     }
@@ -565,6 +575,7 @@ impl Vehicle {
         self.failsafe_tick(now, out);
         self.authority_tick(now, out);
         self.persist_tick(now, out);
+        self.wall_time_tick(now, out);
         // The board's dead-man is fed by the owner's life, not by ours alone:
         // a dead owner link reaches the board even if this loop runs on.
         if !self.armed

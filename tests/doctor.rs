@@ -1,0 +1,285 @@
+//! `neptunus doctor` against `neptunus emulate-board` on a real pty: every
+//! check passes; each fails, with its fix line, when the device is missing,
+//! unreadable, silent or speaks the other framing (and the camera, ports and
+//! data directory checks when theirs are wrong); `--json` parses.
+
+#![allow(
+    clippy::unwrap_used,
+    reason = "a test fails at the first unwrap, with its place"
+)]
+
+use std::io::{BufRead as _, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+
+const BIN: &str = env!("CARGO_BIN_EXE_neptunus");
+
+/// `neptunus emulate-board` as a child, killed on drop.
+struct Board {
+    child: Child,
+    path: PathBuf,
+}
+
+impl Board {
+    fn start(framing: &str) -> Self {
+        let mut child = Command::new(BIN)
+            .args(["emulate-board", "--framing", framing])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("cannot start neptunus emulate-board");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().expect("stdout"))
+            .read_line(&mut line)
+            .expect("the emulator prints its pty");
+        Self {
+            child,
+            path: PathBuf::from(line.trim()),
+        }
+    }
+}
+
+impl Drop for Board {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A configuration file for a board on `serial` with `framing`, data in
+/// `dir/data`, a free UDP port, the HMI on a free port; `extra` appended.
+fn config(dir: &Path, serial: &Path, framing: &str, extra: &str) -> PathBuf {
+    let port = std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .expect("a free port");
+    let text = format!(
+        "data_dir = \"{}\"\n\n[board]\nserial = \"{}\"\nframing = \"{framing}\"\n\n[mavlink]\nendpoints = [\"udpin:127.0.0.1:{port}\"]\n\n[hmi]\nhttp = \"127.0.0.1:0\"\n\n{extra}\n",
+        dir.join("data").display(),
+        serial.display(),
+    );
+    let path = dir.join("neptunus.toml");
+    std::fs::write(&path, text).expect("config written");
+    path
+}
+
+fn doctor(config: &Path, json: bool) -> Output {
+    let mut cmd = Command::new(BIN);
+    cmd.arg("--config").arg(config).arg("doctor");
+    if json {
+        cmd.arg("--json");
+    }
+    cmd.output().expect("neptunus doctor runs")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// The `--json` report: parses, and its `ok` agrees with the exit status.
+fn report(config: &Path) -> serde_json::Value {
+    let o = doctor(config, true);
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+        .unwrap_or_else(|e| panic!("--json does not parse ({e}):\n{}", stdout(&o)));
+    assert_eq!(v["ok"].as_bool(), Some(o.status.success()), "{v}");
+    v
+}
+
+/// The check `name` of a JSON report.
+fn check<'a>(v: &'a serde_json::Value, name: &str) -> &'a serde_json::Value {
+    v["checks"]
+        .as_array()
+        .and_then(|a| a.iter().find(|c| c["name"] == name))
+        .unwrap_or_else(|| panic!("no check {name} in {v}"))
+}
+
+/// The text report fails `name` with a fix line containing `fix`.
+fn assert_fails(config: &Path, name: &str, fix: &str) {
+    let o = doctor(config, false);
+    let text = stdout(&o);
+    assert!(!o.status.success(), "exit 0 with {name} wrong:\n{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    let at = lines
+        .iter()
+        .position(|l| l.starts_with("FAIL") && l.split_whitespace().nth(1) == Some(name))
+        .unwrap_or_else(|| panic!("no FAIL line for {name}:\n{text}"));
+    // The first fix line after it (a long detail may take several lines).
+    let fix_line = lines[at + 1..]
+        .iter()
+        .find(|l| l.trim_start().starts_with("fix:"))
+        .copied()
+        .unwrap_or("");
+    assert!(
+        fix_line.contains("fix:") && fix_line.contains(fix),
+        "the fix for {name} should mention {fix:?}:\n{text}"
+    );
+    let v = report(config);
+    assert_eq!(check(&v, name)["ok"], false, "{v}");
+}
+
+#[test]
+fn every_check_passes_against_the_emulated_board() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::start("crc8");
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        "[camera]\nsource = \"synthetic\"\n",
+    );
+    let o = doctor(&cfg, false);
+    let text = stdout(&o);
+    assert!(o.status.success(), "doctor failed:\n{text}");
+    for name in [
+        "config", "serial", "board", "camera", "ports", "data_dir", "clock",
+    ] {
+        assert!(
+            text.lines()
+                .any(|l| l.starts_with("ok") && l.split_whitespace().nth(1) == Some(name)),
+            "no ok line for {name}:\n{text}"
+        );
+    }
+    assert!(text.contains("crc8"), "{text}");
+    let v = report(&cfg);
+    assert_eq!(v["checks"].as_array().map(Vec::len), Some(7), "{v}");
+    // A plain (December 2014) board passes when the configuration says plain.
+    let plain = Board::start("plain");
+    let cfg = config(
+        dir.path(),
+        &plain.path,
+        "plain",
+        "[camera]\nsource = \"none\"\n",
+    );
+    let v = report(&cfg);
+    assert_eq!(check(&v, "board")["ok"], true, "{v}");
+}
+
+#[test]
+fn a_missing_device_fails_with_its_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = config(dir.path(), Path::new("/dev/ttyO1-missing"), "crc8", "");
+    assert_fails(&cfg, "serial", "UART1");
+}
+
+#[test]
+fn a_device_this_user_cannot_open_fails_with_its_fix() {
+    use std::os::unix::fs::PermissionsExt as _;
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::start("crc8");
+    std::fs::set_permissions(&board.path, std::fs::Permissions::from_mode(0o000)).unwrap();
+    // Root opens anything: then doctor runs as nobody (the config and the
+    // data directory readable and writable by it).
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o777)).unwrap();
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        "[camera]\nsource = \"none\"\n",
+    );
+    std::fs::set_permissions(&cfg, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let mut cmd = if nix::unistd::geteuid().is_root() {
+        let mut c = Command::new("setpriv");
+        c.args(["--reuid=65534", "--regid=65534", "--clear-groups", BIN]);
+        c
+    } else {
+        Command::new(BIN)
+    };
+    let o = cmd
+        .arg("--config")
+        .arg(&cfg)
+        .arg("doctor")
+        .output()
+        .unwrap();
+    let text = stdout(&o);
+    assert!(!o.status.success(), "{text}");
+    let at = text
+        .lines()
+        .position(|l| l.starts_with("FAIL  serial"))
+        .unwrap_or_else(|| {
+            panic!(
+                "serial should fail:\n{text}\n{}",
+                String::from_utf8_lossy(&o.stderr)
+            )
+        });
+    let fix = text.lines().nth(at + 1).unwrap_or("");
+    assert!(fix.contains("fix:") && fix.contains("dialout"), "{text}");
+}
+
+#[test]
+fn a_silent_device_fails_with_its_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    // A pty nobody answers on.
+    let pty = nix::pty::openpty(None, None).unwrap();
+    let slave = std::fs::read_link(format!(
+        "/proc/self/fd/{}",
+        std::os::fd::AsRawFd::as_raw_fd(&pty.slave)
+    ))
+    .unwrap();
+    let cfg = config(dir.path(), &slave, "crc8", "[camera]\nsource = \"none\"\n");
+    assert_fails(&cfg, "board", "P9.24");
+    drop(pty);
+}
+
+#[test]
+fn the_other_framing_fails_with_its_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = Board::start("plain");
+    let cfg = config(
+        dir.path(),
+        &plain.path,
+        "crc8",
+        "[camera]\nsource = \"none\"\n",
+    );
+    assert_fails(&cfg, "board", "framing = \"plain\"");
+    let crc8 = Board::start("crc8");
+    let cfg = config(
+        dir.path(),
+        &crc8.path,
+        "plain",
+        "[camera]\nsource = \"none\"\n",
+    );
+    assert_fails(&cfg, "board", "framing = \"crc8\"");
+}
+
+#[test]
+fn camera_ports_and_data_dir_fail_with_their_fixes() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::start("crc8");
+    // A camera device that is not there.
+    let cam = "[camera]\nsource = \"ffmpeg\"\n[camera.ffmpeg]\nprogram = \"sh\"\ninput_args = [\"-f\", \"v4l2\", \"-i\", \"/dev/video-missing\"]\n";
+    let cfg = config(dir.path(), &board.path, "crc8", cam);
+    assert_fails(&cfg, "camera", "USB camera");
+    // A port someone else listens on.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        "[camera]\nsource = \"none\"\n",
+    );
+    let text = std::fs::read_to_string(&cfg).unwrap().replace(
+        "endpoints = [",
+        &format!("endpoints = [\"tcpin:127.0.0.1:{port}\", "),
+    );
+    std::fs::write(&cfg, text).unwrap();
+    assert_fails(&cfg, "ports", "already running");
+    // A data directory under a file.
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, b"").unwrap();
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        "[camera]\nsource = \"none\"\n",
+    );
+    let text = std::fs::read_to_string(&cfg).unwrap().replace(
+        &dir.path().join("data").display().to_string(),
+        &file.join("data").display().to_string(),
+    );
+    std::fs::write(&cfg, text).unwrap();
+    assert_fails(&cfg, "data_dir", "writable");
+    // And a configuration that does not parse fails first, with the others not checked.
+    std::fs::write(&cfg, "[board]\nbaud = \"fast\"\n").unwrap();
+    assert_fails(&cfg, "config", "--check");
+}

@@ -1,0 +1,128 @@
+#!/usr/bin/env bash
+# Builds the Debian package for this machine's architecture (cargo-deb) and
+# checks it: contents and permissions (dpkg-deb -c), control data and
+# conffiles (dpkg-deb -I), the maintainer scripts, the unit file
+# (systemd-analyze verify, and its security exposure), the packaged
+# configuration (neptunus --check), and the binary from the package running
+# --sim with the packaged configuration against a temporary data directory
+# until it is ready, then stopping cleanly on SIGTERM.
+# Installs what it needs itself. Run from anywhere: bash tests/package.sh
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+fail() { echo "package: FAIL: $*" >&2; exit 1; }
+
+CARGO_DEB_VERSION=3.8.0
+if ! cargo deb --version 2>/dev/null | grep -q "$CARGO_DEB_VERSION"; then
+    cargo install cargo-deb --version "$CARGO_DEB_VERSION" --locked
+fi
+if ! command -v dpkg-deb >/dev/null || ! command -v systemd-analyze >/dev/null; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q dpkg systemd
+fi
+
+echo "== package: cargo deb (release build)"
+rm -f target/debian/neptunus_*.deb
+cargo deb --locked
+deb=$(ls target/debian/neptunus_*.deb)
+echo "$deb: $(stat -c %s "$deb") bytes (the binary: $(stat -c %s target/release/neptunus) bytes)"
+
+echo "== package: control data"
+info=$(dpkg-deb -I "$deb")
+echo "$info"
+grep -q '^ Package: neptunus$' <<<"$info" || fail "no Package: neptunus"
+grep -q "^ Architecture: $(dpkg --print-architecture)$" <<<"$info" || fail "not built for $(dpkg --print-architecture)"
+grep -Eq '^ Depends: .*adduser' <<<"$info" || fail "Depends lacks adduser (postinst uses it)"
+conffiles=$(dpkg-deb --ctrl-tarfile "$deb" | tar -xO ./conffiles)
+[ "$conffiles" = "/etc/neptunus/neptunus.toml" ] || fail "conffiles is '$conffiles', not /etc/neptunus/neptunus.toml"
+
+echo "== package: contents and permissions"
+contents=$(dpkg-deb -c "$deb")
+echo "$contents"
+has() { grep -Eq "^$1 (root/root|0/0) +[0-9]+ [0-9-]+ [0-9:]+ \./$2$" <<<"$contents" || fail "no $2 with mode $1 owned by root"; }
+has '-rwxr-xr-x' 'usr/bin/neptunus'
+has '-rw-r--r--' 'etc/neptunus/neptunus.toml'
+has '-rw-r--r--' '(usr/)?lib/systemd/system/neptunus.service'
+if grep -Eq '/var/lib/neptunus' <<<"$contents"; then fail "the package must not ship /var/lib/neptunus (StateDirectory makes it)"; fi
+
+work=$(mktemp -d)
+child=""
+cleanup() {
+    if [ -n "$child" ]; then kill "$child" 2>/dev/null || true; fi
+    rm -rf "$work"
+}
+trap cleanup EXIT
+dpkg-deb -x "$deb" "$work/root"
+dpkg-deb -e "$deb" "$work/DEBIAN"
+bin="$work/root/usr/bin/neptunus"
+conf="$work/root/etc/neptunus/neptunus.toml"
+unit=""
+for u in "$work"/root/usr/lib/systemd/system/neptunus.service "$work"/root/lib/systemd/system/neptunus.service; do
+    if [ -f "$u" ]; then unit=$u; fi
+done
+[ -n "$unit" ] || fail "no neptunus.service in the package"
+
+echo "== package: maintainer scripts"
+for s in postinst prerm postrm; do
+    [ -f "$work/DEBIAN/$s" ] || fail "no $s"
+    sh -n "$work/DEBIAN/$s" || fail "$s is not valid sh"
+    if grep -q '#DEBHELPER#' "$work/DEBIAN/$s"; then fail "$s: #DEBHELPER# not replaced"; fi
+done
+grep -q 'adduser --system' "$work/DEBIAN/postinst" || fail "postinst does not make the neptunus user"
+grep -Eq 'adduser neptunus "\$group"' "$work/DEBIAN/postinst" || fail "postinst does not add neptunus to dialout/video"
+grep -q 'deb-systemd-helper enable neptunus.service' "$work/DEBIAN/postinst" || fail "postinst does not enable the service"
+grep -q 'deb-systemd-invoke $_dh_action neptunus.service' "$work/DEBIAN/postinst" || fail "postinst does not (re)start the service"
+grep -q 'rm -rf /var/lib/neptunus' "$work/DEBIAN/postrm" || fail "postrm does not remove the data on purge"
+
+echo "== package: the unit (systemd-analyze verify)"
+# verify checks that ExecStart's program exists: point the unit at the
+# extracted binary (the only change), in a folder of its own.
+mkdir "$work/unit"
+sed "s#/usr/bin/neptunus#$bin#g" "$unit" >"$work/unit/neptunus.service"
+# It exits 0 on unknown keys and bad values (only warning): any output fails.
+verify=$(cd "$work/unit" && systemd-analyze verify ./neptunus.service 2>&1) || fail "systemd-analyze verify: $verify"
+[ -z "$verify" ] || fail "systemd-analyze verify warns: $verify"
+echo "systemd-analyze verify: clean"
+for want in 'Type=notify' 'WatchdogSec=' 'Restart=always' 'NoNewPrivileges=yes' 'ProtectSystem=strict' \
+    'ProtectHome=yes' 'PrivateTmp=yes' 'CapabilityBoundingSet=$' 'StateDirectory=neptunus' 'User=neptunus'; do
+    grep -Eq "^$want" "$unit" || fail "the unit lacks $want"
+done
+score=$(systemd-analyze security --offline=true "$unit" 2>/dev/null | sed -n 's/.*Overall exposure level for neptunus.service: \([0-9.]*\).*/\1/p')
+echo "systemd-analyze security: exposure $score (0 = most locked down, 10 = none)"
+[ -n "$score" ] || fail "no systemd-analyze security score"
+awk -v s="$score" 'BEGIN { exit !(s <= 2.0) }' || fail "exposure $score is above 2.0: the hardening regressed"
+
+echo "== package: the packaged configuration"
+"$bin" --config "$conf" --check || fail "the packaged configuration does not parse"
+# Its commented examples ([camera.ffmpeg], [camera.h264]) parse once uncommented.
+sed 's/^# \(\[camera\.\|input_args\|passthrough\)/\1/' "$conf" >"$work/examples.toml"
+cmp -s "$conf" "$work/examples.toml" && fail "no commented example found in the packaged configuration"
+"$bin" --config "$work/examples.toml" --check >/dev/null || fail "a commented example in the packaged configuration does not parse"
+
+echo "== package: the packaged binary runs --sim with the packaged configuration"
+data="$work/data"
+# Flags over the file: loopback ports picked by the system, so tests running
+# side by side (and a vehicle on this machine) do not collide.
+RUST_LOG=info "$bin" --config "$conf" --sim --data-dir "$data" \
+    --mavlink udpin:127.0.0.1:0 --http 127.0.0.1:0 --video-rtp off \
+    >"$work/stdout" 2>"$work/stderr" &
+child=$!
+up=""
+for _ in $(seq 1 300); do
+    if ! kill -0 "$child" 2>/dev/null; then
+        cat "$work/stderr" >&2
+        fail "the packaged binary exited"
+    fi
+    if [ -f "$data/http.addr" ] && grep -q 'board link up' "$work/stderr"; then up=1; break; fi
+    sleep 0.1
+done
+[ -n "$up" ] || { tail -20 "$work/stderr" >&2; fail "no HMI address and board link within 30 s"; }
+kill -TERM "$child"
+status=0
+wait "$child" || status=$?
+child=""
+[ "$status" = 0 ] || { tail -20 "$work/stderr" >&2; fail "exit status $status after SIGTERM"; }
+grep -q 'thrusters to neutral' "$work/stderr" || fail "no 'thrusters to neutral' at shutdown"
+ls "$data"/tlogs/neptunus-*.tlog >/dev/null || fail "no tlog in the temporary data directory"
+echo "package: 1 passed, 0 failed"
