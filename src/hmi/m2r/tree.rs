@@ -191,7 +191,7 @@ mod tests {
         let v = tree.to_value();
         let e = v
             .pointer("/vehicles/1/components/1/messages/ATTITUDE")
-            .unwrap();
+            .expect("the ATTITUDE just recorded");
         assert_eq!(e["message"]["roll"], 0.2);
         assert_eq!(e["status"]["time"]["counter"], 2);
         assert_eq!(e["status"]["time"]["frequency"], 0.5);
