@@ -3,7 +3,7 @@
 //! `web/node_modules/uplot` is missing.
 //!
 //! The upstream definitions (development.xml, common.xml, standard.xml,
-//! minimal.xml) are taken from the `mavlink` crate's own package, so the
+//! minimal.xml, ardupilotmega.xml and its includes) are taken from the `mavlink` crate's own package, so the
 //! repository never carries a copy of them. Both are staged into OUT_DIR
 //! because `<include>` paths resolve relative to the including file.
 
@@ -38,6 +38,12 @@ fn main() {
         "standard.xml",
         "common.xml",
         "development.xml",
+        "ardupilotmega.xml",
+        "uAvionix.xml",
+        "icarous.xml",
+        "loweheiser.xml",
+        "cubepilot.xml",
+        "csAirLink.xml",
     ] {
         fs::copy(upstream.join(name), staging.join(name))
             .unwrap_or_else(|e| panic!("copy upstream {name} from {}: {e}", upstream.display()));
