@@ -7,7 +7,9 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use neptunus::dialect::neptunus::*;
-use neptunus::hmi::m2r::frame::{self, Header};
+use neptunus::hmi::m2r::frame::{self, Header, Reserved};
+
+const US: Reserved = Reserved::vehicle(1);
 
 fn golden(msg: MavMessage, text: &str) {
     let json = serde_json::to_string(&msg).unwrap();
@@ -148,7 +150,7 @@ fn statustext_text_is_an_array_of_characters() {
 fn cockpit_frames_parse() {
     let f = frame::parse(
         r#"{"header":{"system_id":255,"component_id":240,"sequence":0},"message":{"type":"PARAM_SET","param_value":3,"target_system":1,"target_component":0,"param_id":["B","T","N","5","_","S","F","U","N","C","T","I","O","N","\u0000","\u0000"],"param_type":{"type":"MAV_PARAM_TYPE_INT8"}}}"#,
-        1,
+        US,
     )
     .unwrap();
     assert_eq!(
@@ -167,7 +169,7 @@ fn cockpit_frames_parse() {
 
     let f = frame::parse(
         r#"{"header":{"system_id":255,"component_id":240,"sequence":7},"message":{"type":"MANUAL_CONTROL","target":1,"x":600,"y":0,"z":500,"r":0,"s":0,"t":0,"buttons":0,"buttons2":0,"enabled_extensions":0}}"#,
-        1,
+        US,
     )
     .unwrap();
     let MavMessage::MANUAL_CONTROL(m) = f.message else {
@@ -188,8 +190,16 @@ fn what_does_not_convert() {
         r#"{"header":{"system_id":1,"component_id":1,"sequence":0},"message":{"type":"PARAM_REQUEST_LIST","target_system":1,"target_component":0}}"#,
         r#"{"header":{"system_id":255,"component_id":240,"sequence":0},"message":{"type":"PARAM_SET","param_value":3,"target_system":1,"target_component":0,"param_id":["BT","N"],"param_type":{"type":"MAV_PARAM_TYPE_INT8"}}}"#,
     ] {
-        assert!(frame::parse(bad, 1).is_err(), "accepted: {bad}");
+        assert!(frame::parse(bad, US).is_err(), "accepted: {bad}");
     }
+    // Nor may a client speak as a system id the HMI lends its sessions.
+    let hmi = Reserved {
+        vehicle_sysid: 1,
+        hmi_sysids: (200, 209),
+    };
+    let as_205 = r#"{"header":{"system_id":205,"component_id":190,"sequence":0},"message":{"type":"PARAM_REQUEST_LIST","target_system":1,"target_component":0}}"#;
+    assert!(frame::parse(as_205, hmi).is_err());
+    assert!(frame::parse(as_205, US).is_ok());
 }
 
 /// Every message of the dialect survives JSON both ways (its zeroed example

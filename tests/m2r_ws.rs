@@ -619,6 +619,11 @@ async fn frames_that_do_not_convert_are_answered_and_change_nothing() {
                 "param5": 0, "param6": 0, "param7": 0, "command": {"type": "MAV_CMD_COMPONENT_ARM_DISARM"},
                 "target_system": 1, "target_component": 1, "confirmation": 0}}).to_string(),
         json!({"message": manual_control(1000)}).to_string(),
+        // Speaking as the vehicle, or as an id the HMI lends its sessions.
+        json!({"header": {"system_id": 1, "component_id": 1, "sequence": 0},
+            "message": manual_control(1000)}).to_string(),
+        json!({"header": {"system_id": 205, "component_id": 190, "sequence": 0},
+            "message": manual_control(1000)}).to_string(),
     ];
     for text in bad {
         c.send_text(text.clone()).await;

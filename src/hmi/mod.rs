@@ -349,7 +349,14 @@ pub async fn serve(
     let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
     let hostname = auth::machine_hostname();
     // Peer ids: sessions and mavlink2rest clients count from 2; 1 is REST POSTs.
-    let m2r_hub = Arc::new(m2r::Hub::new(ctx.m2r_outlet.endpoint(), 1));
+    let m2r_hub = Arc::new(m2r::Hub::new(
+        ctx.m2r_outlet.endpoint(),
+        1,
+        m2r::frame::Reserved {
+            vehicle_sysid: ctx.vehicle_sysid,
+            hmi_sysids: (lo, hi),
+        },
+    ));
     let shared = Arc::new(Shared {
         outlet: ctx.outlet.clone(),
         inputs: ctx.inputs,

@@ -37,14 +37,37 @@ pub enum ConvertError {
     BroadcastSender,
     #[error("header system_id {0} is the vehicle's own")]
     VehicleSender(u8),
+    #[error("header system_id {0} is lent to browser HMI sessions ([hmi] sysid_min..sysid_max)")]
+    HmiSender(u8),
 }
 
-/// Parses one client frame; `vehicle_sysid` may not be claimed as a sender.
-pub fn parse(text: &str, vehicle_sysid: u8) -> Result<ClientFrame, ConvertError> {
+/// Who a client may not claim to be: the vehicle, and the system ids the
+/// HMI lends its sessions (a client speaking as one could end that
+/// session's control when it closes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reserved {
+    pub vehicle_sysid: u8,
+    pub hmi_sysids: (u8, u8),
+}
+
+impl Reserved {
+    /// Only the vehicle's own id (tests, tools).
+    pub const fn vehicle(vehicle_sysid: u8) -> Self {
+        Self {
+            vehicle_sysid,
+            hmi_sysids: (1, 0),
+        }
+    }
+}
+
+/// Parses one client frame; a sender `reserved` names is refused.
+pub fn parse(text: &str, reserved: Reserved) -> Result<ClientFrame, ConvertError> {
     let frame: ClientFrame = serde_json::from_str(text)?;
+    let (lo, hi) = reserved.hmi_sysids;
     match frame.header.system_id {
         0 => Err(ConvertError::BroadcastSender),
-        s if s == vehicle_sysid => Err(ConvertError::VehicleSender(s)),
+        s if s == reserved.vehicle_sysid => Err(ConvertError::VehicleSender(s)),
+        s if (lo..=hi).contains(&s) => Err(ConvertError::HmiSender(s)),
         _ => Ok(frame),
     }
 }

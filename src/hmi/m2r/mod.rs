@@ -84,6 +84,8 @@ pub(crate) struct Out {
 /// The API's shared state: the REST view, the clients' feed, who is connected.
 pub(crate) struct Hub {
     pub endpoint: usize,
+    /// Sender ids no client may claim.
+    pub reserved: frame::Reserved,
     tree: Mutex<Tree>,
     out: broadcast::Sender<Arc<Out>>,
     /// The peer id of frames POSTed over REST.
@@ -105,9 +107,10 @@ impl Drop for StationSlot {
 }
 
 impl Hub {
-    pub fn new(endpoint: usize, post_peer: u64) -> Self {
+    pub fn new(endpoint: usize, post_peer: u64, reserved: frame::Reserved) -> Self {
         Self {
             endpoint,
+            reserved,
             tree: Mutex::new(Tree::default()),
             out: broadcast::channel(OUT_CAPACITY).0,
             post_peer,
@@ -391,7 +394,7 @@ async fn post(State(shared): State<Arc<Shared>>, req: Request) -> Response {
         return (StatusCode::PAYLOAD_TOO_LARGE, NOT_CONVERTED).into_response();
     };
     let text = String::from_utf8_lossy(&body);
-    let f = match frame::parse(&text, shared.vehicle_sysid) {
+    let f = match frame::parse(&text, shared.m2r.reserved) {
         Ok(f) => f,
         Err(e) => {
             shared.m2r.note_bad(shared.m2r.post_peer, &e.to_string());

@@ -82,7 +82,7 @@ impl Station {
             self.logged_in |= ok;
             return serde_json::json!({ "login": ok, "message": outcome.message() }).to_string();
         }
-        let f = match frame::parse(text, self.shared.vehicle_sysid) {
+        let f = match frame::parse(text, self.hub.reserved) {
             Ok(f) => f,
             Err(e) => {
                 self.bad += 1;
