@@ -18,6 +18,7 @@ import pytest
 
 from mavhelpers import Deadline, free_tcp_port, free_udp_port, generate_dialect, mavlink, recv
 
+
 @pytest.fixture(scope="session")
 def neptunus_dialect(tmp_path_factory):
     """pymavlink bindings of our dialect, generated with pymavlink's own mavgen
