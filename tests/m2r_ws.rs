@@ -18,7 +18,7 @@ use std::time::Duration;
 
 use common::{NEUTRAL_US, Vehicle};
 use futures_util::{SinkExt as _, StreamExt as _};
-use neptunus::firmware::emulator::{BoardControl, PtyBoard};
+use neptunus::firmware::emulator::{BoardControl, BoardSnapshot, PtyBoard};
 use serde_json::{Value, json};
 use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
 use tokio::time::Instant;
@@ -290,18 +290,32 @@ impl Cockpit {
     /// MANUAL_CONTROL every 40 ms (and the 1-Hz HEARTBEAT) until `done`
     /// holds for the board's last `go()` [port, vertical, starboard].
     async fn drive_until(&mut self, x: i16, board: &BoardControl, done: impl Fn([u16; 3]) -> bool) {
+        self.drive_until_board(x, board, |s| done(s.target_us))
+            .await;
+    }
+
+    /// As [`drive_until`](Self::drive_until), for anything the board knows
+    /// (its simulator's motion too).
+    async fn drive_until_board(
+        &mut self,
+        x: i16,
+        board: &BoardControl,
+        done: impl Fn(&BoardSnapshot) -> bool,
+    ) {
         let end = Instant::now() + GENEROUS;
         loop {
             self.beat().await;
             self.send(manual_control(x)).await;
             let _ = self.next_frame(Duration::from_millis(40)).await;
-            let m = board.snapshot().target_us;
-            if done(m) {
+            let s = board.snapshot();
+            if done(&s) {
                 return;
             }
             assert!(
                 Instant::now() < end,
-                "motors {m:?} never as expected for x = {x}"
+                "never as expected for x = {x}: go {:?}, surge {:.3} m/s",
+                s.target_us,
+                s.sim.surge_mps
             );
         }
     }
@@ -417,8 +431,10 @@ async fn cockpit_sees_arms_changes_mode_drives_sets_a_parameter_and_reads_rest()
         c.wait("HEARTBEAT", |m| m["custom_mode"] == mode).await;
     }
 
-    // Forward.
+    // Forward: the thrusters push, and the simulated ROV moves ahead.
     c.drive_until(600, &board, forward).await;
+    c.drive_until_board(600, &board, |s| s.sim.surge_mps > 0.05)
+        .await;
 
     // A parameter, with the padded param_id array and target component 0.
     c.send(
