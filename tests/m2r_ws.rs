@@ -470,6 +470,12 @@ async fn cockpit_sees_arms_changes_mode_drives_sets_a_parameter_and_reads_rest()
     )
     .await;
     assert!(roll.is_number(), "{roll}");
+    let counter = get_json(
+        rig.http,
+        "/mavlink2rest/v1/mavlink/vehicles/1/components/1/messages/ATTITUDE/status/time/counter",
+    )
+    .await;
+    assert!(counter.as_u64().unwrap() >= 1, "{counter}");
     // What Cockpit sent is in the view under its header (it polls this).
     let mc = get_json(
         rig.http,
@@ -762,4 +768,38 @@ async fn a_client_that_never_reads_stalls_nothing() {
     c.arm().await;
     c.drive_until(600, &board, forward).await;
     drop(stuck);
+}
+
+/// `?filter=REGEX` keeps only the message names it matches; a filter that is
+/// not a regular expression is refused at the upgrade.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_filter_keeps_only_what_it_names() {
+    let rig = Rig::start("", false);
+    let path = "/v1/ws/mavlink?filter=%5E(HEARTBEAT%7CSYS_STATUS)%24";
+    let mut c = Cockpit::connect(rig.http, path, 255, 240, &[])
+        .await
+        .unwrap();
+    let mut names = std::collections::BTreeSet::new();
+    while names.len() < 2 {
+        let f = c
+            .next_frame(GENEROUS)
+            .await
+            .expect("frames through the filter");
+        names.insert(f["message"]["type"].as_str().unwrap().to_owned());
+    }
+    assert_eq!(
+        names.into_iter().collect::<Vec<_>>(),
+        ["HEARTBEAT", "SYS_STATUS"],
+        "only what the filter names"
+    );
+    for _ in 0..20 {
+        let f = c.next_frame(GENEROUS).await.unwrap();
+        let t = f["message"]["type"].as_str().unwrap();
+        assert!(
+            t == "HEARTBEAT" || t == "SYS_STATUS",
+            "{t} passed the filter"
+        );
+    }
+    let bad = Cockpit::connect(rig.http, "/v1/ws/mavlink?filter=(", 255, 240, &[]).await;
+    assert_eq!(bad.err().map(|e| e.0), Some(400));
 }
