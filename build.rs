@@ -3,7 +3,7 @@
 //! `web/node_modules/uplot` is missing.
 //!
 //! The upstream definitions (development.xml, common.xml, standard.xml,
-//! minimal.xml) are taken from the `mavlink` crate's own package, so the
+//! minimal.xml, ardupilotmega.xml and its includes) are taken from the `mavlink` crate's own package, so the
 //! repository never carries a copy of them. Both are staged into OUT_DIR
 //! because `<include>` paths resolve relative to the including file.
 
@@ -39,6 +39,12 @@ fn main() {
         "standard.xml",
         "common.xml",
         "development.xml",
+        "ardupilotmega.xml",
+        "uAvionix.xml",
+        "icarous.xml",
+        "loweheiser.xml",
+        "cubepilot.xml",
+        "csAirLink.xml",
     ] {
         fs::copy(upstream.join(name), staging.join(name))
             .unwrap_or_else(|e| panic!("copy upstream {name} from {}: {e}", upstream.display()));
@@ -63,6 +69,59 @@ fn main() {
         mavlink_bindgen::generate(mavlink_bindgen::XmlDefinitions::Files(ours), &generated)
             .unwrap_or_else(|e| panic!("mavlink-bindgen failed on dialect/neptunus.xml: {e}"));
     mavlink_bindgen::format_generated_code(&result);
+    json_shape(&generated.join("neptunus.rs"));
+}
+
+/// Gives the generated types the JSON shape of mavlink2rest (what Cockpit
+/// reads and sends) when the crate's `serde` feature is on: bitflags as
+/// `{"bits":N}` (bitflags 2's own serde writes flag names) and char arrays
+/// as arrays of one-character strings (mavlink-core writes one string).
+/// Both go through `crate::dialect::json_shape`. The rewrite is checked:
+/// a generator change that leaves nothing to rewrite stops the build.
+fn json_shape(file: &Path) {
+    const BITS_DERIVE: &str =
+        "# [cfg_attr (feature = \"serde\" , derive (Serialize , Deserialize))] ";
+    const CHARS_ATTR: &str =
+        "#[cfg_attr(feature = \"serde\", serde(with = \"crate::dialect::json_shape::chars\"))]";
+    let text = fs::read_to_string(file).expect("read the generated dialect");
+    let mut out = String::with_capacity(text.len() + 64 * 1024);
+    let (mut flags, mut chars) = (0usize, 0usize);
+    for line in text.lines() {
+        if line.starts_with("bitflags! {") && line.contains(BITS_DERIVE) {
+            out.push_str(&line.replacen(BITS_DERIVE, "", 1));
+            out.push('\n');
+            // `pub struct NAME : TYPE {`
+            let decl = line
+                .split("pub struct ")
+                .nth(1)
+                .and_then(|rest| rest.split(" {").next())
+                .and_then(|d| d.split_once(" : "))
+                .unwrap_or_else(|| {
+                    panic!("unexpected bitflags line in the generated dialect: {line}")
+                });
+            out.push_str(&format!(
+                "crate::dialect::json_shape::bits_serde!({}, {});\n",
+                decl.0.trim(),
+                decl.1.trim()
+            ));
+            flags += 1;
+            continue;
+        }
+        let trimmed = line.trim_start();
+        if trimmed.starts_with("pub ") && trimmed.contains(": CharArray<") {
+            out.push_str(CHARS_ATTR);
+            out.push('\n');
+            chars += 1;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    assert!(
+        flags > 0 && chars > 0,
+        "the generated dialect has no bitflags ({flags}) or char arrays ({chars}) to give the mavlink2rest JSON shape: \
+         mavlink-bindgen's output changed — update build.rs::json_shape"
+    );
+    fs::write(file, out).expect("write the generated dialect");
 }
 
 /// The `mavlink/message_definitions/v1.0` folder of the mavlink crate package.

@@ -21,6 +21,10 @@
 //! - [`camera`]: video sources (synthetic, ffmpeg, mjpg-streamer, url) and
 //!   the MJPEG, snapshot and status routes.
 
+// The generated dialect's serde defaults name `crate::utils`.
+#[cfg(feature = "serde")]
+use mavlink_core::utils;
+
 pub mod app;
 pub mod camera;
 pub mod config;

@@ -20,7 +20,8 @@ use crate::vehicle::machine::{COMPONENT_ID, NEUTRAL_GO, Now, Output, RunMode, To
 const HEALTHY_PERIOD: Duration = Duration::from_millis(100);
 
 pub(super) struct Io {
-    pub(super) hmi: crate::hmi::Outlet,
+    /// The HMI sessions' and the mavlink2rest API's hubs.
+    pub(super) hmi: [crate::hmi::Outlet; 2],
     pub(super) router: RouterHandle,
     pub(super) link: LinkHandle,
     pub(super) params: ParamSaver,
@@ -37,7 +38,7 @@ pub(super) struct Io {
 
 impl Io {
     pub(super) fn new(
-        hmi: crate::hmi::Outlet,
+        hmi: [crate::hmi::Outlet; 2],
         router: RouterHandle,
         link: LinkHandle,
         params: ParamSaver,
@@ -76,8 +77,10 @@ impl Io {
         sysid: u8,
         now: Now,
     ) {
-        self.hmi.deliver(to, msg, topic);
-        if !self.hmi.only_hmi(to) {
+        for outlet in &self.hmi {
+            outlet.deliver(to, msg, topic);
+        }
+        if !self.local_only(to) {
             self.send_frame(to, now, |seq| encode_v2(sysid, COMPONENT_ID, seq, msg));
         }
     }
@@ -93,7 +96,7 @@ impl Io {
                 // Another component of ours (the camera): the browser HMI
                 // talks to the autopilot alone, so on the wire only.
                 Output::SendAs { to, compid, msg } => {
-                    if !self.hmi.only_hmi(to) {
+                    if !self.local_only(to) {
                         self.send_frame(to, now, |seq| encode_v2(sysid, compid, seq, &msg));
                     }
                 }
@@ -186,6 +189,11 @@ impl Io {
             route: route(to),
             bytes: bytes.into(),
         });
+    }
+
+    /// Whether `to` reaches in-process stations only (nothing to encode).
+    fn local_only(&self, to: To) -> bool {
+        self.hmi.iter().any(|o| o.only_hmi(to))
     }
 
     /// Thrusters to neutral, first thing at shutdown.

@@ -92,10 +92,11 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         Some(dir) => crate::vehicle::input::Profiles::load_dir(dir)?,
         None => crate::vehicle::input::Profiles::builtin(),
     };
-    // HMI: one more endpoint after the MAVLink ones, for the browser sessions.
+    // HMI: two more endpoints after the MAVLink ones, for the browser
+    // sessions and for the mavlink2rest API (Cockpit).
     let hmi_ep = endpoints.len();
     let z_centered = crate::hmi::z_centered_by(profiles.clone());
-    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 1)
+    let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 2)
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
         .with_camera(camera_spec(&settings.camera))
@@ -134,7 +135,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     .await?;
     let (saved_tx, saved) = mpsc::unbounded_channel();
     let io = Io::new(
-        hmi.outlet(),
+        [hmi.outlet(), hmi.m2r_outlet()],
         router.clone(),
         link,
         ParamSaver::spawn(param_file, saved_tx),

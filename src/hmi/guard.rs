@@ -35,7 +35,7 @@ pub fn client_ip(req_ext: &axum::http::Extensions) -> Option<IpAddr> {
         .map(|c| c.0.ip().to_canonical())
 }
 
-fn tls(req_ext: &axum::http::Extensions) -> bool {
+pub(crate) fn is_tls(req_ext: &axum::http::Extensions) -> bool {
     req_ext.get::<ConnInfo>().is_some_and(|c| c.tls)
 }
 
@@ -102,7 +102,7 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
         );
     }
     let path = req.uri().path();
-    let upgrade = path == "/ws";
+    let upgrade = path == "/ws" || super::m2r::is_ws_path(path);
     let changes_state = !matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS);
     if (upgrade || changes_state)
         && let Some(origin) = req.headers().get(header::ORIGIN)
@@ -110,7 +110,7 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
         let origin = origin.to_str().unwrap_or("(not text)");
         if !shared
             .gate
-            .origin_ok(origin, host.as_deref(), tls(req.extensions()))
+            .origin_ok(origin, host.as_deref(), is_tls(req.extensions()))
         {
             return refuse(
                 &shared,
@@ -291,7 +291,7 @@ fn json(status: StatusCode, ok: bool, message: String) -> Response {
 /// cookie (Secure under TLS) with a random token, good for 12 h.
 pub(crate) async fn login(State(shared): State<Arc<Shared>>, req: Request<Body>) -> Response {
     let ip = client_ip(req.extensions());
-    let secure = tls(req.extensions());
+    let secure = is_tls(req.extensions());
     let body: Bytes = match axum::body::to_bytes(req.into_body(), LOGIN_BODY_BYTES).await {
         Ok(b) => b,
         Err(_) => {

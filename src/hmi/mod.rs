@@ -31,6 +31,7 @@ pub mod assets;
 pub mod auth;
 pub mod guard;
 pub mod headers;
+pub mod m2r;
 pub mod model;
 pub mod protocol;
 pub mod rest;
@@ -200,6 +201,8 @@ impl Outlet {
 /// Everything the HMI server needs, passed in (tests run many side by side).
 pub struct HmiContext {
     pub outlet: Outlet,
+    /// The mavlink2rest API's endpoint ([`m2r`]): Cockpit's own rates.
+    pub m2r_outlet: Outlet,
     /// Where sessions' traffic goes: the vehicle task's input.
     pub inputs: mpsc::Sender<Input>,
     pub vehicle_sysid: u8,
@@ -260,6 +263,8 @@ pub(crate) struct Shared {
     pub last_bad_report: Mutex<Option<Instant>>,
     /// The server's own view of the vehicle (`/api/status`, `/api/params`).
     pub status: watch::Receiver<rest::ServerView>,
+    /// The mavlink2rest API's clients and REST view.
+    pub m2r: Arc<m2r::Hub>,
 }
 
 /// A system id lent to one session; back in the pool when dropped, whatever
@@ -343,6 +348,15 @@ pub async fn serve(
     );
     let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
     let hostname = auth::machine_hostname();
+    // Peer ids: sessions and mavlink2rest clients count from 2; 1 is REST POSTs.
+    let m2r_hub = Arc::new(m2r::Hub::new(
+        ctx.m2r_outlet.endpoint(),
+        1,
+        m2r::frame::Reserved {
+            vehicle_sysid: ctx.vehicle_sysid,
+            hmi_sysids: (lo, hi),
+        },
+    ));
     let shared = Arc::new(Shared {
         outlet: ctx.outlet.clone(),
         inputs: ctx.inputs,
@@ -364,17 +378,23 @@ pub async fn serve(
         video: ctx.extra_routes.is_some(),
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
-        next_session: AtomicU64::new(1),
+        next_session: AtomicU64::new(2),
         bad_messages: AtomicU64::new(0),
         last_bad_report: Mutex::new(None),
         status: status_rx,
+        m2r: Arc::clone(&m2r_hub),
     });
+    let fan_out = tokio::spawn(m2r::fan_out(
+        ctx.m2r_outlet.subscribe(),
+        m2r_hub,
+        ctx.vehicle_sysid,
+    ));
     let watcher = tokio::spawn(rest::watch_vehicle(ctx.outlet.subscribe(), status_tx));
     // The HMI's telemetry rates, asked once for the endpoint: sessions no
     // longer ask (a watcher may not change rates).
     session::request_rates(&shared).await;
     let sweeper = tokio::spawn(guard::sweep(Arc::clone(&shared)));
-    let mut app = rest::routes(Arc::clone(&shared));
+    let mut app = rest::routes(Arc::clone(&shared)).merge(m2r::routes(Arc::clone(&shared)));
     if let Some(extra) = ctx.extra_routes {
         app = app.merge(extra);
     }
@@ -384,6 +404,7 @@ pub async fn serve(
     let result = server::run(listener, app, ctx.transport, shutdown).await;
     watcher.abort();
     sweeper.abort();
+    fan_out.abort();
     result
 }
 
@@ -402,13 +423,15 @@ fn warn_plaintext(password_set: bool, local: SocketAddr) {
 pub struct Hmi {
     inputs: Option<mpsc::Receiver<Input>>,
     outlet: Outlet,
+    m2r_outlet: Outlet,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     task: Option<tokio::task::JoinHandle<()>>,
 }
 
 impl Hmi {
-    /// Binds and starts the HMI server for endpoint index `endpoint`
-    /// (or does nothing with `--http off`). The bound address is logged
+    /// Binds and starts the HMI server for endpoint index `endpoint` (its
+    /// mavlink2rest API is endpoint `endpoint + 1`) (or does nothing with
+    /// `--http off`). The bound address is logged
     /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
     /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
     /// certificate or key file is an error naming it.
@@ -421,9 +444,11 @@ impl Hmi {
         extra_routes: Option<axum::Router>,
     ) -> Result<Self, HmiError> {
         let outlet = Outlet::new(endpoint);
+        let m2r_outlet = Outlet::new(endpoint + 1);
         let off = Self {
             inputs: None,
             outlet: outlet.clone(),
+            m2r_outlet: m2r_outlet.clone(),
             stop: None,
             task: None,
         };
@@ -493,6 +518,7 @@ impl Hmi {
         let (tx, rx) = mpsc::channel(1024);
         let ctx = HmiContext {
             outlet: outlet.clone(),
+            m2r_outlet: m2r_outlet.clone(),
             inputs: tx,
             vehicle_sysid,
             sysid_min: settings.sysid_min,
@@ -523,6 +549,7 @@ impl Hmi {
         Ok(Self {
             inputs: Some(rx),
             outlet,
+            m2r_outlet,
             stop: Some(stop_tx),
             task: Some(task),
         })
@@ -542,6 +569,11 @@ impl Hmi {
     /// The vehicle task's side of the hub.
     pub fn outlet(&self) -> Outlet {
         self.outlet.clone()
+    }
+
+    /// The mavlink2rest API's side of the hub.
+    pub fn m2r_outlet(&self) -> Outlet {
+        self.m2r_outlet.clone()
     }
 
     /// Stops the server; sessions' sockets close.

@@ -280,6 +280,10 @@ impl AxisFilter {
     pub fn std(&self) -> f64 {
         self.p[(0, 0)].max(0.0).sqrt()
     }
+    /// Variance of the rate (units²/s²).
+    pub fn rate_variance(&self) -> f64 {
+        self.p[(1, 1)].max(0.0)
+    }
     pub fn rejected(&self) -> u64 {
         self.rejected_total
     }

@@ -25,6 +25,11 @@ pub const STREAMABLE: &[(u32, f64)] = &[
     (NAV_CONTROLLER_OUTPUT_DATA::ID, 4.0),
     (VFR_HUD_DATA::ID, 10.0),
     (SCALED_PRESSURE2_DATA::ID, 2.0),
+    // The depth sensor in the first barometer slot too (the only one).
+    (SCALED_PRESSURE_DATA::ID, 2.0),
+    // Attitude and altitude (Cockpit's depth indicator), the estimator's health.
+    (AHRS2_DATA::ID, 3.0),
+    (EKF_STATUS_REPORT_DATA::ID, 3.0),
     (BATTERY_STATUS_DATA::ID, 3.0),
     // A group: Lights1, PilotGain, CamTilt, Laser …
     (NAMED_VALUE_FLOAT_DATA::ID, 2.0),
@@ -44,7 +49,7 @@ pub const STREAMABLE: &[(u32, f64)] = &[
 pub fn stream_group(stream_id: u8) -> &'static [u32] {
     match stream_id {
         // RAW_SENSORS
-        1 => &[SCALED_PRESSURE2_DATA::ID],
+        1 => &[SCALED_PRESSURE_DATA::ID, SCALED_PRESSURE2_DATA::ID],
         // EXTENDED_STATUS (with the controllers, as ArduPilot)
         2 => &[
             SYS_STATUS_DATA::ID,
@@ -64,6 +69,8 @@ pub fn stream_group(stream_id: u8) -> &'static [u32] {
             SYSTEM_TIME_DATA::ID,
             BATTERY_STATUS_DATA::ID,
             NAMED_VALUE_FLOAT_DATA::ID,
+            AHRS2_DATA::ID,
+            EKF_STATUS_REPORT_DATA::ID,
         ],
         _ => &[],
     }
@@ -78,6 +85,66 @@ pub fn default_interval(msg_id: u32) -> Option<Duration> {
         .iter()
         .find(|(id, _)| *id == msg_id)
         .and_then(|(_, hz)| (*hz > 0.0).then(|| Duration::from_secs_f64(1.0 / hz)))
+}
+
+/// Messages ArduPilot takes a rate for (its table from MAVLink ids to the
+/// messages it schedules) that this vehicle has nothing to fill with: no
+/// GPS, raw IMU, RC input, rangefinder, vibration or home position. Asked
+/// for, they are ACCEPTED and nothing is sent — what ArduSub answers and
+/// does for a sensor it lacks — so a ground station made for ArduSub
+/// (Cockpit asks for 36 at connect) reports no error ArduSub would not
+/// cause. REQUEST_MESSAGE for one of them is ACCEPTED with nothing sent
+/// too, as ArduSub answers for HOME_POSITION before it has a home.
+// HWSTATUS and BATTERY2 are deprecated in the XML, still scheduled by ArduPilot.
+#[allow(deprecated)]
+pub const ARDUPILOT_NOTHING_TO_SEND: &[u32] = &[
+    PARAM_VALUE_DATA::ID,
+    GPS_RAW_INT_DATA::ID,
+    SCALED_IMU_DATA::ID,
+    RAW_IMU_DATA::ID,
+    ATTITUDE_QUATERNION_DATA::ID,
+    LOCAL_POSITION_NED_DATA::ID,
+    RC_CHANNELS_SCALED_DATA::ID,
+    RC_CHANNELS_RAW_DATA::ID,
+    MISSION_CURRENT_DATA::ID,
+    MISSION_ITEM_REACHED_DATA::ID,
+    GPS_GLOBAL_ORIGIN_DATA::ID,
+    RC_CHANNELS_DATA::ID,
+    ATTITUDE_TARGET_DATA::ID,
+    POSITION_TARGET_LOCAL_NED_DATA::ID,
+    POSITION_TARGET_GLOBAL_INT_DATA::ID,
+    OPTICAL_FLOW_DATA::ID,
+    SCALED_IMU2_DATA::ID,
+    GPS2_RAW_DATA::ID,
+    POWER_STATUS_DATA::ID,
+    GPS_RTK_DATA::ID,
+    GPS2_RTK_DATA::ID,
+    SCALED_IMU3_DATA::ID,
+    DISTANCE_SENSOR_DATA::ID,
+    TERRAIN_REQUEST_DATA::ID,
+    SCALED_PRESSURE3_DATA::ID,
+    MEMINFO_DATA::ID,
+    FENCE_STATUS_DATA::ID,
+    AHRS_DATA::ID,
+    HWSTATUS_DATA::ID,
+    WIND_DATA::ID,
+    RANGEFINDER_DATA::ID,
+    CAMERA_FEEDBACK_DATA::ID,
+    BATTERY2_DATA::ID,
+    MAG_CAL_PROGRESS_DATA::ID,
+    MAG_CAL_REPORT_DATA::ID,
+    PID_TUNING_DATA::ID,
+    RPM_DATA::ID,
+    VIBRATION_DATA::ID,
+    HOME_POSITION_DATA::ID,
+    EXTENDED_SYS_STATE_DATA::ID,
+    ADSB_VEHICLE_DATA::ID,
+    AUTOPILOT_STATE_FOR_GIMBAL_DEVICE_DATA::ID,
+];
+
+/// Whether ArduPilot would take a rate for `msg_id` that we have nothing to send for.
+pub fn nothing_to_send(msg_id: u32) -> bool {
+    ARDUPILOT_NOTHING_TO_SEND.contains(&msg_id)
 }
 
 pub fn is_streamable(msg_id: u32) -> bool {

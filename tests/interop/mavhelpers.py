@@ -205,7 +205,19 @@ def generate_dialect(out: Path):
     from). pymavlink 2.4.50's bundled development.xml has neither
     CONTROL_STATUS (512) nor MAV_CMD_REQUEST_OPERATOR_CONTROL."""
     upstream = mavlink_crate_xml_dir()
-    for name in ("minimal.xml", "standard.xml", "common.xml", "development.xml"):
+    for name in (
+        "minimal.xml",
+        "standard.xml",
+        "common.xml",
+        "development.xml",
+        # ardupilotmega.xml and its includes (the dialect includes it too).
+        "ardupilotmega.xml",
+        "uAvionix.xml",
+        "icarous.xml",
+        "loweheiser.xml",
+        "cubepilot.xml",
+        "csAirLink.xml",
+    ):
         shutil.copy(upstream / name, out / name)
     shutil.copy(REPO / "dialect" / "neptunus.xml", out / "neptunus.xml")
     py = out / "neptunus_vehicle_dialect.py"

@@ -10,43 +10,20 @@ switch, so the other tests are unaffected)."""
 from __future__ import annotations
 
 import asyncio
-import importlib.util
 import math
-import shutil
 import socket
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import pytest
 
-from mavhelpers import Deadline, free_tcp_port, free_udp_port, mavlink, recv
-
-REPO = Path(__file__).resolve().parents[2]
+from mavhelpers import Deadline, free_tcp_port, free_udp_port, generate_dialect, mavlink, recv
 
 
 @pytest.fixture(scope="session")
 def neptunus_dialect(tmp_path_factory):
     """pymavlink bindings of our dialect, generated with pymavlink's own mavgen
-    from dialect/neptunus.xml and the upstream XML pymavlink ships."""
-    import pymavlink
-
-    out = tmp_path_factory.mktemp("dialect")
-    upstream = Path(pymavlink.__file__).parent / "dialects" / "v20"
-    for name in ("minimal.xml", "standard.xml", "common.xml", "development.xml"):
-        shutil.copy(upstream / name, out / name)
-    shutil.copy(REPO / "dialect" / "neptunus.xml", out / "neptunus.xml")
-    py = out / "neptunus_dialect.py"
-    subprocess.run(
-        [sys.executable, "-m", "pymavlink.tools.mavgen", "--lang=Python3", "--wire-protocol=2.0", f"--output={py}", str(out / "neptunus.xml")],
-        check=True,
-        capture_output=True,
-    )
-    spec = importlib.util.spec_from_file_location("neptunus_dialect", py)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    from dialect/neptunus.xml over the upstream XML the binary is built from."""
+    return generate_dialect(tmp_path_factory.mktemp("dialect"))
 
 
 class Observer:

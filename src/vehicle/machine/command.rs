@@ -67,7 +67,11 @@ impl Vehicle {
             },
             C::MAV_CMD_REQUEST_MESSAGE => {
                 let msgs = self.requested_message(p, now);
-                if msgs.is_empty() {
+                let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
+                if msgs.is_empty() && crate::vehicle::telemetry::nothing_to_send(id) {
+                    // As ArduSub: accepted, and nothing to send (no home yet, no GPS…).
+                    only(R::MAV_RESULT_ACCEPTED)
+                } else if msgs.is_empty() {
                     only(R::MAV_RESULT_UNSUPPORTED)
                 } else {
                     (R::MAV_RESULT_ACCEPTED, msgs)

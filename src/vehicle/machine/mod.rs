@@ -58,6 +58,7 @@ mod gimbal;
 mod handover;
 mod holds;
 mod inbound;
+mod instruments;
 mod modes;
 mod param_proto;
 mod payload;

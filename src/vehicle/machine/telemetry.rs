@@ -106,12 +106,15 @@ impl Vehicle {
     ) -> MavResult {
         let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
         let interval_us = given(p[1]).unwrap_or(0.0);
-        if !schedule::is_streamable(id) {
+        if !schedule::is_streamable(id) && !schedule::nothing_to_send(id) {
             MavResult::MAV_RESULT_UNSUPPORTED
         } else if !self.may_control(from) {
             // The schedule is shared by every station on the endpoint.
             self.refuse_rates(from, now, out);
             MavResult::MAV_RESULT_DENIED
+        } else if !schedule::is_streamable(id) {
+            // ArduSub's answer for a message it has no sensor for.
+            MavResult::MAV_RESULT_ACCEPTED
         } else if interval_us < 0.0 && !schedule::may_disable(id) {
             self.reply_text(
                 from,
@@ -139,10 +142,17 @@ impl Vehicle {
         }
     }
 
-    /// MAV_CMD_GET_MESSAGE_INTERVAL: MESSAGE_INTERVAL for this endpoint, or
-    /// None for a message that is not streamed.
+    /// MAV_CMD_GET_MESSAGE_INTERVAL: MESSAGE_INTERVAL for this endpoint
+    /// (0 µs, "not available", for one we have nothing to send for), or
+    /// None for a message we do not know.
     pub(super) fn message_interval(&mut self, from: Sender, p: [f32; 7]) -> Option<MavMessage> {
         let id = given(p[0]).map_or(u32::MAX, |v| v as u32);
+        if schedule::nothing_to_send(id) {
+            return Some(MavMessage::MESSAGE_INTERVAL(MESSAGE_INTERVAL_DATA {
+                interval_us: 0,
+                message_id: id as u16,
+            }));
+        }
         if !schedule::is_streamable(id) {
             return None;
         }
@@ -341,10 +351,12 @@ impl Vehicle {
                     theta: t.pitch_rad as f32,
                 })]
             }
-            _ => match self.build_gimbal(id, now) {
-                Some(m) => vec![m],
-                None => self.build_holds(id, now).into_iter().collect(),
-            },
+            _ => self
+                .build_gimbal(id, now)
+                .or_else(|| self.build_instruments(id, now))
+                .or_else(|| self.build_holds(id, now))
+                .into_iter()
+                .collect(),
         }
     }
 
