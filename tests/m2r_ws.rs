@@ -66,7 +66,14 @@ impl Rig {
         };
         let serial = board.path().to_string_lossy().into_owned();
         let config = dir.path().join("neptunus.toml");
-        std::fs::write(&config, format!("[hmi]\n{hmi_toml}\n")).unwrap();
+        // As the HMI's tests do: loopback may pilot without a password
+        // unless the test says otherwise (the vehicle's default is "none").
+        let open = if hmi_toml.contains("open_control") {
+            ""
+        } else {
+            "open_control = \"loopback\"\n"
+        };
+        std::fs::write(&config, format!("[hmi]\n{open}{hmi_toml}\n")).unwrap();
         let gcs_port = common::free_udp_port().unwrap();
         let mut vehicle = Vehicle::spawn(
             bin(),
@@ -550,7 +557,7 @@ async fn other_headers_cannot_drive_same_header_is_the_same_station() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn with_a_pilot_password_only_a_client_that_gave_it_controls() {
-    let rig = Rig::start("", true);
+    let rig = Rig::start("open_control = \"none\"", true);
     let board = rig.control();
     let mut w = rig.cockpit().await;
     w.wait("HEARTBEAT", |_| true).await;
@@ -621,6 +628,50 @@ async fn with_a_pilot_password_only_a_client_that_gave_it_controls() {
     assert_eq!(login["login"], true, "{login}");
     q.drive_until(0, &board, |m| m == NEUTRAL_US).await;
     q.arm().await;
+}
+
+/// The vehicle's default: no pilot password and `open_control = "none"` —
+/// a client anywhere, loopback included, only watches, as a browser
+/// session does; POST is refused the same way.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn without_a_password_and_open_control_none_a_client_only_watches() {
+    let rig = Rig::start("open_control = \"none\"", false);
+    let board = rig.control();
+    let mut w = rig.cockpit().await;
+    w.wait("HEARTBEAT", |_| true).await;
+    let r = w.reply().await;
+    assert!(
+        r.starts_with("Err(") && r.contains("open_control"),
+        "a watcher's HEARTBEAT is refused with the reason: {r}"
+    );
+    w.send(command_long(
+        "MAV_CMD_COMPONENT_ARM_DISARM",
+        [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    ))
+    .await;
+    assert!(w.reply().await.starts_with("Err("));
+    for _ in 0..10 {
+        w.send(manual_control(800)).await;
+        assert!(w.reply().await.starts_with("Err("));
+    }
+    let hb = w.wait("HEARTBEAT", |_| true).await;
+    assert_eq!(
+        hb["message"]["base_mode"]["bits"].as_u64().unwrap() & 128,
+        0,
+        "armed by a client that may only watch"
+    );
+    assert_eq!(board.snapshot().motors_us, NEUTRAL_US);
+    let arm = json!({"header": {"system_id": 255, "component_id": 240, "sequence": 0},
+        "message": command_long("MAV_CMD_COMPONENT_ARM_DISARM", [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])});
+    let (status, _, body) = http(
+        rig.http,
+        "POST",
+        "/mavlink2rest/v1/mavlink",
+        &[],
+        &arm.to_string(),
+    )
+    .await;
+    assert_eq!(status, 401, "POST from a client that may not pilot: {body}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -58,6 +58,38 @@ pub(crate) fn logged_in(shared: &Shared, headers: &HeaderMap) -> bool {
     })
 }
 
+/// May a client at `ip` pilot — a browser session or a mavlink2rest
+/// client alike: logged in with the pilot password, or admitted by `[hmi]
+/// open_control` (which never applies with MAVLink signing on: a browser
+/// cannot sign frames).
+pub(crate) fn may_pilot(shared: &Shared, ip: Option<IpAddr>, logged_in: bool) -> bool {
+    logged_in || (!shared.signing && ip.is_some_and(|ip| shared.open_control.admits(ip)))
+}
+
+/// Why a client that may not pilot only watches, and what to do about it.
+pub(crate) fn watch_only_reason(shared: &Shared) -> String {
+    let set = "set one on the vehicle with `neptunus hmi set-password`, then log in";
+    if shared.signing {
+        if shared.password.is_some() {
+            "MAVLink signing is on: log in with the pilot password to pilot".to_owned()
+        } else {
+            format!("MAVLink signing is on and no pilot password is set: {set}")
+        }
+    } else if shared.password.is_some() {
+        "log in with the pilot password to pilot".to_owned()
+    } else {
+        let who = match shared.open_control {
+            auth::OpenControl::None => {
+                "[hmi] open_control = \"none\" lets no address pilot without one".to_owned()
+            }
+            oc => {
+                format!("only {oc} addresses may pilot without one ([hmi] open_control = \"{oc}\")")
+            }
+        };
+        format!("no pilot password is set, and {who}: {set}")
+    }
+}
+
 fn login_token(headers: &HeaderMap) -> Option<&str> {
     headers
         .get_all(header::COOKIE)

@@ -15,8 +15,9 @@
 //! ([`station`]); a POST is one frame from a station of the REST peer.
 //!
 //! Who may use it is decided in front ([`guard`](crate::hmi::guard)): the
-//! Host rule everywhere, the Origin rule on the WebSocket and on POST; with a
-//! pilot password set, only a client that presented it may control.
+//! Host rule everywhere, the Origin rule on the WebSocket and on POST; only a
+//! client that may pilot by the browser page's rule (the pilot password, or
+//! an address `[hmi] open_control` admits) may control.
 //! It must never bypass the core: frames go in as `Input::Mavlink` only.
 
 pub mod frame;
@@ -380,12 +381,14 @@ async fn ws(
 }
 
 /// `POST mavlink`: one frame, from the REST peer, under the same rules as a
-/// WebSocket client (with a pilot password set, only with the login cookie).
+/// WebSocket client (the password by the login cookie only).
 async fn post(State(shared): State<Arc<Shared>>, req: Request) -> Response {
-    if shared.password.is_some() && !guard::logged_in(&shared, req.headers()) {
+    let ip = guard::client_ip(req.extensions());
+    let logged_in = guard::logged_in(&shared, req.headers());
+    if !guard::may_pilot(&shared, ip, logged_in) {
         return (
             StatusCode::UNAUTHORIZED,
-            "log in first: POST /api/login {\"password\": …} sets the login cookie\n",
+            format!("{}\n", guard::watch_only_reason(&shared)),
         )
             .into_response();
     }
@@ -401,7 +404,9 @@ async fn post(State(shared): State<Arc<Shared>>, req: Request) -> Response {
             return (StatusCode::NOT_FOUND, NOT_CONVERTED).into_response();
         }
     };
-    let pilot = shared.password.is_some();
+    // A pilot (who may claim control whatever its id, and counts as signed)
+    // only when it gave the password, as a WebSocket client.
+    let pilot = shared.password.is_some() && logged_in;
     let from = Sender {
         signed: pilot,
         trusted: false,

@@ -3,10 +3,11 @@
 //! Its frames enter the core as [`Input::Mavlink`] from the system and
 //! component in their header, over the mavlink2rest endpoint with this
 //! connection as the peer, so the core's authority rules, failsafes, signs
-//! of life and pick-up apply as to any station. With a pilot password set,
-//! a client that has not presented it (login cookie, `?password=`, or a
-//! `{"password":…}` message) only watches: of its frames only read-only
-//! requests reach the core. Every frame is answered `Ok(N)` (N = bytes of
+//! of life and pick-up apply as to any station. A client controls under the
+//! browser page's rule ([`guard::may_pilot`]): it presented the pilot
+//! password (login cookie, `?password=`, or a `{"password":…}` message), or
+//! `[hmi] open_control` admits its address. Otherwise it only watches: of
+//! its frames only read-only requests reach the core. Every frame is answered `Ok(N)` (N = bytes of
 //! the MAVLink 2 frame) or [`NOT_CONVERTED`], as mavlink2rest does.
 //!
 //! The vehicle's messages reach the client through a [`Mailbox`]: a client
@@ -68,9 +69,10 @@ struct Station {
 }
 
 impl Station {
-    /// May this connection's frames control the vehicle (the core still decides).
+    /// May this connection's frames control the vehicle (the core still
+    /// decides): the HMI's rule for a browser session.
     fn controls(&self) -> bool {
-        self.shared.password.is_none() || self.logged_in
+        guard::may_pilot(&self.shared, self.ip, self.logged_in)
     }
 
     async fn on_text(&mut self, text: &str) -> String {
@@ -92,7 +94,7 @@ impl Station {
         };
         let controls = self.controls();
         if !controls && !read_only(&f.message) {
-            return "Err(this client only watches: present the pilot password — ?password= on the WebSocket URL or a {\"password\":…} message — to control the vehicle)".to_owned();
+            return format!("Err({})", guard::watch_only_reason(&self.shared));
         }
         let (sysid, compid) = (f.header.system_id, f.header.component_id);
         let n =

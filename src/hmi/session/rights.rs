@@ -10,7 +10,6 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 
 use super::Session;
-use crate::hmi::auth::OpenControl;
 use crate::hmi::protocol::{ModeView, ServerMsg};
 use crate::hmi::{Shared, guard};
 use crate::vehicle::mode::Mode;
@@ -50,11 +49,7 @@ impl Session {
     /// May this session pilot: logged in, or admitted by `open_control`
     /// (which never applies with MAVLink signing on).
     pub(super) fn may_pilot(&self) -> bool {
-        self.logged_in
-            || (!self.shared.signing
-                && self
-                    .ip
-                    .is_some_and(|ip| self.shared.open_control.admits(ip)))
+        guard::may_pilot(&self.shared, self.ip, self.logged_in)
     }
 
     /// Leases a system id if this session may pilot and holds none; the
@@ -80,7 +75,6 @@ impl Session {
         if self.sysid().is_some() {
             return None;
         }
-        let set = "set one on the vehicle with `neptunus hmi set-password`, then log in here";
         Some(if self.may_pilot() {
             let (lo, hi) = self.shared.sysid_range;
             if self.shared.free_sysids.lock().is_ok_and(|f| f.is_empty()) {
@@ -91,24 +85,8 @@ impl Session {
             } else {
                 return None;
             }
-        } else if self.shared.signing {
-            if self.shared.password.is_some() {
-                "MAVLink signing is on: log in with the pilot password to pilot".to_owned()
-            } else {
-                format!("MAVLink signing is on and no pilot password is set: {set}")
-            }
-        } else if self.shared.password.is_some() {
-            "log in with the pilot password to pilot".to_owned()
         } else {
-            let who = match self.shared.open_control {
-                OpenControl::None => {
-                    "[hmi] open_control = \"none\" lets no address pilot without one".to_owned()
-                }
-                oc => format!(
-                    "only {oc} addresses may pilot without one ([hmi] open_control = \"{oc}\")"
-                ),
-            };
-            format!("no pilot password is set, and {who}: {set}")
+            guard::watch_only_reason(&self.shared)
         })
     }
 
