@@ -9,12 +9,12 @@
 //!
 //! The API is its own MAVLink endpoint (the one after the HMI's): the
 //! vehicle's messages for it come through an [`Outlet`](crate::hmi::Outlet)
-//! like the HMI's, are serialised once ([`fan_out`]) and shared by every
+//! like the HMI's, are serialised once (`fan_out`) and shared by every
 //! client and the REST view; Cockpit's message rates are its own and do not
 //! change the browser page's. Each WebSocket client is a ground station
-//! ([`station`]); a POST is one frame from a station of the REST peer.
+//! (`station`); a POST is one frame from a station of the REST peer.
 //!
-//! Who may use it is decided in front ([`guard`](crate::hmi::guard)): the
+//! Who may use it is decided in front ([`guard`]): the
 //! Host rule everywhere, the Origin rule on the WebSocket and on POST; only a
 //! client that may pilot by the browser page's rule (the pilot password, or
 //! an address `[hmi] open_control` admits) may control.
