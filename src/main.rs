@@ -25,8 +25,9 @@ fn main() -> std::process::ExitCode {
 
 fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
     let runtime = || {
-        tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
+        // One thread for the vehicle, its sockets and the serial link; the
+        // browser side starts its own (see `app::run`).
+        tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()
             .context("cannot start the async runtime")

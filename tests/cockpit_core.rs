@@ -70,9 +70,13 @@ fn every_interval_cockpit_sets_is_accepted_and_strangers_are_denied() {
 
     // At the asked rates: AHRS2 at 16 Hz, with the depth as altitude.
     let out = r.run(Duration::from_secs(2));
-    // (On Cockpit's endpoint; the other keeps ArduSub's default 3 Hz.)
+    // (On Cockpit's endpoint; the other keeps ArduSub's default 3 Hz.) A
+    // navigation-line message goes out as each 10-Hz line arrives and is
+    // repeated in between to keep the asked rate; its clock follows the
+    // lines, so between one and two lines' rate it runs up to a
+    // line-alignment short (15 Hz here), never above the asked rate.
     let n = count_sent(&out, AHRS2_DATA::ID, To::Endpoint(0));
-    assert!((31..=33).contains(&n), "AHRS2 in 2 s: {n}");
+    assert!((29..=33).contains(&n), "AHRS2 in 2 s: {n}");
     let a = msgs!(&out, AHRS2).last().cloned().unwrap();
     assert!(
         (a.altitude + 1.0).abs() < 0.05,

@@ -239,6 +239,31 @@ impl Cockpit {
         }
     }
 
+    /// As [`wait`](Self::wait), with neutral sticks every 40 ms meanwhile,
+    /// as Cockpit sends them all the time (an armed vehicle that hears no
+    /// pilot input for FS_PILOT_TIMEOUT disarms).
+    async fn wait_with_sticks(&mut self, name: &str, pred: impl Fn(&Value) -> bool) -> Value {
+        let end = Instant::now() + GENEROUS;
+        let mut sticks_at = Instant::now();
+        loop {
+            self.beat().await;
+            if sticks_at.elapsed() >= Duration::from_millis(40) {
+                sticks_at = Instant::now();
+                self.send(manual_control(0)).await;
+            }
+            assert!(
+                Instant::now() < end,
+                "no {name} as expected within {GENEROUS:?}"
+            );
+            let Some(f) = self.next_frame(Duration::from_millis(40)).await else {
+                continue;
+            };
+            if f["message"]["type"] == name && pred(&f["message"]) {
+                return f;
+            }
+        }
+    }
+
     /// The next vehicle message `name`, sending nothing meanwhile.
     async fn watch(&mut self, name: &str) -> Value {
         let end = Instant::now() + GENEROUS;
@@ -435,7 +460,8 @@ async fn cockpit_sees_arms_changes_mode_drives_sets_a_parameter_and_reads_rest()
             )
             .await;
         assert_eq!(r, "MAV_RESULT_ACCEPTED", "mode {mode}");
-        c.wait("HEARTBEAT", |m| m["custom_mode"] == mode).await;
+        c.wait_with_sticks("HEARTBEAT", |m| m["custom_mode"] == mode)
+            .await;
     }
 
     // Forward: the thrusters push, and the simulated ROV moves ahead.

@@ -34,6 +34,8 @@ pub(super) struct Io {
     pub(super) clock: std::sync::Arc<crate::wallclock::WallClock>,
     seq: u8,
     last_healthy: Option<Duration>,
+    /// Per outlet, what this pass delivers (handed over at its end).
+    delivered: [Vec<crate::hmi::Delivery>; 2],
 }
 
 impl Io {
@@ -58,6 +60,7 @@ impl Io {
             clock: crate::wallclock::WallClock::system(),
             seq: 0,
             last_healthy: None,
+            delivered: Default::default(),
         }
     }
 
@@ -77,8 +80,8 @@ impl Io {
         sysid: u8,
         now: Now,
     ) {
-        for outlet in &self.hmi {
-            outlet.deliver(to, msg, topic);
+        for (outlet, batch) in self.hmi.iter().zip(&mut self.delivered) {
+            batch.extend(outlet.delivery(to, msg, topic));
         }
         if !self.local_only(to) {
             self.send_frame(to, now, |seq| encode_v2(sysid, COMPONENT_ID, seq, msg));
@@ -176,6 +179,9 @@ impl Io {
                     }
                 }
             }
+        }
+        for (outlet, batch) in self.hmi.iter().zip(&mut self.delivered) {
+            outlet.deliver_all(batch);
         }
     }
 

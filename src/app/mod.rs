@@ -10,6 +10,7 @@
 //! - `signing`: message signing and its files;
 //! - `params`: parameter saving off the vehicle task;
 //! - `storage`: the data directory's problems at start;
+//! - `side`: the browser side's own thread (HMI, camera, emulator);
 //! - `notify`: systemd's READY/WATCHDOG/STOPPING, fed from the vehicle task's loop.
 //!
 //! `docs/ARCHITECTURE.md` follows a stick input and a telemetry line
@@ -18,6 +19,7 @@
 mod io;
 mod notify;
 mod params;
+mod side;
 mod signing;
 mod storage;
 mod tasks;
@@ -50,6 +52,8 @@ pub enum AppError {
     Signing(#[from] SigningError),
     #[error(transparent)]
     Hmi(#[from] crate::hmi::HmiError),
+    #[error("the browser side's thread: {0}")]
+    Side(std::io::Error),
     #[error("cannot create the data directory {path}: {source}")]
     DataDir {
         path: std::path::PathBuf,
@@ -69,7 +73,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
     loop {
         tokio::select! {
             () = &mut shutdown => break,
-            _ = t.tick.tick() => vehicle.tick(),
+            () = tokio::time::sleep_until(vehicle.next_wake()) => vehicle.tick(),
             input = t.hmi.recv() => vehicle.handle(input),
             Some(result) = t.saved.recv() => vehicle.handle(Input::ParamsSaved(result)),
             ev = t.link_events.recv() => match ev {

@@ -7,6 +7,7 @@ use tokio::time::{Duration, Instant, Interval};
 
 use super::io::Io;
 use super::params::ParamSaver;
+use super::side::Side;
 use super::signing::LinkSigning;
 use super::vehicle_task::VehicleTask;
 use super::{AppError, storage};
@@ -20,8 +21,6 @@ use crate::vehicle::machine::Vehicle;
 
 /// What the vehicle task waits on, and what is shut down after it.
 pub(super) struct Tasks {
-    /// The vehicle's 10-ms tick.
-    pub(super) tick: Interval,
     /// The 5-s log line.
     pub(super) report: Interval,
     pub(super) hmi: crate::hmi::Hmi,
@@ -38,14 +37,20 @@ pub(super) struct Tasks {
     router: RouterHandle,
     event_log: EventLog,
     board: Option<PtyBoard>,
+    /// The browser side's thread (the HMI, the camera, the emulator).
+    side: Side,
 }
 
 /// Starts everything; the vehicle task is returned ready to run.
 pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask), AppError> {
     let mut storage_problems = storage::create_data_dir(&settings.data_dir);
+    let side = Side::start().map_err(AppError::Side)?;
     let board = match &settings.board {
         BoardSource::Simulated(opts) => {
-            let board = PtyBoard::spawn(opts.clone(), None)?;
+            let board = {
+                let _side = side.handle().enter();
+                PtyBoard::spawn(opts.clone(), None)?
+            };
             tracing::info!(pty = %board.path().display(), "simulation: board emulator on a pseudo-terminal");
             settings.link.device = board.path().to_path_buf();
             Some(board)
@@ -121,18 +126,32 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     // The camera: its picture follows the vehicle (the synthetic source draws it).
     let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
     // It runs only while a browser watches or RTP video has a destination.
-    let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
     let (video_to, station_rx) = watch::channel(None);
-    let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx);
-    let hmi = crate::hmi::Hmi::start(
-        &settings.hmi,
-        hmi_ep,
-        vehicle.sysid(),
-        z_centered,
-        settings.data_dir.clone(),
-        Some(camera.routes()),
-    )
-    .await?;
+    let (camera, rtp) = {
+        let _side = side.handle().enter();
+        let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
+        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx);
+        (camera, rtp)
+    };
+    let hmi = {
+        let hmi_settings = settings.hmi.clone();
+        let (sysid, data_dir, routes) =
+            (vehicle.sysid(), settings.data_dir.clone(), camera.routes());
+        side.handle()
+            .spawn(async move {
+                crate::hmi::Hmi::start(
+                    &hmi_settings,
+                    hmi_ep,
+                    sysid,
+                    z_centered,
+                    data_dir,
+                    Some(routes),
+                )
+                .await
+            })
+            .await
+            .map_err(|e| AppError::Side(std::io::Error::other(e.to_string())))??
+    };
     let (saved_tx, saved) = mpsc::unbounded_channel();
     let io = Io::new(
         [hmi.outlet(), hmi.m2r_outlet()],
@@ -144,16 +163,14 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         settings.simulator.clone(),
     )
     .with_clock(clock);
-    let mut tick = tokio::time::interval(Duration::from_millis(10));
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let report = tokio::time::interval_at(
         Instant::now() + Duration::from_secs(1),
         Duration::from_secs(5),
     );
     // On the emulator, its ground truth is published too (marked as such).
     let truth = board.as_ref().map(|b| b.control().subscribe());
+    let watched = camera.watched();
     let tasks = Tasks {
-        tick,
         report,
         hmi,
         saved,
@@ -165,8 +182,9 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         router,
         event_log,
         board,
+        side,
     };
-    let vt = VehicleTask::new(vehicle, io, t0, scene_tx, trusted, video_to);
+    let vt = VehicleTask::new(vehicle, io, t0, scene_tx, watched, trusted, video_to);
     Ok((tasks, vt))
 }
 
@@ -216,6 +234,7 @@ impl Tasks {
         if let Some(board) = self.board {
             board.shutdown().await;
         }
+        self.side.stop().await;
     }
 }
 

@@ -18,7 +18,9 @@ use crate::firmware::link::LinkEvent;
 use crate::firmware::loopback::sim_truth;
 use crate::mavlink::endpoint::Inbound;
 use crate::mavlink::frame::{Frame, Undecodable};
-use crate::vehicle::machine::{Input, NEUTRAL_US, Now, Output, RunMode, Sender, Vehicle};
+use crate::vehicle::machine::{
+    BUSY_TICK, Input, NEUTRAL_US, Now, Output, RunMode, Sender, Vehicle,
+};
 
 /// The camera's scene follows the vehicle at most this often.
 const SCENE_PERIOD: Duration = Duration::from_millis(50);
@@ -31,6 +33,10 @@ pub(super) struct VehicleTask {
     sim_events: Vec<Event>,
     scene: watch::Sender<crate::camera::Scene>,
     last_scene: Option<Duration>,
+    /// How many want the camera's frames: the scene follows the vehicle
+    /// every [`SCENE_PERIOD`] only while someone does.
+    watched: watch::Receiver<usize>,
+    last_tick: Duration,
     /// Per MAVLink endpoint: its stations are trusted (configuration).
     trusted: Vec<bool>,
     /// Where `auto` RTP video goes: ground stations heard on UDP.
@@ -44,6 +50,7 @@ impl VehicleTask {
         io: Io,
         t0: Instant,
         scene: watch::Sender<crate::camera::Scene>,
+        watched: watch::Receiver<usize>,
         trusted: Vec<bool>,
         video_to: watch::Sender<Option<IpAddr>>,
     ) -> Self {
@@ -55,6 +62,8 @@ impl VehicleTask {
             sim_events: Vec::new(),
             scene,
             last_scene: None,
+            watched,
+            last_tick: Duration::ZERO,
             trusted,
             stations: GroundStations::default(),
             video_to,
@@ -73,11 +82,27 @@ impl VehicleTask {
         self.vehicle.handle(input, now, &mut self.outputs);
     }
 
-    /// The 10-ms tick: the built-in simulator (run mode SIMULATOR) steps on
-    /// it, then the core; the camera's scene and the `auto` video
-    /// destination follow.
+    /// When the next tick is due: when the core needs one
+    /// ([`Vehicle::next_tick`]), every [`BUSY_TICK`] while the built-in
+    /// simulator runs, and every [`SCENE_PERIOD`] while someone watches the
+    /// camera.
+    pub(super) fn next_wake(&self) -> Instant {
+        let mut at = self.vehicle.next_tick();
+        if self.io.simulator.is_some() {
+            at = at.min(self.last_tick + BUSY_TICK);
+        }
+        if *self.watched.borrow() > 0 {
+            at = at.min(self.last_scene.map_or(Duration::ZERO, |t| t + SCENE_PERIOD));
+        }
+        self.t0 + at
+    }
+
+    /// A tick: the built-in simulator (run mode SIMULATOR) steps on it,
+    /// then the core; the camera's scene and the `auto` video destination
+    /// follow.
     pub(super) fn tick(&mut self) {
         let now = self.clock();
+        self.last_tick = now.mono;
         if let Some(sim) = self.io.simulator.as_mut() {
             sim.step(now.mono, &mut self.sim_events);
             let truth = sim.truth();

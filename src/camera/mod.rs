@@ -135,6 +135,12 @@ impl Camera {
         }
     }
 
+    /// How many want frames now (`/video.mjpg` viewers and
+    /// [`DemandGuard`]s), as it changes.
+    pub fn watched(&self) -> watch::Receiver<usize> {
+        self.shared.demand()
+    }
+
     pub fn status(&self) -> CameraStatus {
         self.shared.status(Instant::now())
     }

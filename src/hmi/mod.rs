@@ -150,12 +150,17 @@ pub struct Delivery {
     pub topic: Option<Topic>,
 }
 
+/// What the vehicle said in one pass of its loop, in order. It crosses to
+/// the browser side's thread in one piece, so that thread wakes once for
+/// all of it rather than once a message.
+pub type Deliveries = Arc<[Delivery]>;
+
 /// The vehicle task's side of the hub: delivers the core's messages for the
 /// HMI endpoint to the sessions.
 #[derive(Debug, Clone)]
 pub struct Outlet {
     endpoint: usize,
-    hub: broadcast::Sender<Arc<Delivery>>,
+    hub: broadcast::Sender<Deliveries>,
 }
 
 impl Outlet {
@@ -170,21 +175,32 @@ impl Outlet {
         self.endpoint
     }
 
-    /// Hands `msg` to the sessions it is addressed to (no encoding: sessions
-    /// read the message itself).
-    pub fn deliver(&self, to: To, msg: &MavMessage, topic: Option<Topic>) {
+    /// `msg` as the sessions it is addressed to get it (no encoding:
+    /// sessions read the message itself); None when it is for none of them.
+    pub fn delivery(&self, to: To, msg: &MavMessage, topic: Option<Topic>) -> Option<Delivery> {
         let peer = match to {
             To::All => None,
             To::Endpoint(e) if e == self.endpoint => None,
             To::Peer(e, p) if e == self.endpoint => Some(p),
-            _ => return,
+            _ => return None,
         };
+        Some(Delivery {
+            peer,
+            msg: msg.clone(),
+            topic,
+        })
+    }
+
+    /// Hands over what one pass of the vehicle's loop delivered, emptying
+    /// `batch` (dropped when nobody listens).
+    pub fn deliver_all(&self, batch: &mut Vec<Delivery>) {
+        if batch.is_empty() {
+            return;
+        }
         if self.hub.receiver_count() > 0 {
-            let _ = self.hub.send(Arc::new(Delivery {
-                peer,
-                msg: msg.clone(),
-                topic,
-            }));
+            let _ = self.hub.send(Arc::from(std::mem::take(batch)));
+        } else {
+            batch.clear();
         }
     }
 
@@ -193,7 +209,7 @@ impl Outlet {
         matches!(to, To::Endpoint(e) | To::Peer(e, _) if e == self.endpoint)
     }
 
-    pub fn subscribe(&self) -> broadcast::Receiver<Arc<Delivery>> {
+    pub fn subscribe(&self) -> broadcast::Receiver<Deliveries> {
         self.hub.subscribe()
     }
 }

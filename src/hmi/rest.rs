@@ -24,7 +24,7 @@ use tokio::sync::{broadcast, watch};
 
 use super::model::Model;
 use super::protocol::{MAX_MESSAGE_BYTES, Telemetry};
-use super::{Delivery, SERVER_PEER, Shared, assets, guard, session};
+use super::{Deliveries, SERVER_PEER, Shared, assets, guard, session};
 use crate::dialect::neptunus::*;
 use crate::vehicle::machine::{COMPONENT_ID, Input};
 
@@ -47,41 +47,43 @@ pub struct ServerView {
 /// Keeps [`ServerView`] up to date from the hub (messages for every session
 /// and for the server's own peer).
 pub(crate) async fn watch_vehicle(
-    mut hub: broadcast::Receiver<Arc<Delivery>>,
+    mut hub: broadcast::Receiver<Deliveries>,
     out: watch::Sender<ServerView>,
 ) {
     let mut model = Model::new(None, Instant::now());
     let mut events = Vec::new();
     let mut last_publish = Instant::now();
     loop {
-        let d = match hub.recv().await {
-            Ok(d) => d,
+        let batch = match hub.recv().await {
+            Ok(b) => b,
             Err(broadcast::error::RecvError::Lagged(_)) => continue,
             Err(broadcast::error::RecvError::Closed) => return,
         };
-        if d.peer.is_some_and(|p| p != SERVER_PEER) {
-            continue;
+        for d in batch.iter() {
+            if d.peer.is_some_and(|p| p != SERVER_PEER) {
+                continue;
+            }
+            if let MavMessage::PARAM_VALUE(p) = &d.msg {
+                let name = {
+                    let b: &[u8] = p.param_id.as_ref();
+                    let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
+                    String::from_utf8_lossy(&b[..end]).into_owned()
+                };
+                out.send_modify(|v| {
+                    v.param_count = p.param_count;
+                    v.params.insert(
+                        name,
+                        ParamEntry {
+                            index: p.param_index,
+                            value: p.param_value,
+                        },
+                    );
+                });
+                continue;
+            }
+            model.on_delivery(d, Instant::now(), &mut events);
+            events.clear();
         }
-        if let MavMessage::PARAM_VALUE(p) = &d.msg {
-            let name = {
-                let b: &[u8] = p.param_id.as_ref();
-                let end = b.iter().position(|&c| c == 0).unwrap_or(b.len());
-                String::from_utf8_lossy(&b[..end]).into_owned()
-            };
-            out.send_modify(|v| {
-                v.param_count = p.param_count;
-                v.params.insert(
-                    name,
-                    ParamEntry {
-                        index: p.param_index,
-                        value: p.param_value,
-                    },
-                );
-            });
-            continue;
-        }
-        model.on_delivery(&d, Instant::now(), &mut events);
-        events.clear();
         // The REST status needs no more than a few updates a second.
         if last_publish.elapsed() >= Duration::from_millis(200) {
             last_publish = Instant::now();

@@ -268,6 +268,9 @@ pub fn redact(raw: &[u8]) -> Cow<'_, [u8]> {
 /// Records queued for the telemetry log thread.
 const TLOG_QUEUE: usize = 8192;
 const TLOG_FLUSH_PERIOD: Duration = Duration::from_secs(1);
+/// How long the thread gathers records before it writes them. The queue
+/// holds far more than this many seconds of the busiest traffic.
+const TLOG_BATCH: Duration = Duration::from_millis(250);
 
 enum TlogMsg {
     Frame(u64, Arc<[u8]>),
@@ -362,22 +365,36 @@ fn run_tlog(
             tracing::warn!(path = %path.display(), error = %e, "cannot write the telemetry log (logged once)");
         }
     };
-    loop {
+    'run: loop {
         let wait = next_flush.saturating_duration_since(std::time::Instant::now());
-        match rx.recv_timeout(wait) {
-            Ok(TlogMsg::Frame(time_us, raw)) => {
-                let now_generation = clock.generation();
-                if now_generation != generation {
-                    generation = now_generation;
-                    let result = writer.new_session(&session_name(clock.unix_us()));
+        let mut next = match rx.recv_timeout(wait) {
+            Ok(msg) => Some(msg),
+            Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Timeout) => None,
+        };
+        let batch = next.is_some();
+        // Everything queued is written in one go, then the thread sleeps a
+        // while, so it wakes a few times a second rather than at every
+        // message (each frame carries the time it was sent or received).
+        while let Some(msg) = next {
+            match msg {
+                TlogMsg::Frame(time_us, raw) => {
+                    let now_generation = clock.generation();
+                    if now_generation != generation {
+                        generation = now_generation;
+                        let result = writer.new_session(&session_name(clock.unix_us()));
+                        report(result, writer.path());
+                    }
+                    let result = writer.write_frame(time_us, &raw);
                     report(result, writer.path());
+                    dirty = true;
                 }
-                let result = writer.write_frame(time_us, &raw);
-                report(result, writer.path());
-                dirty = true;
+                TlogMsg::Stop => break 'run,
             }
-            Ok(TlogMsg::Stop) | Err(RecvTimeoutError::Disconnected) => break,
-            Err(RecvTimeoutError::Timeout) => {}
+            next = rx.try_recv().ok();
+        }
+        if batch {
+            std::thread::sleep(TLOG_BATCH);
         }
         let now = std::time::Instant::now();
         if now >= next_flush {

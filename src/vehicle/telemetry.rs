@@ -151,10 +151,76 @@ pub fn is_streamable(msg_id: u32) -> bool {
     STREAMABLE.iter().any(|(id, _)| *id == msg_id)
 }
 
+/// Messages made from the board's navigation line (heading, depth,
+/// attitude and the estimates they update). They go out when a line
+/// arrives, at most at their rate (a line that comes sooner waits for the
+/// interval), so a ground station and the browser see a reading as soon as
+/// the vehicle has it. Asked for faster than the lines come, the last values
+/// are repeated on the message's own clock to keep the asked rate, as
+/// ArduSub keeps it.
+pub const NAV_FED: &[u32] = &[
+    ATTITUDE_DATA::ID,
+    GLOBAL_POSITION_INT_DATA::ID,
+    VFR_HUD_DATA::ID,
+    AHRS2_DATA::ID,
+    NEPTUNUS_ESTIMATE_DATA::ID,
+];
+
+/// How early a line may come and still go out at once: the board's line
+/// timing jitters by a few milliseconds, and a line a little early must not
+/// wait a whole interval. At most a quarter of the interval, so a stream
+/// slower than the lines keeps its rate.
+const EARLY: Duration = Duration::from_millis(15);
+
+fn early(interval: Duration) -> Duration {
+    EARLY.min(interval / 4)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Slot {
     interval: Duration,
     next_due: Duration,
+    /// Made from the navigation line ([`NAV_FED`]).
+    fed: bool,
+    /// A line arrived that has not gone out yet (it came early: it goes at `next_due`).
+    waiting: bool,
+}
+
+impl Slot {
+    fn new(msg_id: u32, interval: Duration, next_due: Duration) -> Self {
+        Self {
+            interval,
+            next_due,
+            fed: NAV_FED.contains(&msg_id),
+            waiting: false,
+        }
+    }
+
+    /// When it next goes out without new input: at `next_due`, but a fed
+    /// message with no line waiting gives a late line the same margin as an
+    /// early one before it repeats the last.
+    fn deadline(&self) -> Duration {
+        if self.fed && !self.waiting {
+            self.next_due + early(self.interval)
+        } else {
+            self.next_due
+        }
+    }
+
+    /// Gone out at `now`. A line sets the next one an interval later (the
+    /// grid follows the lines); otherwise the grid is kept, so the average
+    /// rate is exact and a late tick does not cause a burst of catch-up sends.
+    fn sent(&mut self, now: Duration) {
+        let line = std::mem::take(&mut self.waiting);
+        if self.fed && line {
+            self.next_due = now + self.interval;
+            return;
+        }
+        self.next_due += self.interval;
+        if self.next_due <= now {
+            self.next_due = now + self.interval;
+        }
+    }
 }
 
 /// One endpoint's schedule.
@@ -188,13 +254,7 @@ impl Schedule {
         let mut s = Self::default();
         for (id, _) in STREAMABLE {
             if let Some(iv) = default_interval(*id) {
-                s.slots.insert(
-                    *id,
-                    Slot {
-                        interval: iv,
-                        next_due: now,
-                    },
-                );
+                s.slots.insert(*id, Slot::new(*id, iv, now));
             }
         }
         s
@@ -215,17 +275,11 @@ impl Schedule {
             }
             Some(iv) => {
                 let iv = iv.max(MIN_INTERVAL);
-                let next_due = self
-                    .slots
-                    .get(&msg_id)
-                    .map_or(now, |s| s.next_due.min(now + iv));
-                self.slots.insert(
-                    msg_id,
-                    Slot {
-                        interval: iv,
-                        next_due,
-                    },
-                );
+                let old = self.slots.get(&msg_id);
+                let next_due = old.map_or(now, |s| s.next_due.min(now + iv));
+                let mut slot = Slot::new(msg_id, iv, next_due);
+                slot.waiting = old.is_some_and(|s| s.waiting);
+                self.slots.insert(msg_id, slot);
             }
         }
     }
@@ -235,18 +289,36 @@ impl Schedule {
         self.slots.get(&msg_id).map(|s| s.interval)
     }
 
-    /// Message ids due at `now`; each is rescheduled one interval later
-    /// (kept on its grid, so the average rate is exact; a late tick does
-    /// not cause a burst of catch-up sends).
+    /// Message ids due at `now`; each is rescheduled one interval later.
     pub fn due(&mut self, now: Duration, out: &mut Vec<u32>) {
         for (id, slot) in &mut self.slots {
-            if now >= slot.next_due {
+            if now >= slot.deadline() {
                 out.push(*id);
-                slot.next_due += slot.interval;
-                if slot.next_due <= now {
-                    slot.next_due = now + slot.interval;
-                }
+                slot.sent(now);
             }
         }
+    }
+
+    /// A navigation line arrived at `now`: the fed messages whose interval
+    /// has (nearly) passed are due at once; the others wait for it.
+    pub fn line_arrived(&mut self, now: Duration, out: &mut Vec<u32>) {
+        for (id, slot) in &mut self.slots {
+            if !slot.fed {
+                continue;
+            }
+            if now + early(slot.interval) >= slot.next_due {
+                out.push(*id);
+                slot.waiting = true;
+                slot.sent(now);
+            } else {
+                slot.waiting = true;
+            }
+        }
+    }
+
+    /// When a message is next due without new input: the vehicle need not
+    /// wake before then for this schedule (None: nothing is).
+    pub fn next_deadline(&self) -> Option<Duration> {
+        self.slots.values().map(Slot::deadline).min()
     }
 }

@@ -176,6 +176,9 @@ impl Vehicle {
         let stderr = File::create(&stderr_path)?;
         let mut cmd = Command::new(bin);
         cmd.args(args);
+        // Its own process group: a wrapper (`faketime`) runs the vehicle as
+        // its child, and the group is what is stopped at the end.
+        std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
         if !args.contains(&"--http") {
             cmd.args(["--http", "127.0.0.1:0"]);
         }
@@ -264,6 +267,10 @@ impl Drop for Vehicle {
         // would outlive us, frozen.
         let _ = kill(self.nix_pid(), Signal::SIGCONT);
         let _ = kill(self.nix_pid(), Signal::SIGTERM);
+        // A wrapper's child too (the group's id is the leader's pid).
+        let group = nix::unistd::Pid::from_raw(-self.nix_pid().as_raw());
+        let _ = kill(group, Signal::SIGCONT);
+        let _ = kill(group, Signal::SIGTERM);
         let end = Instant::now() + Duration::from_secs(2);
         while Instant::now() < end {
             if let Ok(Some(_)) = self.child.try_wait() {
@@ -271,6 +278,7 @@ impl Drop for Vehicle {
             }
             thread::sleep(Duration::from_millis(20));
         }
+        let _ = kill(group, Signal::SIGKILL);
         let _ = self.child.kill();
         let _ = self.child.wait();
     }

@@ -40,7 +40,7 @@ use axum::routing::get;
 use mavlink_core::Message as _;
 use tokio::sync::broadcast;
 
-use super::{Delivery, Shared, guard};
+use super::{Deliveries, Shared, guard};
 use crate::dialect::neptunus::MavMessage;
 use crate::vehicle::machine::{COMPONENT_ID, Input, Sender};
 use frame::{Header, NOT_CONVERTED};
@@ -185,51 +185,53 @@ impl Hub {
 /// Serialises each vehicle message for the API once, keeps the REST view
 /// and feeds the clients; runs while the server runs.
 pub(crate) async fn fan_out(
-    mut rx: broadcast::Receiver<Arc<Delivery>>,
+    mut rx: broadcast::Receiver<Deliveries>,
     hub: Arc<Hub>,
     vehicle_sysid: u8,
 ) {
     let mut seq: u8 = 0;
     loop {
-        let d = match rx.recv().await {
-            Ok(d) => d,
+        let batch = match rx.recv().await {
+            Ok(b) => b,
             Err(broadcast::error::RecvError::Lagged(n)) => {
-                tracing::debug!("mavlink2rest fell behind the vehicle by {n} messages");
+                tracing::debug!("mavlink2rest fell behind the vehicle by {n} passes");
                 continue;
             }
             Err(broadcast::error::RecvError::Closed) => return,
         };
-        let name = d.msg.message_name();
-        let msg_json = match frame::message_json(&d.msg) {
-            Ok(j) => j,
-            Err(e) => {
-                tracing::debug!("mavlink2rest: {name} not serialisable: {e}");
-                continue;
+        for d in batch.iter() {
+            let name = d.msg.message_name();
+            let msg_json = match frame::message_json(&d.msg) {
+                Ok(j) => j,
+                Err(e) => {
+                    tracing::debug!("mavlink2rest: {name} not serialisable: {e}");
+                    continue;
+                }
+            };
+            let header = Header {
+                system_id: vehicle_sysid,
+                component_id: COMPONENT_ID,
+                sequence: seq,
+            };
+            seq = seq.wrapping_add(1);
+            let json: Arc<str> = Arc::from(frame::frame_json(header, &msg_json));
+            // What the vehicle said to everyone; an answer to one client stays its own.
+            if d.peer.is_none() {
+                hub.record(
+                    vehicle_sysid,
+                    COMPONENT_ID,
+                    name,
+                    Arc::from(msg_json),
+                    SystemTime::now(),
+                );
             }
-        };
-        let header = Header {
-            system_id: vehicle_sysid,
-            component_id: COMPONENT_ID,
-            sequence: seq,
-        };
-        seq = seq.wrapping_add(1);
-        let json: Arc<str> = Arc::from(frame::frame_json(header, &msg_json));
-        // What the vehicle said to everyone; an answer to one client stays its own.
-        if d.peer.is_none() {
-            hub.record(
-                vehicle_sysid,
-                COMPONENT_ID,
-                name,
-                Arc::from(msg_json),
-                SystemTime::now(),
-            );
-        }
-        if hub.out.receiver_count() > 0 {
-            let _ = hub.out.send(Arc::new(Out {
-                peer: d.peer,
-                name,
-                json,
-            }));
+            if hub.out.receiver_count() > 0 {
+                let _ = hub.out.send(Arc::new(Out {
+                    peer: d.peer,
+                    name,
+                    json,
+                }));
+            }
         }
     }
 }

@@ -29,15 +29,16 @@ use std::time::{Duration, Instant};
 
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
 use futures_util::{SinkExt as _, StreamExt as _};
-use tokio::sync::broadcast::error::RecvError;
+use tokio::sync::broadcast::error::{RecvError, TryRecvError};
 
 use super::model::Model;
 use super::protocol::ServerMsg;
 use super::{Shared, SysidLease};
 use crate::vehicle::machine::{HmiEvent, Input};
 
-/// Telemetry push period (20 Hz).
-const PUSH_PERIOD: Duration = Duration::from_millis(50);
+/// With nothing new from the vehicle, the telemetry is sent again this
+/// often anyway (so the ages it carries keep counting).
+const REFRESH_PERIOD: Duration = Duration::from_millis(500);
 /// HEARTBEAT period.
 const HEARTBEAT_PERIOD: Duration = Duration::from_secs(1);
 /// The browser must have shown life this recently for a HEARTBEAT to go out.
@@ -124,8 +125,7 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
         }
         let mut ping = tokio::time::interval(PING_PERIOD);
         ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-        let mut push = tokio::time::interval(PUSH_PERIOD);
-        push.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        let mut pushed_at = tokio::time::Instant::now();
         let mut beat = tokio::time::interval(HEARTBEAT_PERIOD);
         beat.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
         let mut events = Vec::new();
@@ -165,24 +165,50 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
                         break 'session End::SendFailed;
                     }
                 }
-                d = hub.recv() => match d {
-                    Ok(d) => {
-                        if d.peer.is_some_and(|p| p != s.id) {
-                            continue;
-                        }
-                        s.model.on_delivery(&d, Instant::now(), &mut events);
-                        for ev in events.drain(..) {
-                            if send(&mut tx, &ev).await.is_err() {
-                                break 'session End::SendFailed;
+                d = hub.recv() => {
+                    // Telemetry is pushed as the vehicle sends it: this
+                    // message and all queued behind it (what arrived while
+                    // the last push was being written) go into the model,
+                    // which keeps the newest of each kind, and out as one
+                    // telemetry message. A slow browser gets fewer, newer
+                    // pictures; it never builds a queue or holds anyone up.
+                    let mut changed = false;
+                    let mut next = d;
+                    loop {
+                        match next {
+                            Ok(batch) => {
+                                for d in batch.iter().filter(|d| d.peer.is_none_or(|p| p == s.id)) {
+                                    s.model.on_delivery(d, Instant::now(), &mut events);
+                                    changed = true;
+                                }
                             }
+                            Err(RecvError::Lagged(n)) => {
+                                tracing::debug!(session = s.id, "HMI session fell behind by {n} vehicle messages");
+                            }
+                            Err(RecvError::Closed) => break 'session End::Closed,
+                        }
+                        next = match hub.try_recv() {
+                            Ok(d) => Ok(d),
+                            Err(TryRecvError::Lagged(n)) => Err(RecvError::Lagged(n)),
+                            Err(TryRecvError::Closed) => Err(RecvError::Closed),
+                            Err(TryRecvError::Empty) => break,
+                        };
+                    }
+                    for ev in events.drain(..) {
+                        if send(&mut tx, &ev).await.is_err() {
+                            break 'session End::SendFailed;
                         }
                     }
-                    Err(RecvError::Lagged(n)) => {
-                        tracing::debug!(session = s.id, "HMI session fell behind by {n} vehicle messages");
+                    if changed {
+                        pushed_at = tokio::time::Instant::now();
+                        let t = s.model.snapshot(Instant::now());
+                        if send(&mut tx, &ServerMsg::Telemetry(Box::new(t))).await.is_err() {
+                            break 'session End::SendFailed;
+                        }
                     }
-                    Err(RecvError::Closed) => break 'session End::Closed,
-                },
-                _ = push.tick() => {
+                }
+                () = tokio::time::sleep_until(pushed_at + REFRESH_PERIOD) => {
+                    pushed_at = tokio::time::Instant::now();
                     let t = s.model.snapshot(Instant::now());
                     if send(&mut tx, &ServerMsg::Telemetry(Box::new(t))).await.is_err() {
                         break 'session End::SendFailed;

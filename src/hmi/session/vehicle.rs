@@ -15,20 +15,24 @@ use crate::hmi::Shared;
 use crate::vehicle::machine::{COMPONENT_ID, HmiEvent, Input};
 
 /// Telemetry rates this HMI asks the vehicle for on its endpoint (msg id, Hz),
-/// once, from the server's own peer (see [`request_rates`]).
+/// once, from the server's own peer (see [`request_rates`]). What the
+/// board's navigation line makes goes out as each line arrives, at most at
+/// its rate: 10 Hz is the OpenROV board's line rate (faster would only
+/// repeat the same values between lines).
 const RATES: [(u32, f32); 8] = [
     // Heading, roll, pitch.
-    (ATTITUDE_DATA::ID, 20.0),
+    (ATTITUDE_DATA::ID, 10.0),
     // Depth.
-    (VFR_HUD_DATA::ID, 20.0),
+    (VFR_HUD_DATA::ID, 10.0),
     // Thrusters.
     (SERVO_OUTPUT_RAW_DATA::ID, 10.0),
     // Health, voltage, current.
     (SYS_STATUS_DATA::ID, 4.0),
     // Lights, gain, tilt.
     (NAMED_VALUE_FLOAT_DATA::ID, 4.0),
-    (NEPTUNUS_SIM_STATE_DATA::ID, 20.0),
-    (NEPTUNUS_ESTIMATE_DATA::ID, 20.0),
+    // The emulator's ground truth changes ten times a second.
+    (NEPTUNUS_SIM_STATE_DATA::ID, 10.0),
+    (NEPTUNUS_ESTIMATE_DATA::ID, 10.0),
     (NEPTUNUS_AUTOPILOT_DATA::ID, 10.0),
 ];
 

@@ -129,6 +129,7 @@ impl Vehicle {
                 if let Some(r) = roll_deg {
                     self.board.roll_deg = Stamped::new(r, now.mono);
                 }
+                self.stream_nav_line(now, out);
             }
             Event::Status(s) => {
                 if s.vout_v.is_none() {

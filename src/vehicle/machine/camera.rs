@@ -120,6 +120,11 @@ impl Vehicle {
         self.camera.stream = stream;
     }
 
+    /// When the camera's next heartbeat is due (None: no camera, or at the next tick).
+    pub(super) fn camera_next_heartbeat(&self) -> Option<Duration> {
+        self.camera.spec.as_ref().and(self.camera.next_heartbeat)
+    }
+
     /// The camera's heartbeat, once a second on every endpoint.
     pub(super) fn camera_tick(&mut self, now: Now, out: &mut Vec<Output>) {
         if self.camera.spec.is_none() {

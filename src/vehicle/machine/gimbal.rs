@@ -110,6 +110,11 @@ impl Vehicle {
         }
     }
 
+    /// A pitch rate is moving the tilt (the core ticks while it does).
+    pub(super) fn gimbal_moving(&self) -> bool {
+        self.gimbal.rate_dps != 0.0
+    }
+
     /// Ends a pitch rate (a safety stop: mode change, disarm, transfer).
     pub(super) fn gimbal_stop(&mut self) {
         self.gimbal.rate_dps = 0.0;

@@ -68,6 +68,7 @@ mod signing;
 mod stubs;
 mod telemetry;
 mod texts;
+mod wake;
 mod wall_time;
 
 pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
@@ -75,6 +76,7 @@ pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 pub use run_mode::RunMode;
 pub use texts::{Topic, ascii_text};
+pub use wake::{BUSY_TICK, IDLE_TICK};
 pub use wall_time::ClockSync;
 
 use super::input::Profiles;

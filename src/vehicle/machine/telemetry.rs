@@ -37,6 +37,14 @@ impl Streams {
         }
     }
 
+    /// When a message is next due on any endpoint without new input.
+    pub fn next_deadline(&self) -> Option<Duration> {
+        self.schedules
+            .iter()
+            .filter_map(Schedule::next_deadline)
+            .min()
+    }
+
     /// The schedule of an endpoint (endpoint ids beyond the table share the last one).
     fn schedule_mut(&mut self, endpoint: usize) -> &mut Schedule {
         let last = self.schedules.len() - 1;
@@ -47,10 +55,26 @@ impl Streams {
 impl Vehicle {
     /// The messages due now, to each endpoint.
     pub(super) fn stream_tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        self.stream_send(now, out, Schedule::due);
+    }
+
+    /// A navigation line has just updated the readings: the messages made
+    /// from it go out now where their interval allows.
+    pub(super) fn stream_nav_line(&mut self, now: Now, out: &mut Vec<Output>) {
+        self.stream_send(now, out, Schedule::line_arrived);
+    }
+
+    /// Builds and sends, endpoint by endpoint, what `pick` says is due.
+    fn stream_send(
+        &mut self,
+        now: Now,
+        out: &mut Vec<Output>,
+        pick: fn(&mut Schedule, Duration, &mut Vec<u32>),
+    ) {
         let mut due = Vec::new();
         for ep in 0..self.streams.schedules.len() {
             due.clear();
-            self.streams.schedules[ep].due(now.mono, &mut due);
+            pick(&mut self.streams.schedules[ep], now.mono, &mut due);
             for id in &due {
                 for msg in self.build(*id, now) {
                     out.push(Output::Send {

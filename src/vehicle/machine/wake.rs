@@ -1,0 +1,52 @@
+//! When the core next needs a tick: the app sleeps until then instead of
+//! ticking at a fixed rate, so an idle vehicle wakes only for what is due.
+//!
+//! While anything moves or may move — armed (driving, autopilots, the
+//! pilot-input and link failsafes), a camera tilt or gimbal rate, a
+//! parameter list being sent — the core ticks every [`BUSY_TICK`], as it
+//! always did. Otherwise it ticks when a telemetry message or the camera's
+//! heartbeat is due, and at least every [`IDLE_TICK`] for the timers of a
+//! disarmed vehicle (authority and request timeouts, failsafe warnings,
+//! parameter saving, the board's dead-man feed), which a tenth of a second
+//! does not change. Inputs are handled when they arrive, never on a tick.
+
+use std::time::Duration;
+
+use super::Vehicle;
+
+/// The tick period while something moves or may move.
+pub const BUSY_TICK: Duration = Duration::from_millis(10);
+
+/// The longest a vehicle with nothing moving goes without a tick. Well
+/// inside the board link's dead-man window (500 ms), which the tick feeds.
+pub const IDLE_TICK: Duration = Duration::from_millis(100);
+
+impl Vehicle {
+    /// When (monotonic time, as `Now::mono`) the core next needs
+    /// `Input::Tick`; at once before the first tick.
+    pub fn next_tick(&self) -> Duration {
+        let Some(last) = self.clock.last_tick else {
+            return Duration::ZERO;
+        };
+        if self.ticks_busy() {
+            return last + BUSY_TICK;
+        }
+        [
+            Some(last + IDLE_TICK),
+            self.streams.next_deadline(),
+            self.camera_next_heartbeat(),
+        ]
+        .into_iter()
+        .flatten()
+        .min()
+        .unwrap_or(last + IDLE_TICK)
+    }
+
+    /// Whether something moves or may move, and needs the fine tick.
+    fn ticks_busy(&self) -> bool {
+        self.armed
+            || self.pilot.tilt_rate != 0.0
+            || self.gimbal_moving()
+            || !self.streams.param_queue.is_empty()
+    }
+}

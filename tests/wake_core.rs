@@ -1,0 +1,153 @@
+//! When the core needs to wake, and that a navigation line reaches the
+//! ground stations at once: on the core with synthetic time.
+//!
+//! - a disarmed vehicle with nothing moving asks for a tick only when a
+//!   telemetry message (or the camera's heartbeat) is due, and at least
+//!   every `IDLE_TICK`; armed, every `BUSY_TICK`, as before;
+//! - ATTITUDE and the other line-made messages go out in the very outputs
+//!   of the line that made them, at their rate, and are repeated between
+//!   lines only when asked for faster than the lines come.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod common;
+
+use std::time::Duration;
+
+use common::core_rig::{CoreRig, count_sent};
+use mavlink_core::MessageData;
+use neptunus::dialect::neptunus::*;
+use neptunus::firmware::codec::Event;
+use neptunus::vehicle::machine::{
+    BUSY_TICK, IDLE_TICK, Identity, Input, Output, Sender, To, Vehicle,
+};
+use neptunus::vehicle::params::ParamStore;
+
+const GCS: Sender = Sender::new(0, 1, 255, 190);
+
+fn rig() -> CoreRig {
+    CoreRig::new(Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 1)).started()
+}
+
+/// Ticks only when the core asks for one, with the board's 10-Hz lines and
+/// 1-Hz status in between, for `d`; every output, and the number of ticks.
+fn run_on_demand(r: &mut CoreRig, d: Duration) -> (Vec<Output>, usize) {
+    let end = r.t + d;
+    // The next line on the board's 100-ms beat, as `CoreRig::run` gives them.
+    let mut next_line = Duration::from_millis((r.t.as_millis() as u64 / 100 + 1) * 100);
+    let mut out = Vec::new();
+    let mut ticks = 0;
+    while r.t < end {
+        let tick_at = r.v.next_tick().max(r.t);
+        if next_line <= tick_at {
+            r.t = next_line;
+            let nav = r.feed.nav;
+            out.extend(r.input(Input::Board(Event::Nav(nav))));
+            if next_line.as_millis().is_multiple_of(1000) {
+                let status = r.feed.status.clone();
+                out.extend(r.input(Input::Board(Event::Status(status))));
+            }
+            next_line += Duration::from_millis(100);
+        } else {
+            r.t = tick_at;
+            out.extend(r.input(Input::Tick));
+            ticks += 1;
+        }
+    }
+    (out, ticks)
+}
+
+#[test]
+fn an_idle_vehicle_wakes_only_for_what_is_due() {
+    let mut r = rig();
+    let (out, ticks) = run_on_demand(&mut r, Duration::from_secs(10));
+    // ArduSub's default streams on one endpoint: the clocked ones (1–5 Hz)
+    // share few instants, the line-made ones need no tick at all.
+    assert!(
+        ticks <= 10 * 20,
+        "{ticks} ticks in 10 s for an idle vehicle (was 1000 at 100 Hz)"
+    );
+    assert!(ticks >= 10 * 10, "at least every IDLE_TICK: {ticks}");
+    // Nothing lost: the default rates still hold.
+    let n = |id| count_sent(&out, id, To::Endpoint(0));
+    assert!(
+        (98..=101).contains(&n(ATTITUDE_DATA::ID)),
+        "ATTITUDE {}",
+        n(ATTITUDE_DATA::ID)
+    );
+    assert!(
+        (19..=21).contains(&n(SYS_STATUS_DATA::ID)),
+        "SYS_STATUS {}",
+        n(SYS_STATUS_DATA::ID)
+    );
+    assert!(
+        (9..=11).contains(&n(HEARTBEAT_DATA::ID)),
+        "HEARTBEAT {}",
+        n(HEARTBEAT_DATA::ID)
+    );
+    // Never more than IDLE_TICK without a tick.
+    assert!(r.v.next_tick() <= r.t + IDLE_TICK);
+}
+
+#[test]
+fn armed_the_core_ticks_every_busy_tick() {
+    let mut r = rig().alive(GCS);
+    r.run(Duration::from_secs(1));
+    let out = r.arm(GCS);
+    assert!(
+        common::core_rig::acks(&out)
+            .iter()
+            .any(|a| a.result == MavResult::MAV_RESULT_ACCEPTED),
+        "not armed"
+    );
+    r.input(Input::Tick);
+    assert_eq!(r.v.next_tick(), r.t + BUSY_TICK);
+}
+
+#[test]
+fn a_navigation_line_goes_out_with_the_line_not_on_a_later_tick() {
+    let mut r = rig();
+    // Past the default interval since the last line.
+    r.t += Duration::from_millis(100);
+    let mut nav = r.feed.nav;
+    nav.heading_deg = Some(123.0);
+    let out = r.input(Input::Board(Event::Nav(nav)));
+    let ids: Vec<u32> = common::core_rig::sent(&out)
+        .iter()
+        .map(|(_, m)| mavlink_core::Message::message_id(m))
+        .collect();
+    for id in [
+        ATTITUDE_DATA::ID,
+        VFR_HUD_DATA::ID,
+        NEPTUNUS_ESTIMATE_DATA::ID,
+    ] {
+        assert!(
+            ids.contains(&id),
+            "message {id} not sent with the line: {ids:?}"
+        );
+    }
+    // A line right after it waits for the interval (no doubled rate).
+    r.t += Duration::from_millis(30);
+    let out = r.input(Input::Board(Event::Nav(nav)));
+    assert_eq!(count_sent(&out, ATTITUDE_DATA::ID, To::Endpoint(0)), 0);
+}
+
+#[test]
+fn asked_faster_than_the_lines_the_rate_is_kept_by_repeats() {
+    let mut r = rig().alive(GCS);
+    r.run(Duration::from_secs(1));
+    let out = r.cmd(
+        GCS,
+        MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
+        &[ATTITUDE_DATA::ID as f32, 50_000.0],
+    );
+    assert_eq!(
+        common::core_rig::ack_of(&out, MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL),
+        MavResult::MAV_RESULT_ACCEPTED
+    );
+    let (out, _) = run_on_demand(&mut r, Duration::from_secs(4));
+    let n = count_sent(&out, ATTITUDE_DATA::ID, To::Endpoint(0));
+    assert!(
+        (78..=81).contains(&n),
+        "ATTITUDE at 20 Hz with 10-Hz lines: {n} in 4 s"
+    );
+}
