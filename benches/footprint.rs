@@ -149,12 +149,12 @@ fn main() -> anyhow::Result<()> {
     let k = knobs()?;
     let bin = common::neptunus_bin()?;
     header(&bin, &k);
-    let mavproxy = if k.full { baseline() } else { None };
+    let mut mavproxy = if k.full { baseline() } else { None };
     let mut runs: Vec<Vec<Row>> = Vec::new();
     for run in 1..=k.runs {
         let mut rows = Vec::new();
         for &s in &k.scenarios {
-            rows.push(measure_scenario(s, &bin, mavproxy.as_deref(), &k)?);
+            rows.push(measure_scenario(s, &bin, &mut mavproxy, &k)?);
         }
         if k.runs > 1 {
             println!("\n== run {run} of {}", k.runs);
@@ -224,9 +224,18 @@ fn baseline() -> Option<PathBuf> {
         .unwrap_or_else(|| root.join("target"));
     match children::mavproxy_python(&root, &target) {
         Ok(p) => {
+            let pin = std::fs::read_to_string(root.join("tests/interop/requirements.txt"))
+                .ok()
+                .and_then(|r| {
+                    r.lines()
+                        .find(|l| l.starts_with("mavproxy=="))
+                        .map(str::to_owned)
+                })
+                .unwrap_or_else(|| "mavproxy".into());
             println!(
-                "baseline: MAVProxy from {} (pins of tests/interop/requirements.txt)",
-                p.display()
+                "baseline: {pin} from {}, {}",
+                p.display(),
+                children::MAVPROXY_FLAGS.join(" ")
             );
             Some(p)
         }
@@ -237,19 +246,22 @@ fn baseline() -> Option<PathBuf> {
     }
 }
 
+/// Runs and measures one scenario. A MAVProxy that fails is dropped from
+/// this scenario and the rest of the run, with the reason printed.
 fn measure_scenario(
     s: Scenario,
     bin: &Path,
-    mavproxy: Option<&Path>,
+    mavproxy: &mut Option<PathBuf>,
     k: &Knobs,
 ) -> anyhow::Result<Row> {
     let mut notes = Vec::new();
-    let mut running = match scenario::start(s, bin, mavproxy) {
+    let mut running = match scenario::start(s, bin, mavproxy.as_deref()) {
         Ok(r) => r,
         Err(e) if mavproxy.is_some() => {
-            let why = format!("MAVProxy could not forward, measured without it: {e:#}");
+            let why = format!("MAVProxy failed, measuring without it from here on: {e:#}");
             println!("{}: {why}", s.name());
-            notes.push(why);
+            notes.push("MAVProxy failed: measured without it (the reason is printed above)".into());
+            *mavproxy = None;
             scenario::start(s, bin, None)?
         }
         Err(e) => return Err(e),
@@ -313,6 +325,9 @@ fn print_table(rows: &[Row], details: bool) {
         );
         println!("{}", text.trim_end());
     };
+    println!(
+        "(CPU: % of one core; ctx sw/s: all threads; RSS: peak, VmHWM; threads: at the end, +started -ended in the window; CPU vs MP: neptunus / MAVProxy in the same window, MAVProxy forwarding station 1's traffic)"
+    );
     for r in rows {
         let ratio = r.ratio.map_or("-".into(), |x| format!("{x:.2}x"));
         line(

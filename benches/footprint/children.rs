@@ -170,6 +170,15 @@ pub fn mavproxy_python(root: &Path, target: &Path) -> anyhow::Result<PathBuf> {
     Ok(python)
 }
 
+/// MAVProxy's flags besides its links: see [`mavproxy`].
+pub const MAVPROXY_FLAGS: [&str; 5] = [
+    "--non-interactive",
+    "--no-state",
+    "--default-modules=",
+    "--streamrate=-1",
+    "--heartbeat-rate=0",
+];
+
 /// MAVProxy as a plain forwarding hop: the vehicle sends to `master_port`
 /// (MAVProxy's `udpin`), MAVProxy forwards to the station listening on
 /// `out_port` and back. No modules beyond its core `link`, no stream-rate
@@ -191,13 +200,7 @@ pub fn mavproxy(
         .arg(&script)
         .arg(format!("--master=udpin:127.0.0.1:{master_port}"))
         .arg(format!("--out=udpout:127.0.0.1:{out_port}"))
-        .args([
-            "--non-interactive",
-            "--no-state",
-            "--default-modules=",
-            "--streamrate=-1",
-            "--heartbeat-rate=0",
-        ])
+        .args(MAVPROXY_FLAGS)
         .current_dir(&home)
         .env("HOME", &home)
         .env("TERM", "dumb")

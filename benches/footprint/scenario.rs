@@ -8,7 +8,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use tokio::sync::watch;
@@ -166,7 +166,7 @@ pub fn start(scenario: Scenario, bin: &Path, mavproxy: Option<&Path>) -> anyhow:
     // Station 1 listens, as QGroundControl does on 14550; the vehicle (or
     // MAVProxy, forwarding) sends to it.
     let (mut gcs1, port1) = Gcs::bind()?;
-    let (mavproxy, vehicle_port) = match mavproxy {
+    let (mut mavproxy, vehicle_port) = match mavproxy {
         Some(python) => {
             let master = common::free_udp_port()?;
             let mp = children::mavproxy(python, master, port1, dir.path())?;
@@ -198,14 +198,22 @@ pub fn start(scenario: Scenario, bin: &Path, mavproxy: Option<&Path>) -> anyhow:
     let argv: Vec<&str> = args.iter().map(String::as_str).collect();
     let mut vehicle = Vehicle::spawn(bin, &argv, dir.path(), "")?;
 
-    let heard = gcs1.await_vehicle(&mut vehicle, Duration::from_secs(30));
-    if let (Err(e), Some(mp)) = (&heard, &mavproxy) {
-        anyhow::bail!(
-            "{e}\nMAVProxy forwarded nothing to station 1; MAVProxy said:\n{}",
-            mp.tail()
-        );
+    // In steps, so that a MAVProxy that exits is seen at once.
+    let end = Instant::now() + Duration::from_secs(30);
+    while let Err(e) = gcs1.await_vehicle(&mut vehicle, Duration::from_secs(1)) {
+        if let Some(mp) = &mut mavproxy {
+            mp.check_running()?;
+        }
+        if Instant::now() >= end {
+            return Err(match &mavproxy {
+                Some(mp) => e.context(format!(
+                    "MAVProxy forwarded nothing to station 1 within 30 s; it said:\n{}",
+                    mp.tail()
+                )),
+                None => e,
+            });
+        }
     }
-    heard?;
     let traffic = if scenario.driving() {
         Traffic::Drive(0)
     } else {
