@@ -76,7 +76,7 @@ mod scenario;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use measure::Figures;
 use scenario::Scenario;
 
@@ -279,7 +279,7 @@ fn measure_scenario(
     let c1 = running.tally.counts();
     running.check()?;
     let vehicle = measure::figures(vpid, &v0, &v1)?;
-    let mavproxy = match (mpid, &m0, &m1) {
+    let baseline = match (mpid, &m0, &m1) {
         (Some(pid), Some(a), Some(b)) => Some(measure::figures(pid, a, b)?),
         _ => None,
     };
@@ -292,17 +292,14 @@ fn measure_scenario(
     if let Ok(errors) = running.tally.errors.lock() {
         notes.extend(errors.iter().map(|e| format!("load: {e}")));
     }
-    if vehicle.cpu_pct.is_nan() {
-        bail!("no CPU figure for {}", s.name());
-    }
-    let ratio = mavproxy
+    let ratio = baseline
         .as_ref()
         .filter(|m| m.cpu_pct > 0.0)
         .map(|m| vehicle.cpu_pct / m.cpu_pct);
     Ok(Row {
         scenario: s,
         vehicle,
-        mavproxy,
+        mavproxy: baseline,
         ratio,
         load,
         notes,
