@@ -345,9 +345,12 @@ pub fn statustext(s: &STATUSTEXT_DATA) -> String {
     String::from_utf8_lossy(b).trim_end_matches('\0').to_owned()
 }
 
-/// A bare UDP ground station with sysid [`GCS_SYSID`].
+/// A bare UDP ground station, sysid [`GCS_SYSID`] unless changed.
 pub struct Gcs {
     pub sock: UdpSocket,
+    /// The system id it sends as ([`GCS_SYSID`] by default; the footprint
+    /// bench runs several stations side by side).
+    pub sysid: u8,
     pub seq: u8,
     next_heartbeat: Instant,
     next_stick: Instant,
@@ -362,6 +365,7 @@ impl Gcs {
         let now = Instant::now();
         Ok(Self {
             sock,
+            sysid: GCS_SYSID,
             seq: 0,
             next_heartbeat: now,
             next_stick: now,
@@ -411,7 +415,7 @@ impl Gcs {
 
     /// Sends one message; returns the moment just before it went out.
     pub fn send(&mut self, msg: &MavMessage) -> anyhow::Result<Instant> {
-        let bytes = encode_v2(GCS_SYSID, GCS_COMPID, self.seq, msg);
+        let bytes = encode_v2(self.sysid, GCS_COMPID, self.seq, msg);
         self.seq = self.seq.wrapping_add(1);
         let at = Instant::now();
         // Before a udpin vehicle has bound its port (or after it exited),
