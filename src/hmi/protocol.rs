@@ -33,7 +33,7 @@
 //! |---|---|---|
 //! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version`, `modes` (the modes to offer: `mode`, `name`, `label`, `thrusters`, `button`), `boot_mode` |
 //! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
-//! | `telemetry` | 20 Hz | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, and `failsafes`: the plain-word reason of every active failsafe (empty: none) |
+//! | `telemetry` | as the vehicle sends (one per pass of its loop), at least every 0.5 s | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, and `failsafes`: the plain-word reason of every active failsafe (empty: none) |
 //! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text`, `category` (what it is about, chosen where the text is written: `stop`, `control`, `gain`, `ap_depth`, `ap_heading`, `failsafe`, `board_link` — the developer logger's categories — or `general`) |
 //! | `ack` | this session's command answered | `command`, `command_name`, `result`, `result_name`, `text` (plain words: "Arm/disarm: refused", "Lights: done") |
 //! | `request_pending` | this session's control request was passed to the owner (instead of its `ack`: MAVLink answers a forwarded request with FAILED, which is no failure) | `owner` (sysid asked), `timeout_s` (how long the owner has to answer) |
@@ -376,7 +376,7 @@ pub struct AgesView {
     pub estimate: Option<u64>,
 }
 
-/// The vehicle as a session's browser sees it, pushed at 20 Hz. Fields the
+/// The vehicle as a session's browser sees it, pushed as the vehicle sends. Fields the
 /// vehicle has not sent (yet) are null.
 #[derive(Debug, Clone, PartialEq, Serialize, Default)]
 pub struct Telemetry {

@@ -44,6 +44,9 @@ pub struct ServerView {
     pub param_count: u16,
 }
 
+/// How often the REST status follows the vehicle.
+const PUBLISH_PERIOD: Duration = Duration::from_millis(200);
+
 /// Keeps [`ServerView`] up to date from the hub (messages for every session
 /// and for the server's own peer).
 pub(crate) async fn watch_vehicle(
@@ -53,10 +56,14 @@ pub(crate) async fn watch_vehicle(
     let mut model = Model::new(None, Instant::now());
     let mut events = Vec::new();
     let mut last_publish = Instant::now();
+    let mut next = hub.recv().await;
     loop {
-        let batch = match hub.recv().await {
+        let batch = match next {
             Ok(b) => b,
-            Err(broadcast::error::RecvError::Lagged(_)) => continue,
+            Err(broadcast::error::RecvError::Lagged(_)) => {
+                next = hub.recv().await;
+                continue;
+            }
             Err(broadcast::error::RecvError::Closed) => return,
         };
         for d in batch.iter() {
@@ -84,12 +91,26 @@ pub(crate) async fn watch_vehicle(
             model.on_delivery(d, Instant::now(), &mut events);
             events.clear();
         }
-        // The REST status needs no more than a few updates a second.
-        if last_publish.elapsed() >= Duration::from_millis(200) {
-            last_publish = Instant::now();
-            let t = model.snapshot(Instant::now());
-            out.send_modify(|v| v.telemetry = t);
-        }
+        // Everything already queued first; then, once nothing is, the
+        // status. It needs no more than a few updates a second: what
+        // arrives meanwhile waits in the hub, and this task wakes five
+        // times a second rather than at every pass of the vehicle's loop.
+        next = match hub.try_recv() {
+            Ok(b) => Ok(b),
+            Err(broadcast::error::TryRecvError::Lagged(n)) => {
+                Err(broadcast::error::RecvError::Lagged(n))
+            }
+            Err(broadcast::error::TryRecvError::Closed) => return,
+            Err(broadcast::error::TryRecvError::Empty) => {
+                if last_publish.elapsed() >= PUBLISH_PERIOD {
+                    last_publish = Instant::now();
+                    let t = model.snapshot(Instant::now());
+                    out.send_modify(|v| v.telemetry = t);
+                }
+                tokio::time::sleep(PUBLISH_PERIOD).await;
+                hub.recv().await
+            }
+        };
     }
 }
 

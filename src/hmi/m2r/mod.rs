@@ -190,11 +190,13 @@ pub(crate) async fn fan_out(
     vehicle_sysid: u8,
 ) {
     let mut seq: u8 = 0;
+    let mut next = rx.recv().await;
     loop {
-        let batch = match rx.recv().await {
+        let batch = match next {
             Ok(b) => b,
             Err(broadcast::error::RecvError::Lagged(n)) => {
                 tracing::debug!("mavlink2rest fell behind the vehicle by {n} passes");
+                next = rx.recv().await;
                 continue;
             }
             Err(broadcast::error::RecvError::Closed) => return,
@@ -233,8 +235,28 @@ pub(crate) async fn fan_out(
                 }));
             }
         }
+        // Everything already queued first. Then, with no client connected,
+        // only the REST view follows the vehicle: five times a second is
+        // enough, and this task wakes five times a second rather than at
+        // every pass of the vehicle's loop.
+        next = match rx.try_recv() {
+            Ok(b) => Ok(b),
+            Err(broadcast::error::TryRecvError::Lagged(n)) => {
+                Err(broadcast::error::RecvError::Lagged(n))
+            }
+            Err(broadcast::error::TryRecvError::Closed) => return,
+            Err(broadcast::error::TryRecvError::Empty) => {
+                if hub.out.receiver_count() == 0 {
+                    tokio::time::sleep(IDLE_PERIOD).await;
+                }
+                rx.recv().await
+            }
+        };
     }
 }
+
+/// How often the REST view follows the vehicle while no WebSocket client is connected.
+const IDLE_PERIOD: std::time::Duration = std::time::Duration::from_millis(200);
 
 pub(crate) fn routes(shared: Arc<Shared>) -> Router {
     let mut r = Router::new();
