@@ -16,7 +16,7 @@ import time
 
 import pytest
 
-from mavhelpers import Deadline, free_tcp_port, free_udp_port, generate_dialect, mavlink, recv
+from mavhelpers import Deadline, free_tcp_port, free_udp_port, from_vehicle, generate_dialect, mavlink, recv
 
 
 @pytest.fixture(scope="session")
@@ -46,7 +46,9 @@ class Observer:
             except socket.timeout:
                 continue
             for m in self.mav.parse_buffer(data) or []:
-                if m.get_srcSystem() == 1:
+                # The autopilot's own (the camera, component 100, sends a
+                # HEARTBEAT of its own right after the autopilot's).
+                if from_vehicle(m):
                     self.latest[m.get_type()] = m
 
     def wait(self, mtype: str, cond, timeout: float, what: str):
