@@ -125,10 +125,21 @@ fn a_navigation_line_goes_out_with_the_line_not_on_a_later_tick() {
             "message {id} not sent with the line: {ids:?}"
         );
     }
-    // A line right after it waits for the interval (no doubled rate).
+    // A line right after it waits for the interval (no doubled rate)…
     r.t += Duration::from_millis(30);
+    nav.heading_deg = Some(124.0);
     let out = r.input(Input::Board(Event::Nav(nav)));
     assert_eq!(count_sent(&out, ATTITUDE_DATA::ID, To::Endpoint(0)), 0);
+    // …and a newer line arriving when the interval is up goes instead of it.
+    r.t += Duration::from_millis(70);
+    let out = r.input(Input::Tick);
+    assert_eq!(count_sent(&out, ATTITUDE_DATA::ID, To::Endpoint(0)), 0);
+    nav.heading_deg = Some(125.0);
+    let out = r.input(Input::Board(Event::Nav(nav)));
+    // (ATTITUDE carries the filtered heading; the estimate the raw one.)
+    let e = common::core_rig::msgs!(&out, NEPTUNUS_ESTIMATE);
+    assert_eq!(e.len(), 1);
+    assert_eq!(e[0].heading_measured, 125.0, "the newest line's heading");
 }
 
 #[test]

@@ -57,8 +57,11 @@ use crate::vehicle::machine::{Input, Sender, To, Topic};
 pub const SESSION_COMPID: u8 = 190;
 /// The peer id of the server's own requests (parameter list for `/api/params`).
 pub const SERVER_PEER: u64 = 0;
-/// Capacity of the hub: telemetry a slow session may fall behind by.
-const HUB_CAPACITY: usize = 1024;
+/// Capacity of the hub, in passes of the vehicle's loop (each a batch of
+/// messages): how far a slow session may fall behind, about 6 s at the
+/// vehicle's 20-odd passes a second. The hub keeps the last batches until
+/// they are overwritten, so this is memory too (a few hundred kB).
+const HUB_CAPACITY: usize = 128;
 /// `[hmi] max_watchers` default: a room of onlookers, not a crowd.
 pub const DEFAULT_MAX_WATCHERS: usize = 32;
 

@@ -197,10 +197,11 @@ impl Slot {
     }
 
     /// When it next goes out without new input: at `next_due`, but a fed
-    /// message with no line waiting gives a late line the same margin as an
-    /// early one before it repeats the last.
+    /// message gives a late line the same margin as an early one — before
+    /// it repeats the last values, or sends a line that came too early
+    /// (a newer line arriving in the margin goes instead).
     fn deadline(&self) -> Duration {
-        if self.fed && !self.waiting {
+        if self.fed {
             self.next_due + early(self.interval)
         } else {
             self.next_due
