@@ -182,7 +182,8 @@ struct Slot {
     next_due: Duration,
     /// Made from the navigation line ([`NAV_FED`]).
     fed: bool,
-    /// A line arrived that has not gone out yet (it came early: it goes at `next_due`).
+    /// A line arrived that has not gone out yet (it came early: it goes
+    /// at its deadline, unless a newer line comes first).
     waiting: bool,
 }
 
