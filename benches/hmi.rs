@@ -10,11 +10,12 @@
 //! - **CPU**: the child's utime + stime from `/proc/<pid>/stat` over a fixed
 //!   window, with no browser session and then with 20 protocol clients
 //!   (tokio-tungstenite) connected, as % of one core. The difference is what
-//!   the HMI adds at 20 Hz telemetry per session.
+//!   the HMI adds per session (telemetry pushed as the vehicle sends it).
 //! - **Delay**: board line written → WebSocket message received, for the
 //!   first message that carries each line's heading (p50/p99 over all 20
-//!   clients). It includes the vehicle's 20 Hz ATTITUDE schedule and the
-//!   sessions' 20 Hz push, so about one period of each is expected.
+//!   clients). A line's NEPTUNUS_ESTIMATE leaves the core with the line (the
+//!   HMI asks for it at 10 Hz, so every other one of these 20 Hz lines) and
+//!   each session pushes at once.
 //!
 //! Figures are printed, never asserted. The binary is `$NEPTUNUS_BIN`, else
 //! `target/release/neptunus`, else `target/debug/neptunus` (with a warning).
@@ -37,7 +38,7 @@ use std::fmt::Write as _;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, bail};
+use anyhow::bail;
 use futures_util::StreamExt as _;
 use neptunus::firmware::emulator::{Board, EmulatorOptions};
 use neptunus::firmware::pty::PtyPair;
@@ -158,35 +159,12 @@ async fn client(
 }
 
 fn cpu_percent(pid: u32, window: Duration, ticks_per_s: f64) -> anyhow::Result<f64> {
-    let t0 = proc_cpu_ticks(pid)?;
+    let t0 = common::proc_cpu_ticks(pid)?;
     let start = Instant::now();
     std::thread::sleep(window);
-    let t1 = proc_cpu_ticks(pid)?;
+    let t1 = common::proc_cpu_ticks(pid)?;
     let secs = start.elapsed().as_secs_f64();
     Ok((t1 - t0) as f64 / ticks_per_s / secs * 100.0)
-}
-
-/// utime + stime of a process (all its threads), in clock ticks.
-fn proc_cpu_ticks(pid: u32) -> anyhow::Result<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
-    let rest = stat
-        .rsplit_once(')')
-        .map(|(_, r)| r)
-        .context("unexpected /proc/<pid>/stat format")?;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let utime: u64 = fields.get(11).context("no utime")?.parse()?;
-    let stime: u64 = fields.get(12).context("no stime")?.parse()?;
-    Ok(utime + stime)
-}
-
-fn clock_ticks_per_s() -> f64 {
-    std::process::Command::new("getconf")
-        .arg("CLK_TCK")
-        .output()
-        .ok()
-        .and_then(|o| String::from_utf8(o.stdout).ok())
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or(100.0)
 }
 
 fn main() -> anyhow::Result<()> {
@@ -195,7 +173,7 @@ fn main() -> anyhow::Result<()> {
     let bin = common::neptunus_bin()?;
     println!("neptunus binary: {}", bin.display());
     println!(
-        "{CLIENTS} WebSocket clients, telemetry pushed at 20 Hz, board nav lines at {} Hz, CPU windows of {} s",
+        "{CLIENTS} WebSocket clients, telemetry pushed as it comes, board nav lines at {} Hz, CPU windows of {} s",
         1000 / NAV_PERIOD_MS,
         window.as_secs()
     );
@@ -222,7 +200,7 @@ fn main() -> anyhow::Result<()> {
     // Let the link come up and settle before measuring.
     std::thread::sleep(Duration::from_secs(2));
     vehicle.check_running()?;
-    let ticks = clock_ticks_per_s();
+    let ticks = common::clock_ticks_per_s();
     let idle = cpu_percent(vehicle.pid(), window, ticks)?;
 
     let delays: Arc<Mutex<Vec<Duration>>> = Arc::default();

@@ -33,11 +33,9 @@
 mod common;
 
 use std::collections::HashMap;
-use std::fs::File;
-use std::io::{Read as _, Write as _};
+use std::io::Write as _;
 use std::net::UdpSocket;
 use std::path::Path;
-use std::process::Command;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc as std_mpsc;
@@ -438,11 +436,11 @@ fn neptunus_run(
     paced_send(&mut gcs, &sticks, 200, cfg.period, true)?;
     let _ = collect_frames(&frames_rx);
 
-    let cpu_before = proc_cpu_ticks(vehicle.pid())?;
+    let cpu_before = common::proc_cpu_ticks(vehicle.pid())?;
     let t0 = Instant::now();
     let sent = paced_send(&mut gcs, &sticks, cfg.count, cfg.period, true)?;
-    let cpu = proc_cpu_ticks(vehicle.pid())?.saturating_sub(cpu_before) as f64
-        / clock_ticks_per_s()
+    let cpu = common::proc_cpu_ticks(vehicle.pid())?.saturating_sub(cpu_before) as f64
+        / common::clock_ticks_per_s()
         / t0.elapsed().as_secs_f64()
         * 100.0;
     let frames = collect_frames(&frames_rx);
@@ -509,10 +507,10 @@ fn soak_run(bin: &Path, cfg: &Config) -> anyhow::Result<Soak> {
     };
     // Settle (start-up allocations, first telemetry), then the window.
     drive_until(start + Duration::from_secs(2), &mut gcs)?;
-    let ticks_before = proc_cpu_ticks(vehicle.pid())?;
+    let ticks_before = common::proc_cpu_ticks(vehicle.pid())?;
     let t0 = Instant::now();
     drive_until(t0 + cfg.soak, &mut gcs)?;
-    let ticks = proc_cpu_ticks(vehicle.pid())?.saturating_sub(ticks_before);
+    let ticks = common::proc_cpu_ticks(vehicle.pid())?.saturating_sub(ticks_before);
     let window = t0.elapsed();
     let (rss_kb, hwm_kb) = proc_memory_kb(vehicle.pid())?;
     stop.store(true, Ordering::Relaxed);
@@ -524,7 +522,7 @@ fn soak_run(bin: &Path, cfg: &Config) -> anyhow::Result<Soak> {
         );
     }
     let soak = Soak {
-        cpu_pct: ticks as f64 / clock_ticks_per_s() / window.as_secs_f64() * 100.0,
+        cpu_pct: ticks as f64 / common::clock_ticks_per_s() / window.as_secs_f64() * 100.0,
         rss_mb: rss_kb as f64 / 1024.0,
         hwm_mb: hwm_kb as f64 / 1024.0,
         telemetry_per_s: datagrams as f64 / start.elapsed().as_secs_f64(),
@@ -539,22 +537,6 @@ fn soak_run(bin: &Path, cfg: &Config) -> anyhow::Result<Soak> {
         soak.telemetry_per_s
     );
     Ok(soak)
-}
-
-/// utime + stime of a process (all its threads), in clock ticks.
-fn proc_cpu_ticks(pid: u32) -> anyhow::Result<u64> {
-    let mut stat = String::new();
-    File::open(format!("/proc/{pid}/stat"))?.read_to_string(&mut stat)?;
-    // The command name (field 2) may contain spaces; fields after its `)`.
-    let rest = stat
-        .rsplit_once(')')
-        .map(|(_, r)| r)
-        .context("unexpected /proc/<pid>/stat format")?;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    // Fields 14 and 15 of stat(5); `rest` starts at field 3.
-    let utime: u64 = fields.get(11).context("no utime")?.parse()?;
-    let stime: u64 = fields.get(12).context("no stime")?.parse()?;
-    Ok(utime + stime)
 }
 
 /// VmRSS and VmHWM in kB.
@@ -572,16 +554,6 @@ fn proc_memory_kb(pid: u32) -> anyhow::Result<(u64, u64)> {
             .parse()?)
     };
     Ok((field("VmRSS:")?, field("VmHWM:")?))
-}
-
-fn clock_ticks_per_s() -> f64 {
-    Command::new("getconf")
-        .arg("CLK_TCK")
-        .output()
-        .ok()
-        .and_then(|o| String::from_utf8(o.stdout).ok())
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or(100.0)
 }
 
 // ---------------------------------------------------------------------------

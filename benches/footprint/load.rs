@@ -120,49 +120,6 @@ pub async fn hmi_session(
     }
 }
 
-/// (message id, Hz): what Cockpit asks for at connect, plus
-/// NAMED_VALUE_FLOAT and NEPTUNUS_ESTIMATE (as benches/m2r.rs does).
-const COCKPIT_RATES: [(u32, f32); 38] = [
-    (30, 16.0),
-    (178, 16.0),
-    (74, 16.0),
-    (44102, 16.0),
-    (0, 1.0),
-    (1, 2.0),
-    (2, 1.0),
-    (33, 5.0),
-    (36, 5.0),
-    (137, 2.0),
-    (147, 2.0),
-    (251, 2.0),
-    (22, 1.0),
-    (24, 1.0),
-    (27, 2.0),
-    (29, 2.0),
-    (35, 2.0),
-    (65, 2.0),
-    (100, 1.0),
-    (116, 2.0),
-    (124, 1.0),
-    (125, 1.0),
-    (127, 1.0),
-    (128, 1.0),
-    (129, 2.0),
-    (132, 2.0),
-    (143, 2.0),
-    (152, 1.0),
-    (162, 1.0),
-    (163, 2.0),
-    (173, 2.0),
-    (191, 1.0),
-    (192, 1.0),
-    (193, 2.0),
-    (194, 2.0),
-    (241, 1.0),
-    (242, 1.0),
-    (285, 5.0),
-];
-
 /// The mavlink2rest client's system id (255 is station 1's).
 const COCKPIT_SYSID: u8 = 252;
 
@@ -185,7 +142,7 @@ pub async fn cockpit(
     let url = format!("ws://{addr}/mavlink2rest/ws/mavlink");
     let (ws, _) = tokio_tungstenite::connect_async(url).await?;
     let (mut tx, mut rx) = ws.split();
-    for (id, hz) in COCKPIT_RATES {
+    for (id, hz) in crate::common::COCKPIT_RATES {
         tx.send(cockpit_frame(
             json!({"type": "COMMAND_LONG", "param1": id, "param2": 1e6 / hz,
             "param3": 0, "param4": 0, "param5": 0, "param6": 0, "param7": 0,

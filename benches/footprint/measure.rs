@@ -39,7 +39,7 @@ pub struct Figures {
 
 pub fn snapshot(pid: u32) -> anyhow::Result<Snapshot> {
     let at = Instant::now();
-    let cpu_ticks = cpu_ticks(pid)?;
+    let cpu_ticks = crate::common::proc_cpu_ticks(pid)?;
     let mut tasks = HashMap::new();
     let dir = format!("/proc/{pid}/task");
     for entry in std::fs::read_dir(&dir).with_context(|| format!("cannot list {dir}"))? {
@@ -91,7 +91,9 @@ pub fn figures(pid: u32, a: &Snapshot, b: &Snapshot) -> anyhow::Result<Figures> 
         .collect();
     per_thread.sort_by(|x, y| y.2.total_cmp(&x.2));
     Ok(Figures {
-        cpu_pct: b.cpu_ticks.saturating_sub(a.cpu_ticks) as f64 / clock_ticks_per_s() / secs
+        cpu_pct: b.cpu_ticks.saturating_sub(a.cpu_ticks) as f64
+            / crate::common::clock_ticks_per_s()
+            / secs
             * 100.0,
         cs_per_s: total as f64 / secs,
         peak_rss_mb: hwm_kb / 1024.0,
@@ -108,33 +110,4 @@ fn field<'a>(status: &'a str, key: &str) -> Option<&'a str> {
         .lines()
         .find_map(|l| l.strip_prefix(key))
         .map(str::trim)
-}
-
-/// utime + stime of a process (all its threads, living and exited), in
-/// clock ticks.
-fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
-        .with_context(|| format!("process {pid} has exited"))?;
-    // The command name (field 2) may contain spaces; fields follow its `)`.
-    let rest = stat
-        .rsplit_once(')')
-        .map(|(_, r)| r)
-        .context("unexpected /proc/PID/stat format")?;
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let utime: u64 = fields.get(11).context("no utime")?.parse()?;
-    let stime: u64 = fields.get(12).context("no stime")?.parse()?;
-    Ok(utime + stime)
-}
-
-fn clock_ticks_per_s() -> f64 {
-    static TICKS: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
-    *TICKS.get_or_init(|| {
-        std::process::Command::new("getconf")
-            .arg("CLK_TCK")
-            .output()
-            .ok()
-            .and_then(|o| String::from_utf8(o.stdout).ok())
-            .and_then(|s| s.trim().parse().ok())
-            .unwrap_or(100.0)
-    })
 }

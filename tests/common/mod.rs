@@ -733,3 +733,78 @@ pub fn pct_ms(sorted: &[Duration], q: f64) -> f64 {
     let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
     sorted[rank - 1].as_secs_f64() * 1e3
 }
+
+/// utime + stime of a process (all its threads, living and exited), in
+/// clock ticks, from `/proc/PID/stat`.
+pub fn proc_cpu_ticks(pid: u32) -> anyhow::Result<u64> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .with_context(|| format!("process {pid} has exited"))?;
+    // The command name (field 2) may contain spaces; fields follow its `)`:
+    // `rest` starts at field 3, utime and stime are fields 14 and 15.
+    let rest = stat
+        .rsplit_once(')')
+        .map(|(_, r)| r)
+        .context("unexpected /proc/PID/stat format")?;
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let utime: u64 = fields.get(11).context("no utime")?.parse()?;
+    let stime: u64 = fields.get(12).context("no stime")?.parse()?;
+    Ok(utime + stime)
+}
+
+/// Clock ticks per second (`getconf CLK_TCK`; 100 if it cannot tell).
+pub fn clock_ticks_per_s() -> f64 {
+    static TICKS: std::sync::OnceLock<f64> = std::sync::OnceLock::new();
+    *TICKS.get_or_init(|| {
+        Command::new("getconf")
+            .arg("CLK_TCK")
+            .output()
+            .ok()
+            .and_then(|o| String::from_utf8(o.stdout).ok())
+            .and_then(|s| s.trim().parse().ok())
+            .unwrap_or(100.0)
+    })
+}
+
+/// (message id, Hz): the 36 SET_MESSAGE_INTERVALs Cockpit sends at
+/// connect, plus NAMED_VALUE_FLOAT and NEPTUNUS_ESTIMATE (the benches'
+/// Cockpit-like clients).
+pub const COCKPIT_RATES: [(u32, f32); 38] = [
+    (30, 16.0),
+    (178, 16.0),
+    (74, 16.0),
+    (44102, 16.0),
+    (0, 1.0),
+    (1, 2.0),
+    (2, 1.0),
+    (33, 5.0),
+    (36, 5.0),
+    (137, 2.0),
+    (147, 2.0),
+    (251, 2.0),
+    (22, 1.0),
+    (24, 1.0),
+    (27, 2.0),
+    (29, 2.0),
+    (35, 2.0),
+    (65, 2.0),
+    (100, 1.0),
+    (116, 2.0),
+    (124, 1.0),
+    (125, 1.0),
+    (127, 1.0),
+    (128, 1.0),
+    (129, 2.0),
+    (132, 2.0),
+    (143, 2.0),
+    (152, 1.0),
+    (162, 1.0),
+    (163, 2.0),
+    (173, 2.0),
+    (191, 1.0),
+    (192, 1.0),
+    (193, 2.0),
+    (194, 2.0),
+    (241, 1.0),
+    (242, 1.0),
+    (285, 5.0),
+];
