@@ -223,39 +223,36 @@ impl Cockpit {
     /// The next vehicle message `name` for which `pred` holds, sending
     /// Cockpit's HEARTBEAT meanwhile.
     async fn wait(&mut self, name: &str, pred: impl Fn(&Value) -> bool) -> Value {
-        let end = Instant::now() + GENEROUS;
-        loop {
-            self.beat().await;
-            assert!(
-                Instant::now() < end,
-                "no {name} as expected within {GENEROUS:?}"
-            );
-            let Some(f) = self.next_frame(Duration::from_millis(200)).await else {
-                continue;
-            };
-            if f["message"]["type"] == name && pred(&f["message"]) {
-                return f;
-            }
-        }
+        self.wait_sending(name, pred, false).await
     }
 
     /// As [`wait`](Self::wait), with neutral sticks every 40 ms meanwhile,
     /// as Cockpit sends them all the time (an armed vehicle that hears no
     /// pilot input for FS_PILOT_TIMEOUT disarms).
     async fn wait_with_sticks(&mut self, name: &str, pred: impl Fn(&Value) -> bool) -> Value {
+        self.wait_sending(name, pred, true).await
+    }
+
+    async fn wait_sending(
+        &mut self,
+        name: &str,
+        pred: impl Fn(&Value) -> bool,
+        sticks: bool,
+    ) -> Value {
         let end = Instant::now() + GENEROUS;
-        let mut sticks_at = Instant::now();
+        let poll = Duration::from_millis(if sticks { 40 } else { 200 });
+        let mut sticks_at: Option<Instant> = None;
         loop {
             self.beat().await;
-            if sticks_at.elapsed() >= Duration::from_millis(40) {
-                sticks_at = Instant::now();
+            if sticks && sticks_at.is_none_or(|t| t.elapsed() >= poll) {
+                sticks_at = Some(Instant::now());
                 self.send(manual_control(0)).await;
             }
             assert!(
                 Instant::now() < end,
                 "no {name} as expected within {GENEROUS:?}"
             );
-            let Some(f) = self.next_frame(Duration::from_millis(40)).await else {
+            let Some(f) = self.next_frame(poll).await else {
                 continue;
             };
             if f["message"]["type"] == name && pred(&f["message"]) {

@@ -158,6 +158,20 @@ pub struct Delivery {
 /// all of it rather than once a message.
 pub type Deliveries = Arc<[Delivery]>;
 
+/// The next batch already in the hub, as `recv` would give it (None:
+/// nothing is queued): readers drain what waits before they sleep again.
+pub(crate) fn queued(
+    rx: &mut broadcast::Receiver<Deliveries>,
+) -> Option<Result<Deliveries, broadcast::error::RecvError>> {
+    use broadcast::error::{RecvError, TryRecvError};
+    match rx.try_recv() {
+        Ok(b) => Some(Ok(b)),
+        Err(TryRecvError::Lagged(n)) => Some(Err(RecvError::Lagged(n))),
+        Err(TryRecvError::Closed) => Some(Err(RecvError::Closed)),
+        Err(TryRecvError::Empty) => None,
+    }
+}
+
 /// The vehicle task's side of the hub: delivers the core's messages for the
 /// HMI endpoint to the sessions.
 #[derive(Debug, Clone)]

@@ -95,13 +95,9 @@ pub(crate) async fn watch_vehicle(
         // status. It needs no more than a few updates a second: what
         // arrives meanwhile waits in the hub, and this task wakes five
         // times a second rather than at every pass of the vehicle's loop.
-        next = match hub.try_recv() {
-            Ok(b) => Ok(b),
-            Err(broadcast::error::TryRecvError::Lagged(n)) => {
-                Err(broadcast::error::RecvError::Lagged(n))
-            }
-            Err(broadcast::error::TryRecvError::Closed) => return,
-            Err(broadcast::error::TryRecvError::Empty) => {
+        next = match super::queued(&mut hub) {
+            Some(n) => n,
+            None => {
                 if last_publish.elapsed() >= PUBLISH_PERIOD {
                     last_publish = Instant::now();
                     let t = model.snapshot(Instant::now());

@@ -239,13 +239,9 @@ pub(crate) async fn fan_out(
         // only the REST view follows the vehicle: five times a second is
         // enough, and this task wakes five times a second rather than at
         // every pass of the vehicle's loop.
-        next = match rx.try_recv() {
-            Ok(b) => Ok(b),
-            Err(broadcast::error::TryRecvError::Lagged(n)) => {
-                Err(broadcast::error::RecvError::Lagged(n))
-            }
-            Err(broadcast::error::TryRecvError::Closed) => return,
-            Err(broadcast::error::TryRecvError::Empty) => {
+        next = match super::queued(&mut rx) {
+            Some(n) => n,
+            None => {
                 if hub.out.receiver_count() == 0 {
                     tokio::time::sleep(IDLE_PERIOD).await;
                 }

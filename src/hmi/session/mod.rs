@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 
 use axum::extract::ws::{Message, Utf8Bytes, WebSocket};
 use futures_util::{SinkExt as _, StreamExt as _};
-use tokio::sync::broadcast::error::{RecvError, TryRecvError};
+use tokio::sync::broadcast::error::RecvError;
 
 use super::model::Model;
 use super::protocol::ServerMsg;
@@ -187,11 +187,9 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
                             }
                             Err(RecvError::Closed) => break 'session End::Closed,
                         }
-                        next = match hub.try_recv() {
-                            Ok(d) => Ok(d),
-                            Err(TryRecvError::Lagged(n)) => Err(RecvError::Lagged(n)),
-                            Err(TryRecvError::Closed) => Err(RecvError::Closed),
-                            Err(TryRecvError::Empty) => break,
+                        next = match super::queued(&mut hub) {
+                            Some(n) => n,
+                            None => break,
                         };
                     }
                     for ev in events.drain(..) {
