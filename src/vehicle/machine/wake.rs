@@ -31,15 +31,10 @@ impl Vehicle {
         if self.ticks_busy() {
             return last + BUSY_TICK;
         }
-        [
-            Some(last + IDLE_TICK),
-            self.streams.next_deadline(),
-            self.camera_next_heartbeat(),
-        ]
-        .into_iter()
-        .flatten()
-        .min()
-        .unwrap_or(last + IDLE_TICK)
+        [self.streams.next_deadline(), self.camera_next_heartbeat()]
+            .into_iter()
+            .flatten()
+            .fold(last + IDLE_TICK, Duration::min)
     }
 
     /// Whether something moves or may move, and needs the fine tick.
