@@ -18,6 +18,9 @@
 //! - [`vehicle`]: the vehicle core (state machine, modes, driving, authority,
 //!   failsafes, estimator, autopilots, parameters, telemetry) — sans-IO.
 //! - [`scenario`]: closed-loop scenarios on simulated time (`sim-report`).
+//! - `hil` (feature `hil`): the genuine OpenROV firmware built from source
+//!   and run in the simavr AVR simulator behind a pty, for tests against the
+//!   real board's behaviour.
 //! - [`camera`]: video sources (synthetic, ffmpeg, mjpg-streamer, url) and
 //!   the MJPEG, snapshot and status routes.
 
@@ -32,6 +35,8 @@ pub mod dialect;
 pub mod doctor;
 pub mod eventlog;
 pub mod firmware;
+#[cfg(feature = "hil")]
+pub mod hil;
 pub mod hmi;
 pub mod logfile;
 pub mod mavlink;

@@ -81,6 +81,11 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
                 shutdown_signal(),
             ))?;
         }
+        #[cfg(feature = "hil")]
+        Some(CliCommand::GenuineBoard(args)) => {
+            init_logging(None)?;
+            genuine_board(&args, &cli.run)?;
+        }
         None if cli.run.check => {
             let settings = config::resolve(&cli.run)?;
             check_summary(&cli.run, &settings)?;
@@ -98,6 +103,32 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
         }
     }
     Ok(std::process::ExitCode::SUCCESS)
+}
+
+/// `genuine-board`: builds (or finds) the firmware, runs it in simavr behind a
+/// pty, prints the pty's path, and runs until interrupted.
+#[cfg(feature = "hil")]
+fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::Result<()> {
+    use neptunus::hil::{Analog, GenuineBoard, prepare};
+    let cache = config::resolve(run)?.data_dir.join("openrov-firmware");
+    let firmware = prepare(&args.firmware, &cache)?;
+    let framing = firmware.framing;
+    let analog = Analog {
+        battery_v: args.battery_v,
+        ..Analog::default()
+    };
+    let board = GenuineBoard::spawn(firmware, analog, args.link.clone())?;
+    let mut out = std::io::stdout();
+    writeln!(out, "{}", board.path().display())?;
+    out.flush()?;
+    tracing::info!(%framing, elf = %board.firmware().elf.display(), "genuine board running; pass --serial {} --framing {framing} to neptunus", board.path().display());
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")?;
+    rt.block_on(shutdown_signal());
+    drop(board);
+    Ok(())
 }
 
 /// `--check`: what the configuration resolves to, for the operator to read.

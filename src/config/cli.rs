@@ -129,6 +129,11 @@ impl std::str::FromStr for HttpAddr {
 pub enum CliCommand {
     /// Run the OpenROV board emulator on a new pseudo-terminal and print its path.
     EmulateBoard(EmulateArgs),
+    /// Run the genuine OpenROV controller-board firmware in the simavr AVR
+    /// simulator on a new pseudo-terminal and print its path (built with the
+    /// `hil` feature).
+    #[cfg(feature = "hil")]
+    GenuineBoard(GenuineArgs),
     /// Ground-station profiles (conventions per sender).
     Profiles {
         #[command(subcommand)]
@@ -201,6 +206,22 @@ pub enum ProfilesCommand {
         /// Directory of *.toml profiles [default: the built-in set].
         dir: Option<PathBuf>,
     },
+}
+
+/// Options of `genuine-board`.
+#[cfg(feature = "hil")]
+#[derive(Debug, Args)]
+pub struct GenuineArgs {
+    /// The firmware: a checkout of openrov-software-arduino (built with
+    /// avr-gcc on first use and cached), its OpenROV folder, or a built .elf.
+    #[arg(value_name = "FIRMWARE")]
+    pub firmware: PathBuf,
+    /// Also make a symlink at PATH pointing to the pseudo-terminal.
+    #[arg(long, value_name = "PATH")]
+    pub link: Option<PathBuf>,
+    /// Battery voltage on the board's voltage divider (V).
+    #[arg(long, value_name = "V", default_value_t = 12.0)]
+    pub battery_v: f64,
 }
 
 /// Options of `emulate-board`.

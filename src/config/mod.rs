@@ -15,6 +15,8 @@ mod resolve;
 
 use std::path::PathBuf;
 
+#[cfg(feature = "hil")]
+pub use cli::GenuineArgs;
 pub use cli::{
     Cli, CliCommand, EmulateArgs, HmiCommand, HttpAddr, ProfilesCommand, RunArgs, SigningCommand,
     TlsModeName,

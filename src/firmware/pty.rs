@@ -45,26 +45,16 @@ impl PtyPair {
     /// Creates a raw pty pair; the master is non-blocking and registered with
     /// the tokio runtime (call inside a runtime).
     pub fn open() -> Result<Self, PtyError> {
-        let pair = nix::pty::openpty(None, None).map_err(PtyError::Create)?;
-        // Raw mode on the slave at once: bytes written to the master before the
-        // link opens the slave must not be mangled (CR→NL, echo).
-        let mut tio = tcgetattr(pair.slave.as_fd()).map_err(PtyError::Configure)?;
-        cfmakeraw(&mut tio);
-        tcsetattr(pair.slave.as_fd(), SetArg::TCSANOW, &tio).map_err(PtyError::Configure)?;
-        // Non-blocking master: a spurious readiness must never block a runtime worker.
-        let flags = fcntl(pair.master.as_fd(), FcntlArg::F_GETFL).map_err(PtyError::Configure)?;
-        let flags = OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK;
-        fcntl(pair.master.as_fd(), FcntlArg::F_SETFL(flags)).map_err(PtyError::Configure)?;
-        let slave_path = nix::unistd::ttyname(pair.slave.as_fd()).map_err(PtyError::Configure)?;
+        let raw = open_raw()?;
         // `AsyncFd::new` is deprecated because a registered fd could be closed
         // behind the reactor's back; here the reactor owns the `OwnedFd`
         // outright, so nothing else can close it.
         #[allow(deprecated)]
-        let master = AsyncFd::new(pair.master).map_err(PtyError::Register)?;
+        let master = AsyncFd::new(raw.master).map_err(PtyError::Register)?;
         Ok(Self {
             master,
-            _slave: pair.slave,
-            slave_path,
+            _slave: raw.slave,
+            slave_path: raw.slave_path,
             symlink: None,
         })
     }
@@ -81,14 +71,7 @@ impl PtyPair {
 
     /// Points `link` at the slave, atomically replacing an older link.
     pub fn make_symlink(&mut self, link: &Path) -> Result<(), PtyError> {
-        let tmp = link.with_extension("tmp-link");
-        let _ = std::fs::remove_file(&tmp);
-        let err = |source| PtyError::Symlink {
-            path: link.to_path_buf(),
-            source,
-        };
-        std::os::unix::fs::symlink(&self.slave_path, &tmp).map_err(err)?;
-        std::fs::rename(&tmp, link).map_err(err)?;
+        symlink_to(&self.slave_path, link)?;
         self.symlink = Some(link.to_path_buf());
         Ok(())
     }
@@ -121,10 +104,55 @@ impl PtyPair {
 impl Drop for PtyPair {
     fn drop(&mut self) {
         if let Some(link) = &self.symlink {
-            // Only remove the link if it still points at us (a newer emulator may own it).
-            if std::fs::read_link(link).is_ok_and(|target| target == self.slave_path) {
-                let _ = std::fs::remove_file(link);
-            }
+            remove_link_to(link, &self.slave_path);
         }
+    }
+}
+
+/// A raw-mode pty pair before anything is registered: the master
+/// non-blocking, the slave kept open by its owner (see [`PtyPair`]).
+#[derive(Debug)]
+pub struct RawPty {
+    pub master: OwnedFd,
+    pub slave: OwnedFd,
+    pub slave_path: PathBuf,
+}
+
+/// Creates a raw-mode pty pair with a non-blocking master.
+pub fn open_raw() -> Result<RawPty, PtyError> {
+    let pair = nix::pty::openpty(None, None).map_err(PtyError::Create)?;
+    // Raw mode on the slave at once: bytes written to the master before the
+    // link opens the slave must not be mangled (CR→NL, echo).
+    let mut tio = tcgetattr(pair.slave.as_fd()).map_err(PtyError::Configure)?;
+    cfmakeraw(&mut tio);
+    tcsetattr(pair.slave.as_fd(), SetArg::TCSANOW, &tio).map_err(PtyError::Configure)?;
+    // Non-blocking master: a spurious readiness must never block a reader.
+    let flags = fcntl(pair.master.as_fd(), FcntlArg::F_GETFL).map_err(PtyError::Configure)?;
+    let flags = OFlag::from_bits_truncate(flags) | OFlag::O_NONBLOCK;
+    fcntl(pair.master.as_fd(), FcntlArg::F_SETFL(flags)).map_err(PtyError::Configure)?;
+    let slave_path = nix::unistd::ttyname(pair.slave.as_fd()).map_err(PtyError::Configure)?;
+    Ok(RawPty {
+        master: pair.master,
+        slave: pair.slave,
+        slave_path,
+    })
+}
+
+/// Points `link` at `target`, atomically replacing an older link.
+pub fn symlink_to(target: &Path, link: &Path) -> Result<(), PtyError> {
+    let tmp = link.with_extension("tmp-link");
+    let _ = std::fs::remove_file(&tmp);
+    let err = |source| PtyError::Symlink {
+        path: link.to_path_buf(),
+        source,
+    };
+    std::os::unix::fs::symlink(target, &tmp).map_err(err)?;
+    std::fs::rename(&tmp, link).map_err(err)
+}
+
+/// Removes `link` if it still points at `target` (a newer board may own it).
+pub fn remove_link_to(link: &Path, target: &Path) {
+    if std::fs::read_link(link).is_ok_and(|t| t == target) {
+        let _ = std::fs::remove_file(link);
     }
 }

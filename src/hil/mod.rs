@@ -1,0 +1,30 @@
+//! The genuine OpenROV firmware in the loop (feature `hil`): the controller
+//! board's own firmware, built from source and run in the simavr AVR
+//! simulator at real time behind a pseudo-terminal, so that Neptunus's
+//! serial link talks to what runs on the ROV rather than to our reading of
+//! it.
+//!
+//! - [`compile`]: finds the sketch and builds it with avr-gcc and Debian's
+//!   Arduino AVR core, caching the ELF.
+//! - `avr`: simavr behind a safe face (the crate's one FFI boundary).
+//! - [`pins`]: the board's outputs as an instrument reads them: ESC and
+//!   servo pulse widths from pin edges, lights and lasers from their timer.
+//! - [`runner`]: [`GenuineBoard`], the firmware paced to the wall clock on
+//!   its own thread, its UART0 on a pty, its analog inputs set in volts and
+//!   amperes, a reset line, and the records tests and benches read.
+//!
+//! The firmware is test data, not part of Neptunus: this module builds and
+//! runs it, it never changes it. Nothing here decides what the vehicle
+//! does; the firmware decides what the board does.
+
+mod avr;
+pub mod compile;
+pub mod pins;
+pub mod runner;
+
+pub use avr::{AvrError, F_CPU_HZ};
+pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
+pub use pins::{Output, PinsReport, PulseChange};
+pub use runner::{
+    Analog, GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
+};

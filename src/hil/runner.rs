@@ -1,0 +1,609 @@
+//! The genuine board on a pseudo-terminal: the firmware in simavr, paced to
+//! the wall clock on its own thread, its UART0 bridged to a pty that the
+//! serial link opens like `/dev/ttyO1`.
+//!
+//! Owns the pacing (simulated cycles against the wall clock, in 1 ms
+//! slices; the simulator's speed against real time is measured, not
+//! assumed), the bridge (bytes from the host go onto the UART line at its
+//! baud rate, bytes the firmware prints go to the pty), the analog inputs
+//! (battery voltage, currents, board temperature, in volts and amperes
+//! converted to what the board's dividers put on its ADC pins), the output
+//! measurement ([`super::pins`]), a hardware reset, and the figures and
+//! records a test or a bench reads ([`GenuineControl`]). It never decides
+//! anything the board does: that is the firmware's.
+
+use std::io;
+use std::os::fd::{AsFd, OwnedFd};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use super::avr::{AvrError, Edge, F_CPU_HZ, Mcu};
+use super::compile::Firmware;
+use super::pins::{Pins, PinsReport, PulseChange, WATCHED, reg};
+use crate::firmware::pty::{PtyError, open_raw, remove_link_to, symlink_to};
+
+/// Simulated time run between looks at the wall clock, the pty and the controls.
+const SLICE_CYCLES: u64 = F_CPU_HZ / 1000;
+/// Behind the wall clock by more than this, the runner stops trying to catch
+/// up (and counts a slip): a board that cannot keep real time runs slow
+/// rather than in bursts.
+const MAX_DEBT_CYCLES: u64 = F_CPU_HZ / 4;
+/// How often the speed figures are renewed.
+const SPEED_WINDOW: Duration = Duration::from_secs(1);
+
+/// The analog inputs of controller board 2.5, in the units the board reports.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Analog {
+    /// Battery voltage on A4 (`vout`, `BRDV`: ADC × 20 / 1023).
+    pub battery_v: f64,
+    /// Board current on A0 (`iout`, `BRDI`: ADC × 2 / 1023).
+    pub board_current_a: f64,
+    /// Battery tube currents on A6 and A5 (`BT1I`, `BT2I`: ADC × 10 / 1023).
+    pub battery_current_a: [f64; 2],
+    /// Board temperature sensor on A8 (`BRDT`: (ADC × 5 / 1024 − 0.4) × 51.28).
+    pub board_temp_c: f64,
+}
+
+impl Default for Analog {
+    fn default() -> Self {
+        Self {
+            battery_v: 12.0,
+            board_current_a: 0.2,
+            battery_current_a: [0.0; 2],
+            board_temp_c: 25.0,
+        }
+    }
+}
+
+impl Analog {
+    /// `(ADC channel, millivolts)` for each input: the smallest voltage whose
+    /// 10-bit conversion (against 5 V) is the code nearest the wanted reading.
+    fn inputs(&self) -> [(u8, u32); 5] {
+        let mv_for_code = |code: f64| {
+            let code = code.round().clamp(0.0, 1023.0);
+            (code * 5000.0 / 1023.0).ceil() as u32
+        };
+        let temp_code = (self.board_temp_c / 51.28 + 0.4) * 1024.0 / 5.0;
+        [
+            (4, mv_for_code(self.battery_v / 20.0 * 1023.0)),
+            (0, mv_for_code(self.board_current_a / 2.0 * 1023.0)),
+            (6, mv_for_code(self.battery_current_a[0] / 10.0 * 1023.0)),
+            (5, mv_for_code(self.battery_current_a[1] / 10.0 * 1023.0)),
+            (8, mv_for_code(temp_code * 1023.0 / 1024.0)),
+        ]
+    }
+}
+
+/// Errors starting the genuine board.
+#[derive(Debug, thiserror::Error)]
+pub enum GenuineError {
+    #[error(transparent)]
+    Avr(#[from] AvrError),
+    #[error(transparent)]
+    Pty(#[from] PtyError),
+    #[error("cannot start the simulator thread: {0}")]
+    Thread(io::Error),
+}
+
+/// Bytes on the serial line, stamped with the wall time the runner moved them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SerialChunk {
+    pub at: Instant,
+    /// `true`: host → board; `false`: board → host.
+    pub to_board: bool,
+    pub bytes: Vec<u8>,
+}
+
+/// A pulse change, stamped with the wall time its simulated cycle maps to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimedChange {
+    pub at: Instant,
+    pub change: PulseChange,
+}
+
+/// The genuine board right now.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GenuineSnapshot {
+    /// Simulated time since power-up (s).
+    pub sim_time_s: f64,
+    pub pins: PinsReport,
+    pub analog: Analog,
+    /// Simulated seconds per wall second over the last second: 1.0 when the
+    /// board keeps real time, below when it cannot.
+    pub realtime_ratio: f64,
+    /// Simulated seconds per wall second spent simulating: how much faster
+    /// than real time simavr could run this firmware on this machine.
+    pub speed_ratio: f64,
+    /// Times the runner fell more than 250 ms behind and let the debt go.
+    pub slips: u64,
+    pub resets: u64,
+    pub bytes_to_board: u64,
+    pub bytes_from_board: u64,
+    /// Board output the pty had no room for (nobody reading).
+    pub bytes_lost: u64,
+    /// Why the simulation stopped, if it did.
+    pub error: Option<String>,
+}
+
+enum Ctl {
+    Analog(Analog),
+    Reset,
+    Inject(Vec<u8>),
+    Serial(Sender<SerialChunk>),
+    Changes(Sender<TimedChange>),
+    Stop,
+}
+
+/// Controls for a running [`GenuineBoard`]; cheap to clone, usable from any thread.
+#[derive(Debug, Clone)]
+pub struct GenuineControl {
+    tx: Sender<Ctl>,
+    snapshot: Arc<Mutex<GenuineSnapshot>>,
+}
+
+impl std::fmt::Debug for Ctl {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Ctl::Analog(_) => "Analog",
+            Ctl::Reset => "Reset",
+            Ctl::Inject(_) => "Inject",
+            Ctl::Serial(_) => "Serial",
+            Ctl::Changes(_) => "Changes",
+            Ctl::Stop => "Stop",
+        })
+    }
+}
+
+impl GenuineControl {
+    /// The board and its outputs as last measured (renewed every millisecond
+    /// of simulated time).
+    pub fn snapshot(&self) -> GenuineSnapshot {
+        match self.snapshot.lock() {
+            Ok(s) => s.clone(),
+            Err(poisoned) => poisoned.into_inner().clone(),
+        }
+    }
+    /// New analog inputs from the next slice on.
+    pub fn set_analog(&self, analog: Analog) {
+        let _ = self.tx.send(Ctl::Analog(analog));
+    }
+    /// Pulls the reset line: the firmware starts again from power-up.
+    pub fn reset(&self) {
+        let _ = self.tx.send(Ctl::Reset);
+    }
+    /// Bytes onto the board's receive line as if the host wrote them,
+    /// between two of the host's frames (after its next `;`).
+    pub fn inject(&self, bytes: Vec<u8>) {
+        let _ = self.tx.send(Ctl::Inject(bytes));
+    }
+    /// Every byte on the serial line from now on, both ways.
+    pub fn serial(&self) -> Receiver<SerialChunk> {
+        let (tx, rx) = mpsc::channel();
+        let _ = self.tx.send(Ctl::Serial(tx));
+        rx
+    }
+    /// Every pulse change from now on.
+    pub fn changes(&self) -> Receiver<TimedChange> {
+        let (tx, rx) = mpsc::channel();
+        let _ = self.tx.send(Ctl::Changes(tx));
+        rx
+    }
+}
+
+/// The genuine firmware in simavr behind a pty, running until dropped.
+#[derive(Debug)]
+pub struct GenuineBoard {
+    path: PathBuf,
+    firmware: Firmware,
+    control: GenuineControl,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl GenuineBoard {
+    /// Loads `firmware`, powers the board up with `analog` on its inputs and
+    /// runs it in real time behind a fresh pty (reachable at `symlink` if
+    /// given).
+    pub fn spawn(
+        firmware: Firmware,
+        analog: Analog,
+        symlink: Option<PathBuf>,
+    ) -> Result<Self, GenuineError> {
+        let elf = firmware.elf.clone();
+        let pty = open_raw()?;
+        let path = match &symlink {
+            Some(link) => {
+                symlink_to(&pty.slave_path, link)?;
+                link.clone()
+            }
+            None => pty.slave_path.clone(),
+        };
+        let snapshot = Arc::new(Mutex::new(GenuineSnapshot {
+            sim_time_s: 0.0,
+            pins: PinsReport::default(),
+            analog,
+            realtime_ratio: 0.0,
+            speed_ratio: 0.0,
+            slips: 0,
+            resets: 0,
+            bytes_to_board: 0,
+            bytes_from_board: 0,
+            bytes_lost: 0,
+            error: None,
+        }));
+        let (tx, rx) = mpsc::channel();
+        let (ready_tx, ready_rx) = mpsc::channel();
+        let shared = Arc::clone(&snapshot);
+        let link = symlink.map(|l| (l, pty.slave_path.clone()));
+        let thread = std::thread::Builder::new()
+            .name("genuine-board".into())
+            .spawn(move || {
+                // simavr's objects never leave this thread.
+                let mcu = match Mcu::load(&elf, &WATCHED) {
+                    Ok(mcu) => {
+                        let _ = ready_tx.send(Ok(()));
+                        mcu
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        return;
+                    }
+                };
+                let mut runner = Runner::new(mcu, pty.master, analog, shared);
+                runner.run(&rx);
+                drop(pty.slave);
+                if let Some((link, target)) = link {
+                    remove_link_to(&link, &target);
+                }
+            })
+            .map_err(GenuineError::Thread)?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                let _ = thread.join();
+                return Err(e.into());
+            }
+            Err(_) => {
+                let _ = thread.join();
+                return Err(GenuineError::Thread(io::Error::other(
+                    "the simulator thread ended before loading the firmware",
+                )));
+            }
+        }
+        Ok(Self {
+            path,
+            firmware,
+            control: GenuineControl { tx, snapshot },
+            thread: Some(thread),
+        })
+    }
+
+    /// The serial device to give the link (`--serial`).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The firmware running.
+    pub fn firmware(&self) -> &Firmware {
+        &self.firmware
+    }
+
+    pub fn control(&self) -> GenuineControl {
+        self.control.clone()
+    }
+}
+
+impl Drop for GenuineBoard {
+    fn drop(&mut self) {
+        let _ = self.control.tx.send(Ctl::Stop);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// The simulator thread's state.
+struct Runner {
+    mcu: Mcu,
+    master: OwnedFd,
+    analog: Analog,
+    shared: Arc<Mutex<GenuineSnapshot>>,
+    pins: Pins,
+    /// Host bytes not yet on the UART line.
+    from_host: std::collections::VecDeque<u8>,
+    /// Whether the last host byte put on the line ended a frame.
+    host_at_boundary: bool,
+    inject: std::collections::VecDeque<Vec<u8>>,
+    serial_subs: Vec<Sender<SerialChunk>>,
+    change_subs: Vec<Sender<TimedChange>>,
+    anchor_cycle: u64,
+    anchor_wall: Instant,
+    stats: GenuineSnapshot,
+    window_start: (Instant, u64, Duration),
+    busy: Duration,
+}
+
+impl Runner {
+    fn new(
+        mut mcu: Mcu,
+        master: OwnedFd,
+        analog: Analog,
+        shared: Arc<Mutex<GenuineSnapshot>>,
+    ) -> Self {
+        for (channel, mv) in analog.inputs() {
+            mcu.set_adc_mv(channel, mv);
+        }
+        let stats = shared
+            .lock()
+            .map(|s| s.clone())
+            .unwrap_or_else(|p| p.into_inner().clone());
+        let now = Instant::now();
+        let cycle = mcu.cycle();
+        Self {
+            mcu,
+            master,
+            analog,
+            shared,
+            pins: Pins::default(),
+            from_host: Default::default(),
+            host_at_boundary: true,
+            inject: Default::default(),
+            serial_subs: Vec::new(),
+            change_subs: Vec::new(),
+            anchor_cycle: cycle,
+            anchor_wall: now,
+            stats,
+            window_start: (now, cycle, Duration::ZERO),
+            busy: Duration::ZERO,
+        }
+    }
+
+    fn wall_of(&self, cycle: u64) -> Instant {
+        let ns = u128::from(cycle.saturating_sub(self.anchor_cycle)) * 1_000_000_000
+            / u128::from(F_CPU_HZ);
+        self.anchor_wall + Duration::from_nanos(ns.min(u128::from(u64::MAX)) as u64)
+    }
+
+    fn run(&mut self, rx: &Receiver<Ctl>) {
+        let mut out = Vec::with_capacity(4096);
+        let mut edges: Vec<Edge> = Vec::with_capacity(256);
+        let mut buf = [0u8; 1024];
+        loop {
+            loop {
+                match rx.try_recv() {
+                    Ok(Ctl::Stop) | Err(TryRecvError::Disconnected) => return,
+                    Ok(c) => self.control(c),
+                    Err(TryRecvError::Empty) => break,
+                }
+            }
+            self.read_host(&mut buf);
+            let now = Instant::now();
+            let due = now.saturating_duration_since(self.anchor_wall);
+            let target =
+                self.anchor_cycle + (due.as_nanos() * u128::from(F_CPU_HZ) / 1_000_000_000) as u64;
+            let cycle = self.mcu.cycle();
+            if cycle >= target {
+                self.publish(now);
+                // Ahead of the wall clock: wait for host bytes or the next slice.
+                let ahead_ns = (cycle - target + SLICE_CYCLES) * 1_000_000_000 / F_CPU_HZ;
+                let ms = (ahead_ns / 1_000_000).clamp(1, 5) as u8;
+                let mut fds = [nix::poll::PollFd::new(
+                    self.master.as_fd(),
+                    nix::poll::PollFlags::POLLIN,
+                )];
+                let _ = nix::poll::poll(&mut fds, nix::poll::PollTimeout::from(ms));
+                continue;
+            }
+            if target - cycle > MAX_DEBT_CYCLES {
+                // Cannot keep up: run slow from here instead of in a burst.
+                self.stats.slips += 1;
+                self.anchor_cycle = cycle;
+                self.anchor_wall = now;
+            }
+            // A whole slice, even if that runs up to a slice ahead of the
+            // wall clock: the wait above then sleeps instead of spinning.
+            let end = cycle + SLICE_CYCLES;
+            self.feed_uart();
+            let started = Instant::now();
+            if let Err(e) = self.mcu.run_until(end) {
+                self.stop_with(e);
+                // A crashed board stays silent until stopped (or reset).
+                if !self.wait_for_reset(rx) {
+                    return;
+                }
+                continue;
+            }
+            self.busy += started.elapsed();
+            self.mcu.take_output(&mut out);
+            if !out.is_empty() {
+                self.send_to_host(&out);
+                out.clear();
+            }
+            self.mcu.take_edges(&mut edges);
+            for e in edges.drain(..) {
+                if let Some(c) = self.pins.edge(e.pin, e.cycle, e.high) {
+                    self.emit_change(c);
+                }
+            }
+            let cycle = self.mcu.cycle();
+            for c in self.pins.expire(cycle) {
+                self.emit_change(c);
+            }
+            self.pins.timer5(
+                self.mcu.data(reg::TCCR5A),
+                self.mcu.data(reg::OCR5BL),
+                self.mcu.data(reg::OCR5CL),
+                self.mcu.data(reg::PORTL),
+            );
+        }
+    }
+
+    fn control(&mut self, c: Ctl) {
+        match c {
+            Ctl::Analog(a) => {
+                self.analog = a;
+                for (channel, mv) in a.inputs() {
+                    self.mcu.set_adc_mv(channel, mv);
+                }
+            }
+            Ctl::Reset => {
+                self.mcu.reset();
+                self.stats.resets += 1;
+                self.stats.error = None;
+                let cycle = self.mcu.cycle();
+                for c in self.pins.clear(cycle) {
+                    self.emit_change(c);
+                }
+            }
+            Ctl::Inject(bytes) => self.inject.push_back(bytes),
+            Ctl::Serial(tx) => self.serial_subs.push(tx),
+            Ctl::Changes(tx) => self.change_subs.push(tx),
+            Ctl::Stop => {}
+        }
+    }
+
+    /// Takes what the host wrote to the pty.
+    fn read_host(&mut self, buf: &mut [u8]) {
+        loop {
+            match nix::unistd::read(self.master.as_fd(), buf) {
+                Ok(0) | Err(_) => return,
+                Ok(n) => {
+                    self.stats.bytes_to_board += n as u64;
+                    let chunk = &buf[..n];
+                    self.from_host.extend(chunk);
+                    let at = Instant::now();
+                    self.serial_subs.retain(|s| {
+                        s.send(SerialChunk {
+                            at,
+                            to_board: true,
+                            bytes: chunk.to_vec(),
+                        })
+                        .is_ok()
+                    });
+                }
+            }
+        }
+    }
+
+    /// Puts waiting bytes on the UART line while its receiver has room;
+    /// injected frames go in between two of the host's.
+    fn feed_uart(&mut self) {
+        while self.mcu.uart_ready() {
+            if self.host_at_boundary
+                && let Some(frame) = self.inject.pop_front()
+            {
+                for b in frame {
+                    self.mcu.uart_send(b);
+                }
+                continue;
+            }
+            let Some(b) = self.from_host.pop_front() else {
+                break;
+            };
+            self.mcu.uart_send(b);
+            self.host_at_boundary = b == b';';
+        }
+    }
+
+    fn send_to_host(&mut self, bytes: &[u8]) {
+        self.stats.bytes_from_board += bytes.len() as u64;
+        let mut rest = bytes;
+        while !rest.is_empty() {
+            match nix::unistd::write(&self.master, rest) {
+                Ok(n) if n > 0 => rest = &rest[n..],
+                _ => {
+                    // Nobody reads the pty and its buffer is full: the bytes
+                    // are lost, as on a UART with nobody listening.
+                    self.stats.bytes_lost += rest.len() as u64;
+                    break;
+                }
+            }
+        }
+        let at = Instant::now();
+        self.serial_subs.retain(|s| {
+            s.send(SerialChunk {
+                at,
+                to_board: false,
+                bytes: bytes.to_vec(),
+            })
+            .is_ok()
+        });
+    }
+
+    fn emit_change(&mut self, change: PulseChange) {
+        let at = self.wall_of(change.cycle);
+        self.change_subs
+            .retain(|s| s.send(TimedChange { at, change }).is_ok());
+    }
+
+    fn publish(&mut self, now: Instant) {
+        let cycle = self.mcu.cycle();
+        let (w0, c0, b0) = self.window_start;
+        let wall = now.saturating_duration_since(w0);
+        if wall >= SPEED_WINDOW {
+            let sim = cycle.saturating_sub(c0) as f64 / F_CPU_HZ as f64;
+            self.stats.realtime_ratio = sim / wall.as_secs_f64();
+            let busy = self.busy.saturating_sub(b0).as_secs_f64();
+            if busy > 0.0 {
+                self.stats.speed_ratio = sim / busy;
+            }
+            self.window_start = (now, cycle, self.busy);
+        }
+        self.stats.sim_time_s = cycle as f64 / F_CPU_HZ as f64;
+        self.stats.pins = self.pins.report(cycle);
+        self.stats.analog = self.analog;
+        if let Ok(mut s) = self.shared.lock() {
+            *s = self.stats.clone();
+        }
+    }
+
+    fn stop_with(&mut self, e: AvrError) {
+        tracing::error!(error = %e, "the genuine board stopped");
+        self.stats.error = Some(e.to_string());
+        self.publish(Instant::now());
+    }
+
+    /// After a crash: waits for a reset (`true`) or the end (`false`).
+    fn wait_for_reset(&mut self, rx: &Receiver<Ctl>) -> bool {
+        loop {
+            match rx.recv() {
+                Ok(Ctl::Stop) | Err(_) => return false,
+                Ok(Ctl::Reset) => {
+                    self.control(Ctl::Reset);
+                    self.anchor_cycle = self.mcu.cycle();
+                    self.anchor_wall = Instant::now();
+                    return true;
+                }
+                Ok(c) => self.control(c),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn analog_inputs_land_on_the_nearest_code() {
+        let a = Analog {
+            battery_v: 12.0,
+            board_current_a: 0.2,
+            battery_current_a: [1.5, 0.0],
+            board_temp_c: 25.0,
+        };
+        let code = |mv: u32| (u64::from(mv) * 1023 / 5000) as f64;
+        let inputs = a.inputs();
+        // The board's own arithmetic on the code simavr converts.
+        assert!((code(inputs[0].1) * 20.0 / 1023.0 - 12.0).abs() < 0.02);
+        assert!((code(inputs[1].1) * 2.0 / 1023.0 - 0.2).abs() < 0.002);
+        assert!((code(inputs[2].1) * 10.0 / 1023.0 - 1.5).abs() < 0.01);
+        assert_eq!(inputs[3].1, 0);
+        let t = (code(inputs[4].1) * 5.0 / 1024.0 - 0.4) * 51.28;
+        assert!((t - 25.0).abs() < 0.3, "{t}");
+    }
+}
