@@ -17,7 +17,7 @@ fn board_output() -> Vec<u8> {
         if i % 10 == 9 {
             out.extend_from_slice(
                 format!(
-                    "vout:{:.2};iout:{:.2};btti:{:.2};pres:{:.2};temp:{:.2};time:{};fmem:{};\
+                    "vout:{:.2};iout:{:.2};BT1I:{:.2};pres:{:.2};temp:{:.2};time:{};fmem:{};\
                      motorAttached:1;servo:{};starg:1500;mtarg:1500,1500,1500;\r\n",
                     11.0 + (f * 0.01) % 2.0,
                     (f * 0.003) % 3.0,

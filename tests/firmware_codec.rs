@@ -14,11 +14,13 @@ use rand::{Rng, SeedableRng};
 // helpers
 // ---------------------------------------------------------------------------
 
-/// Decodes `bytes` in one push with a fresh decoder.
+/// Decodes `bytes` in one push with a fresh decoder, then decides a line
+/// still held for its `;` (as at the end of a capture).
 fn decode(bytes: &[u8]) -> (Vec<Event>, DecodeStats) {
     let mut decoder = LineDecoder::new();
     let mut events = Vec::new();
     decoder.push(bytes, &mut events);
+    decoder.flush(&mut events);
     (events, decoder.stats().clone())
 }
 
@@ -75,7 +77,8 @@ fn assert_events_in_range(events: &[Event]) {
                 let fields = [
                     ("vout", s.vout_v),
                     ("iout", s.iout_a),
-                    ("btti", s.btti_a),
+                    ("BT1I", s.battery_current_a.map(|a| a / 2.0)),
+                    ("BRDT", s.board_temp_c),
                     ("pres", s.pres_mbar),
                     ("temp", s.temp_c),
                     ("time", s.time_ms.map(|v| v as f64)),
@@ -328,17 +331,19 @@ fn deap_and_deep_both_give_depth() {
 
 #[test]
 fn status_line_decodes_every_field() {
-    let line = "vout:12.10;iout:0.75;btti:1.20;pres:1013.25;temp:14.50;time:123456;fmem:2048;\
+    let line = "vout:12.10;iout:0.75;pres:1013.25;temp:14.50;time:123456.00;fmem:2048.00;\
                 motorAttached:1;servo:1500;starg:1600;mtarg:1500,1400,1600;motors:1500,1500,1500;\
-                ver:2.5.1-abc;cmpd:1;BRDT:25.0;BRDI:0.1;BRDV:12.0;SC1I:0.0;SC2I:0.0;SC3I:0.0;\
-                BT1I:0.5;BT2I:0.5;AVCC:5000;\r\n";
+                ver:2.5.1-abc;cmpd:Aug 31 2015, 10:00:00, 4.8.1;BRDT:25.0;BRDI:0.1;BRDV:12.0;\
+                SC1I:0.0;SC2I:0.0;SC3I:0.0;BT1I:0.5;BT2I:0.7;AVCC:5000;atmp:0.00;alps:3101;\
+                dlms:0|281|772;mtrmod:1.00,1.00,1.00,2.00,2.00,2.00;\r\n";
     let (events, stats) = decode(line.as_bytes());
     assert_eq!(
         events,
         vec![Event::Status(StatusSample {
             vout_v: Some(12.1),
             iout_a: Some(0.75),
-            btti_a: Some(1.2),
+            battery_current_a: Some(1.2),
+            board_temp_c: Some(25.0),
             pres_mbar: Some(1013.25),
             temp_c: Some(14.5),
             time_ms: Some(123_456),
@@ -349,6 +354,7 @@ fn status_line_decodes_every_field() {
             mtarg_us: Some([1500, 1400, 1600]),
             motors_us: Some([1500, 1500, 1500]),
             version: Some("2.5.1-abc".into()),
+            compiled: Some("Aug 31 2015, 10:00:00, 4.8.1".into()),
         })]
     );
     assert_eq!(stats.lines_accepted, 1);
@@ -358,8 +364,8 @@ fn status_line_decodes_every_field() {
 #[test]
 fn event_keys_decode_in_line_order_after_nav_and_status() {
     let line = "log:hello world: ok;boot:1;hdgd:10;CAPA:63;vout:12;crc:pass;\
-                crc:fail,12/34;cmd:go(1500,1500,1500);rawcmd:6A,67,6F,;pong:1234;\
-                LIGT:128;LIGP:0.50;claser:255;\r\n";
+                crc:fail,9E/CB;cmd:go(1500,1500,1500);rawcmd:6A,67,6F,;pong:1234;\
+                LIGT:128;LIGP:0.50;claser:255;icmd:stop();\r\n";
     let (events, stats) = decode(line.as_bytes());
     assert_eq!(
         events,
@@ -376,7 +382,10 @@ fn event_keys_decode_in_line_order_after_nav_and_status() {
             Event::Boot,
             Event::Capabilities(63),
             Event::CrcPass,
-            Event::CrcFail { calc: 12, got: 34 },
+            Event::CrcFail {
+                calc: 0x9E,
+                got: 0xCB
+            },
             Event::CmdEcho("go(1500,1500,1500)".into()),
             Event::RawCmd("6A,67,6F,".into()),
             Event::Pong("1234".into()),
@@ -385,6 +394,7 @@ fn event_keys_decode_in_line_order_after_nav_and_status() {
                 fraction: Some(0.5),
             },
             Event::Laser(255),
+            Event::InternalCommand("stop()".into()),
         ]
     );
     assert_eq!(stats.lines_accepted, 1);
@@ -441,6 +451,116 @@ fn range_ends_are_inclusive() {
 }
 
 // ---------------------------------------------------------------------------
+// decoding: the genuine board's lines
+// ---------------------------------------------------------------------------
+
+/// What the genuine 30.0.2 firmware printed in simavr with nothing on its
+/// I2C bus and 11.8 V on its battery input: set-up, `boot`, one status
+/// cycle, and the answers to `ping(0)`, `go(1600,1500,1400)` and a frame
+/// with a bad CRC (its report has no line end, so the next navigation line
+/// follows on the same line).
+const GENUINE_30_0_2: &str = "\
+log:setting dev #0;log:setting dev #1;log:setting dev #2;log:setting dev #3;log:setting dev #4;log:setting dev #5;log:pilot setup complete;\r\n\
+log:setting dev #6;log:setting dev #7;log:setting dev #8;MPU9150.status:Not found;\r\n\
+log:setting dev #9;log:Depth Sensor setup;\r\n\
+MS5803.status: initialized I2C;\r\n\
+MS5803.status: reset;\r\n\
+Depth: Calibration constants are:\r\n\
+Depth.C0:0;\r\n\
+Depth.C7:0;\r\n\
+log:setting dev #10;log:setting dev #11;BNO055.Address:40;\r\n\
+BNO055.WHO_AM_I:0;\r\n\
+BNO055.IAM_160:255;\r\n\
+BNO055.status:failed;\r\n\
+boot:1;\r\n\
+hdgd:0.00;deap:0.00;pitc:0.00;roll:0.00;yaw:0.00;fthr:0.00;\r\n\
+motorAttached:1;\r\n\
+servo:1500;starg:1500;\r\n\
+fmem:3572.00;vout:11.79;iout:0.20;atmp:0.00;ver:CUSTOM_BUILD;cmpd:Nov 26 2026, 15:43:05, 5.4.0\r\n\
+;time:912.00;\r\n\
+pres:0.00;temp:0.00;\r\n\
+dlms:0|281|772|263|194|2755|596|287|358|399|6110|4911|49;\r\n\
+alps:3101;\r\n\
+BRDT:-20.51;SC1I:0.00;SC2I:0.00;SC3I:0.00;BRDI:0.20;BT1I:0.00;BT2I:0.00;BRDV:11.79;AVCC:5001;\r\n\
+mtarg:1500,1500,1500;\r\n\
+mtrmod:1.00,1.00,1.00,2.00,2.00,2.00;\r\n\
+log:Failed to read Depth from I2C\r\n\
+rawcmd:9E,70,69,6E,67,28,30,29,3B,;\r\n\
+crc:pass;cmd:ping(0);\r\n\
+pong:1,2499;hdgd:0.00;deap:0.00;pitc:0.00;roll:0.00;yaw:0.00;fthr:0.00;\r\n\
+rawcmd:3E,67,6F,28,31,36,30,30,2C,31,35,30,30,2C,31,34,30,30,29,3B,;\r\n\
+crc:pass;cmd:go(1600,1500,1400);\r\n\
+motors:1640,1500,1270;\r\n\
+rawcmd:CB,70,69,6E,67,28,30,29,3B,;\r\n\
+crc:fail,9E/CB;hdgd:0.00;deap:0.00;pitc:0.00;roll:0.00;yaw:0.00;fthr:0.00;\r\n";
+
+#[test]
+fn every_line_of_the_genuine_board_is_decoded_or_knowingly_ignored() {
+    // In one piece, and a byte at a time: the held line must not depend on chunking.
+    let (events, stats) = decode(GENUINE_30_0_2.as_bytes());
+    let mut decoder = LineDecoder::new();
+    let mut bytewise = Vec::new();
+    for b in GENUINE_30_0_2.as_bytes() {
+        decoder.push(std::slice::from_ref(b), &mut bytewise);
+    }
+    assert_eq!(bytewise, events);
+    assert_eq!(stats.rejected_total(), 0, "{stats:?}");
+    assert_eq!(stats.unknown_keys, 0, "{stats:?}");
+    assert_eq!(stats.text_lines, 1, "the calibration heading is free text");
+    assert_eq!(stats.joined_lines, 1, "the status line broken before its `;`");
+    assert!(events.contains(&Event::Boot));
+    let status = |f: fn(&StatusSample) -> bool| {
+        events
+            .iter()
+            .any(|e| matches!(e, Event::Status(s) if f(s)))
+    };
+    assert!(status(|s| s.vout_v == Some(11.79)
+        && s.iout_a == Some(0.2)
+        && s.fmem_bytes == Some(3572)
+        && s.time_ms == Some(912)
+        && s.version.as_deref() == Some("CUSTOM_BUILD")
+        && s.compiled.as_deref() == Some("Nov 26 2026, 15:43:05, 5.4.0")));
+    assert!(status(|s| s.board_temp_c == Some(-20.51) && s.battery_current_a == Some(0.0)));
+    assert!(status(|s| s.motors_us == Some([1640, 1500, 1270])));
+    assert!(events.contains(&Event::Log("Failed to read Depth from I2C".into())));
+    assert!(events.contains(&Event::Pong("1,2499".into())));
+    assert!(events.contains(&Event::CmdEcho("go(1600,1500,1400)".into())));
+    let fail_at = events
+        .iter()
+        .position(|e| *e == Event::CrcFail { calc: 0x9E, got: 0xCB })
+        .expect("the CRC failure report");
+    assert!(
+        events[..fail_at].iter().any(|e| matches!(e, Event::Nav(_))),
+        "the navigation line on the report's line is kept too"
+    );
+    let depth = events.iter().find_map(|e| match e {
+        Event::Nav(n) => n.depth_m,
+        _ => None,
+    });
+    assert_eq!(depth, Some(0.0), "`deap` is the 2015 depth key");
+}
+
+#[test]
+fn a_held_line_is_decided_by_the_next_one() {
+    // The 2014 firmware's set-up chatter, and a `log:` whose `;` follows a
+    // line break (`Serial.println("log:done\n;")`).
+    let (events, stats) = decode(
+        b"mpu_init failed with code: -1\r\nDepth Sensor setup.\r\nlog:done\n;\r\nboot:1;\r\n",
+    );
+    assert_eq!(events, vec![Event::Log("done".into()), Event::Boot]);
+    assert_eq!(stats.text_lines, 2);
+    assert_eq!(stats.joined_lines, 1);
+    assert_eq!(stats.rejected_total(), 0);
+    // Without a next line the held one waits; `flush` decides it.
+    let mut decoder = LineDecoder::new();
+    let mut events = Vec::new();
+    decoder.push(b"log:Failed to read Depth from I2C\r\n", &mut events);
+    assert!(events.is_empty());
+    decoder.flush(&mut events);
+    assert_eq!(events, vec![Event::Log("Failed to read Depth from I2C".into())]);
+}
+
+// ---------------------------------------------------------------------------
 // decoding: rejection
 // ---------------------------------------------------------------------------
 
@@ -466,7 +586,7 @@ fn non_numeric_values_reject_the_whole_line() {
         "hdgd: 12;",
         "hdgd:12 ;",
         "deep:1.2pitc:-2.10;",
-        "time:1.5;",
+        "time:1.5x;",
         "fmem:12a;",
         "servo:0x5DC;",
         "mtarg:1500,1500;",
@@ -474,8 +594,9 @@ fn non_numeric_values_reject_the_whole_line() {
         "motors:1500,,1500;",
         "crc:fial;",
         "crc:fail,12;",
-        "crc:fail,a/3;",
+        "crc:fail,g/3;",
         "crc:fail,-1/3;",
+        "crc:fail,123/3;",
         "LIGP:half;",
         "CAPA:;",
         "motorAttached:yes;",
@@ -497,7 +618,8 @@ fn wild_points_ten_and_hundred_times_are_out_of_range() {
         "fthr:1000.00;",  // 10×
         "vout:121.00;",   // 10× of 12.10
         "iout:75.00;",    // 100×
-        "btti:-0.10;",
+        "BT1I:-0.10;",
+        "BRDT:200.00;",
         "pres:101325.00;", // 100×
         "temp:145.00;",    // 10×
         "time:4294967297;",
@@ -512,7 +634,6 @@ fn wild_points_ten_and_hundred_times_are_out_of_range() {
         "LIGT:1280;",
         "LIGP:1.01;",
         "claser:2550;",
-        "crc:fail,256/3;",
         "hdgd:99999999999999999999999999999999999999999999999999999999999999999999999999\
          99999999999999999999999999999999999999999999999999999999999999999999999999999\
          99999999999999999999999999999999999999999999999999999999999999999999999999999\
@@ -534,6 +655,7 @@ fn first_reason_in_line_order_is_counted_once() {
 fn torn_lines_are_rejected() {
     for line in [
         "hdgd:123.45;deep:1.23;pitc:-2.10;roll:0.5", // missing `;` at the end
+        "hdgd:123.4",                                // cut inside its only value
         "hdgd:123.45;deep1.23;pitc:-2.10;",          // segment without ':'
         ":12;",                                      // empty key
         "hdgd:1;\rdeep:2;",                          // stray CR inside
@@ -626,7 +748,7 @@ fn random_line(rng: &mut SmallRng) -> String {
             fixed(rng, -10_000, 10_000),
         ),
         5..=6 => format!(
-            "vout:{};iout:{};btti:{};pres:{};temp:{};time:{};fmem:{};motorAttached:{};\
+            "vout:{};iout:{};BT1I:{};pres:{};temp:{};time:{}.00;fmem:{};motorAttached:{};\
              servo:{};starg:{};mtarg:{},{},{};cmpd:{};BRDT:{};",
             fixed(rng, 0, 3_000),
             fixed(rng, 0, 2_000),
@@ -656,7 +778,7 @@ fn random_line(rng: &mut SmallRng) -> String {
             0 => "boot:1;".to_owned(),
             1 => format!("CAPA:{};", rng.random_range(0..=255u8)),
             2 => "crc:pass;".to_owned(),
-            3 => format!("crc:fail,{}/{};", rng.random::<u8>(), rng.random::<u8>()),
+            3 => format!("crc:fail,{:X}/{:X};", rng.random::<u8>(), rng.random::<u8>()),
             4 => format!(
                 "rawcmd:{:X},67,6F,;crc:pass;cmd:go({},1500,1500);",
                 rng.random::<u8>(),
@@ -749,7 +871,8 @@ fn line_strategy() -> impl Strategy<Value = Vec<u8>> {
         "fthr",
         "vout",
         "iout",
-        "btti",
+        "BT1I",
+        "BRDT",
         "pres",
         "temp",
         "time",
@@ -776,7 +899,7 @@ fn line_strategy() -> impl Strategy<Value = Vec<u8>> {
         (-5000i64..70_000).prop_map(|v| v.to_string()),
         (500u16..=2500, 500u16..=2500, 0u16..=3000).prop_map(|(a, b, c)| format!("{a},{b},{c}")),
         "[ -~]{0,8}",
-        Just("fail,12/34".to_owned()),
+        Just("fail,9E/CB".to_owned()),
         Just("pass".to_owned()),
     ];
     let pair = (key, value).prop_map(|(k, v)| format!("{k}:{v};"));
@@ -820,6 +943,7 @@ proptest! {
         for piece in stream.chunks(chunk) {
             decoder.push(piece, &mut events);
         }
+        decoder.flush(&mut events);
         prop_assert_eq!(&events, &whole);
         prop_assert_eq!(decoder.stats(), &whole_stats);
     }

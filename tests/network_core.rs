@@ -30,7 +30,7 @@ fn feed() -> BoardFeed {
         status: StatusSample {
             vout_v: Some(12.0),
             iout_a: Some(0.3),
-            btti_a: Some(0.3),
+            battery_current_a: Some(0.3),
             pres_mbar: Some(1100.0),
             temp_c: Some(15.0),
             ..Default::default()

@@ -29,7 +29,7 @@ fn east_at_1_5_m() -> BoardFeed {
         status: StatusSample {
             vout_v: Some(12.0),
             iout_a: Some(0.3),
-            btti_a: Some(0.3),
+            battery_current_a: Some(0.3),
             pres_mbar: Some(1162.0),
             temp_c: Some(18.0),
             ..Default::default()

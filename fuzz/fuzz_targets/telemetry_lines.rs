@@ -35,7 +35,7 @@ fn check_events(events: &[Event]) {
                 for (key, v) in [
                     ("vout", s.vout_v),
                     ("iout", s.iout_a),
-                    ("btti", s.btti_a),
+                    ("BT1I", s.battery_current_a.map(|a| a / 2.0)),
                     ("pres", s.pres_mbar),
                     ("temp", s.temp_c),
                     ("time", s.time_ms.map(|t| t as f64)),

@@ -31,6 +31,8 @@ pub const STREAMABLE: &[(u32, f64)] = &[
     (AHRS2_DATA::ID, 3.0),
     (EKF_STATUS_REPORT_DATA::ID, 3.0),
     (BATTERY_STATUS_DATA::ID, 3.0),
+    // The board's free RAM (with EXTRA3, as ArduPilot sends its own).
+    (MEMINFO_DATA::ID, 0.0),
     // A group: Lights1, PilotGain, CamTilt, Laser …
     (NAMED_VALUE_FLOAT_DATA::ID, 2.0),
     (CONTROL_STATUS_DATA::ID, 1.0),
@@ -68,6 +70,7 @@ pub fn stream_group(stream_id: u8) -> &'static [u32] {
         12 => &[
             SYSTEM_TIME_DATA::ID,
             BATTERY_STATUS_DATA::ID,
+            MEMINFO_DATA::ID,
             NAMED_VALUE_FLOAT_DATA::ID,
             AHRS2_DATA::ID,
             EKF_STATUS_REPORT_DATA::ID,
@@ -123,7 +126,6 @@ pub const ARDUPILOT_NOTHING_TO_SEND: &[u32] = &[
     DISTANCE_SENSOR_DATA::ID,
     TERRAIN_REQUEST_DATA::ID,
     SCALED_PRESSURE3_DATA::ID,
-    MEMINFO_DATA::ID,
     FENCE_STATUS_DATA::ID,
     AHRS_DATA::ID,
     HWSTATUS_DATA::ID,

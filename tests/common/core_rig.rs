@@ -49,7 +49,7 @@ impl BoardFeed {
             },
             status: StatusSample {
                 vout_v: Some(12.0),
-                btti_a: Some(0.5),
+                battery_current_a: Some(0.5),
                 pres_mbar: Some(1113.0),
                 ..Default::default()
             },

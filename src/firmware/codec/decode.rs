@@ -7,8 +7,9 @@
 use super::MAX_LINE_BYTES;
 use super::types::{DecodeStats, Event, NavSample, RejectReason, StatusSample};
 use super::value::{
-    ANGLE_DEG, BYTE, CURRENT_A, DEPTH_M, FLAG, FMEM_BYTES, FRACTION, FTHR_PCT, HEADING_DEG,
-    PRES_MBAR, TEMP_C, TIME_MS, VOUT_V, byte, crc_report, int, pulse, pulses, real,
+    ANGLE_DEG, BOARD_TEMP_C, BYTE, CURRENT_A, DEPTH_M, FLAG, FMEM_BYTES, FRACTION, FTHR_PCT,
+    HEADING_DEG, PRES_MBAR, TEMP_C, TIME_MS, VOUT_V, byte, crc_report, int, pulse, pulses, real,
+    whole,
 };
 
 /// Turns board bytes, in any chunking, into [`Event`]s.
@@ -22,6 +23,10 @@ pub struct LineDecoder {
     /// Events of the line being decoded, held back until the whole line is
     /// known to be good; kept to reuse its allocation.
     pending: Vec<Event>,
+    /// A line that ended without its `;`, kept until the next line says
+    /// whether the `;` merely came after a line break (the next line starts
+    /// with `;`) or was never printed.
+    held: Option<Vec<u8>>,
     stats: DecodeStats,
 }
 
@@ -61,6 +66,14 @@ impl LineDecoder {
         }
     }
 
+    /// Decides a held line now, as if the line after it did not begin with
+    /// `;` (the board went quiet, or the device is being closed).
+    pub fn flush(&mut self, out: &mut Vec<Event>) {
+        if let Some(held) = self.held.take() {
+            self.unterminated(&held, out);
+        }
+    }
+
     /// Counters since this decoder was made.
     pub fn stats(&self) -> &DecodeStats {
         &self.stats
@@ -85,27 +98,67 @@ impl LineDecoder {
             self.line.clear();
             return;
         }
-        let text = self.line.strip_suffix(b"\r").unwrap_or(&self.line);
+        let line = std::mem::take(&mut self.line);
+        let text = line.strip_suffix(b"\r").unwrap_or(&line);
         if text.len() > MAX_LINE_BYTES {
             self.stats.count_rejected(RejectReason::Overlong);
         } else if !text.is_empty() {
-            self.pending.clear();
-            match decode_line(text, &mut self.pending) {
-                Ok(line) => {
-                    self.stats.lines_accepted += 1;
-                    self.stats.unknown_keys += line.unknown_keys;
-                    if let Some(nav) = line.nav {
-                        out.push(Event::Nav(nav));
-                    }
-                    if let Some(status) = line.status {
-                        out.push(Event::Status(status));
-                    }
-                    out.append(&mut self.pending);
-                }
-                Err(reason) => self.stats.count_rejected(reason),
-            }
+            self.complete(text, out);
         }
+        self.line = line;
         self.line.clear();
+    }
+
+    /// A whole line (without its terminator): joined to a held one, held
+    /// itself, or decoded.
+    fn complete(&mut self, text: &[u8], out: &mut Vec<Event>) {
+        if let Some(mut held) = self.held.take() {
+            if text.first() == Some(&b';') && held.len() + text.len() <= MAX_LINE_BYTES {
+                // The board printed a line break before this line's `;`.
+                held.extend_from_slice(text);
+                self.stats.joined_lines += 1;
+                self.decode(&held, out);
+                return;
+            }
+            self.unterminated(&held, out);
+        }
+        if text.ends_with(b";") {
+            self.decode(text, out);
+        } else {
+            self.held = Some(text.to_vec());
+        }
+    }
+
+    /// A line that ended without `;` and was not continued by one.
+    fn unterminated(&mut self, text: &[u8], out: &mut Vec<Event>) {
+        if let Some(message) = text.strip_prefix(b"log:") {
+            // The board's log messages are free text; some lack the `;`.
+            self.stats.lines_accepted += 1;
+            out.push(Event::Log(text_of(message)));
+        } else if !text.contains(&b';') && text.contains(&b' ') {
+            // Words, not `key:value;` pairs: a sensor's set-up chatter.
+            self.stats.text_lines += 1;
+        } else {
+            self.stats.count_rejected(RejectReason::Torn);
+        }
+    }
+
+    fn decode(&mut self, text: &[u8], out: &mut Vec<Event>) {
+        self.pending.clear();
+        match decode_line(text, &mut self.pending) {
+            Ok(line) => {
+                self.stats.lines_accepted += 1;
+                self.stats.unknown_keys += line.unknown_keys;
+                if let Some(nav) = line.nav {
+                    out.push(Event::Nav(nav));
+                }
+                if let Some(status) = line.status {
+                    out.push(Event::Status(status));
+                }
+                out.append(&mut self.pending);
+            }
+            Err(reason) => self.stats.count_rejected(reason),
+        }
     }
 }
 
@@ -156,15 +209,20 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
             b"fthr" => nav.fthr_pct = Some(real(value, FTHR_PCT)?),
             b"vout" => status.vout_v = Some(real(value, VOUT_V)?),
             b"iout" => status.iout_a = Some(real(value, CURRENT_A)?),
-            b"btti" => status.btti_a = Some(real(value, CURRENT_A)?),
+            b"BT1I" | b"BT2I" => {
+                let a = real(value, CURRENT_A)?;
+                status.battery_current_a = Some(status.battery_current_a.unwrap_or(0.0) + a);
+            }
+            b"BRDT" => status.board_temp_c = Some(real(value, BOARD_TEMP_C)?),
             b"pres" => status.pres_mbar = Some(real(value, PRES_MBAR)?),
             b"temp" => status.temp_c = Some(real(value, TEMP_C)?),
-            b"time" => {
-                status.time_ms = Some(int(value, TIME_MS)?.try_into().map_err(|_| OutOfRange)?)
-            }
+            b"time" => status.time_ms = Some(whole(value, TIME_MS)?),
             b"fmem" => {
-                status.fmem_bytes =
-                    Some(int(value, FMEM_BYTES)?.try_into().map_err(|_| OutOfRange)?)
+                status.fmem_bytes = Some(
+                    whole(value, FMEM_BYTES)?
+                        .try_into()
+                        .map_err(|_| OutOfRange)?,
+                )
             }
             b"motorAttached" => status.motor_attached = Some(int(value, FLAG)? == 1),
             b"servo" => status.servo_us = Some(pulse(value)?),
@@ -172,8 +230,16 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
             b"mtarg" => status.mtarg_us = Some(pulses(value)?),
             b"motors" => status.motors_us = Some(pulses(value)?),
             b"ver" => status.version = Some(text_of(value)),
-            b"cmpd" | b"BRDT" | b"BRDI" | b"BRDV" | b"SC1I" | b"SC2I" | b"SC3I" | b"BT1I"
-            | b"BT2I" | b"AVCC" => {}
+            b"cmpd" => status.compiled = Some(text_of(value)),
+            // Known and not needed: the same readings again (`BRDV` = `vout`,
+            // `BRDI` = `iout`), the ESC supply currents, AVcc, the unused
+            // MCU temperature, loop statistics, motor modifiers, the board's
+            // own holds' targets and errors, the external lights.
+            b"BRDI" | b"BRDV" | b"SC1I" | b"SC2I" | b"SC3I" | b"AVCC" | b"atmp" | b"alps"
+            | b"dlms" | b"mtrmod" | b"targetDepth" | b"targetHeading" | b"dp_er" | b"p_er"
+            | b"LIGTE" | b"LIGPE" | b"dtwa" => {}
+            // A device's set-up report (`MPU9150.status`, `Depth.C0`, `BNO055.Address`).
+            _ if key.contains(&b'.') => {}
             b"boot" => events.push(Event::Boot),
             b"CAPA" => events.push(Event::Capabilities(
                 int(value, BYTE)?.try_into().map_err(|_| OutOfRange)?,
@@ -183,6 +249,7 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
             b"rawcmd" => events.push(Event::RawCmd(text_of(value))),
             b"pong" => events.push(Event::Pong(text_of(value))),
             b"log" => events.push(Event::Log(text_of(value))),
+            b"icmd" => events.push(Event::InternalCommand(text_of(value))),
             b"LIGT" => {
                 lights_at = Some(events.len());
                 events.push(Event::Lights {

@@ -27,29 +27,44 @@
 //!   next `\n`, garbage included. The decoder never buffers more than
 //!   `MAX_LINE_BYTES + 1` bytes.
 //! - A line is a sequence of `key:value;` pairs. Each pair splits at its first
-//!   `:` (values such as `cmd:go(1,2,3)` or `crc:fail,12/34` hold commas and
+//!   `:` (values such as `cmd:go(1,2,3)` or `crc:fail,9E/CB` hold commas and
 //!   parentheses). Empty segments (from `;;`) are ignored.
-//! - The whole line is rejected as [`RejectReason::Torn`] if it does not end
-//!   with `;`, if a non-empty segment has no `:`, or if a key is empty.
+//! - A line that does not end with `;` is held until the next line: if that
+//!   one begins with `;`, the board printed a line break before the `;`
+//!   (its status line's `cmpd` is `println`ed, then `;` follows) and the two
+//!   are decoded as one ([`DecodeStats::joined_lines`]). Otherwise the held
+//!   line is a `log:` message printed without its `;` ([`Event::Log`]), the
+//!   board's free text if it holds no `;` and has words with spaces (a
+//!   sensor's set-up chatter, counted in [`DecodeStats::text_lines`] and
+//!   ignored), or else [`RejectReason::Torn`]. [`LineDecoder::flush`]
+//!   decides a held line without waiting.
+//! - The whole line is rejected as [`RejectReason::Torn`] if a non-empty
+//!   segment has no `:`, or if a key is empty.
 //! - Numeric keys must hold a number inside the key's physical range
 //!   ([`physical_range`]), else the whole line is rejected as
 //!   [`RejectReason::NonNumeric`] or [`RejectReason::OutOfRange`]. Real-valued
 //!   keys accept an optional sign, digits and at most one `.` (what the
 //!   Arduino prints), so `1e5`, `inf`, `nan`, ` 1` and `pitc` are non-numeric.
-//!   Integer keys (`time`, `fmem`, `motorAttached`, `servo`, `starg`,
-//!   `mtarg`, `motors`, `CAPA`, `LIGT`, `claser`) accept an optional `-` and
-//!   digits only. `mtarg`/`motors` hold exactly three comma-separated
-//!   integers. A number too large to represent is out of range.
+//!   `time` and `fmem` are whole numbers the board prints as floats
+//!   (`time:912.00`), rounded. Integer keys (`motorAttached`, `servo`,
+//!   `starg`, `mtarg`, `motors`, `CAPA`, `LIGT`, `claser`) accept an
+//!   optional `-` and digits only. `mtarg`/`motors` hold exactly three
+//!   comma-separated integers. A number too large to represent is out of range.
 //! - A rejected line emits nothing at all and is counted once, with the first
 //!   reason found reading left to right (a missing final `;` is found first).
-//! - `ver` goes into [`StatusSample::version`]; `cmpd`, `BRDT`, `BRDI`,
-//!   `BRDV`, `SC1I`, `SC2I`, `SC3I`, `BT1I`, `BT2I` and `AVCC` are known and
-//!   ignored without being parsed. Any other key is counted in
-//!   [`DecodeStats::unknown_keys`] (only for accepted lines) and ignored; the
-//!   line is still accepted.
+//! - `ver` goes into [`StatusSample::version`], `cmpd` into
+//!   [`StatusSample::compiled`], `BRDT` into [`StatusSample::board_temp_c`],
+//!   `BT1I` + `BT2I` into [`StatusSample::battery_current_a`]. Known and
+//!   ignored without being parsed: `BRDI`, `BRDV`, `SC1I`..`SC3I`, `AVCC`,
+//!   `atmp`, `alps`, `dlms`, `mtrmod`, `targetDepth`, `targetHeading`,
+//!   `dp_er`, `p_er`, `LIGTE`, `LIGPE`, `dtwa`, and any key with a `.` (a
+//!   device's set-up report such as `MPU9150.status` or `Depth.C0`). Any
+//!   other key is counted in [`DecodeStats::unknown_keys`] (only for
+//!   accepted lines) and ignored; the line is still accepted.
 //! - Event keys: `boot` → [`Event::Boot`] (any value), `CAPA` →
-//!   [`Event::Capabilities`], `crc` → `pass` / `fail,<calc>/<got>` (decimal,
-//!   each 0..=255), `cmd` → [`Event::CmdEcho`], `rawcmd` → [`Event::RawCmd`],
+//!   [`Event::Capabilities`], `crc` → `pass` / `fail,<calc>/<got>` (each one
+//!   or two hex digits), `cmd` → [`Event::CmdEcho`], `icmd` →
+//!   [`Event::InternalCommand`], `rawcmd` → [`Event::RawCmd`],
 //!   `pong` → [`Event::Pong`], `log` → [`Event::Log`] (text values verbatim),
 //!   `LIGT` → [`Event::Lights`] with the fraction from a `LIGP` anywhere on
 //!   the same line (a `LIGP` without `LIGT` is range-checked and otherwise

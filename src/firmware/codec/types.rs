@@ -28,15 +28,18 @@ pub struct StatusSample {
     pub vout_v: Option<f64>,
     /// `iout` board current, 0..20.
     pub iout_a: Option<f64>,
-    /// `btti` battery current, 0..20.
-    pub btti_a: Option<f64>,
+    /// Battery current, 0..20: `BT1I` + `BT2I`, the two battery tubes'
+    /// current sensors of controller board 2.5 (either alone if only one is on the line).
+    pub battery_current_a: Option<f64>,
+    /// `BRDT` controller-board temperature, -40..125.
+    pub board_temp_c: Option<f64>,
     /// `pres` pressure, 0..30000.
     pub pres_mbar: Option<f64>,
     /// `temp` water temperature, -10..60.
     pub temp_c: Option<f64>,
-    /// `time` board uptime, 0..=2^32.
+    /// `time` board uptime (printed as a float, `912.00`), 0..=2^32.
     pub time_ms: Option<u64>,
-    /// `fmem` free RAM, 0..65535.
+    /// `fmem` free RAM (printed as a float), 0..65535.
     pub fmem_bytes: Option<u32>,
     /// `motorAttached` 0/1.
     pub motor_attached: Option<bool>,
@@ -50,6 +53,8 @@ pub struct StatusSample {
     pub motors_us: Option<[u16; 3]>,
     /// `ver` firmware version text.
     pub version: Option<String>,
+    /// `cmpd` when the firmware was compiled (date, time and compiler).
+    pub compiled: Option<String>,
 }
 
 /// One thing the board said.
@@ -65,7 +70,7 @@ pub enum Event {
     Capabilities(u32),
     /// `crc:pass;`
     CrcPass,
-    /// `crc:fail,<calc>/<got>;`
+    /// `crc:fail,<calc>/<got>;` (hexadecimal, as the board prints them).
     CrcFail { calc: u8, got: u8 },
     /// `cmd:<text>;` the board's echo of a command it accepted.
     CmdEcho(String),
@@ -77,8 +82,14 @@ pub enum Event {
     Lights { level: u8, fraction: Option<f64> },
     /// `claser:n;`
     Laser(u8),
-    /// `log:<text>;`
+    /// `log:<text>;`, or a `log:` line the board printed without its `;`
+    /// (`log:Failed to read Depth from I2C`, once a second without the depth add-on).
     Log(String),
+    /// `icmd:<text>;` a command the board queued for itself and now runs:
+    /// `stop()` when its dead-man switch trips, `start()` when a ping ends
+    /// that, `ligt(…)` while it blinks the lights, `lift(0)`/`yaw(0)` when
+    /// it cancels its own holds.
+    InternalCommand(String),
 }
 
 /// Why a whole line was dropped.
@@ -106,6 +117,13 @@ pub struct DecodeStats {
     pub unknown_keys: u64,
     /// Bytes that are neither printable ASCII nor a line terminator.
     pub garbage_bytes: u64,
+    /// The board's free-text prints (no `;`, words with spaces: its sensors'
+    /// set-up chatter such as `Depth: Calibration constants are:`),
+    /// knowingly ignored.
+    pub text_lines: u64,
+    /// Lines whose `;` came on the next line (the board's `println` before
+    /// `;`, as in its status line's `cmpd`), joined and decoded as one.
+    pub joined_lines: u64,
 }
 
 impl DecodeStats {

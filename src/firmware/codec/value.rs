@@ -18,6 +18,7 @@ pub(super) const VOUT_V: (f64, f64) = (0.0, 30.0);
 pub(super) const CURRENT_A: (f64, f64) = (0.0, 20.0);
 pub(super) const PRES_MBAR: (f64, f64) = (0.0, 30_000.0);
 pub(super) const TEMP_C: (f64, f64) = (-10.0, 60.0);
+pub(super) const BOARD_TEMP_C: (f64, f64) = (-40.0, 125.0);
 pub(super) const TIME_MS: (f64, f64) = (0.0, 4_294_967_296.0);
 pub(super) const FMEM_BYTES: (f64, f64) = (0.0, 65_535.0);
 pub(super) const FLAG: (f64, f64) = (0.0, 1.0);
@@ -34,9 +35,10 @@ pub fn physical_range(key: &str) -> Option<(f64, f64)> {
         "pitc" | "roll" | "yaw" => ANGLE_DEG,
         "fthr" => FTHR_PCT,
         "vout" => VOUT_V,
-        "iout" | "btti" => CURRENT_A,
+        "iout" | "BT1I" | "BT2I" => CURRENT_A,
         "pres" => PRES_MBAR,
         "temp" => TEMP_C,
+        "BRDT" => BOARD_TEMP_C,
         "time" => TIME_MS,
         "fmem" => FMEM_BYTES,
         "motorAttached" => FLAG,
@@ -140,7 +142,8 @@ pub(super) fn pulses(value: &[u8]) -> Result<[u16; 3], RejectReason> {
     Ok(out)
 }
 
-/// `pass` or `fail,<calc>/<got>`.
+/// `pass` or `fail,<calc>/<got>`, the two CRCs in hexadecimal as the
+/// board's `Serial.print(crc, HEX)` writes them (`9E`, `7`).
 pub(super) fn crc_report(value: &[u8]) -> Result<Event, RejectReason> {
     if value == b"pass" {
         return Ok(Event::CrcPass);
@@ -158,10 +161,20 @@ pub(super) fn crc_report(value: &[u8]) -> Result<Event, RejectReason> {
     })
 }
 
-/// A CRC byte printed in decimal; a negative sign is not a CRC at all.
+/// A CRC byte in hexadecimal: one or two hex digits, nothing else.
 fn crc_value(value: &[u8]) -> Result<u8, RejectReason> {
-    if value.first() == Some(&b'-') {
+    if value.is_empty() || value.len() > 2 || !value.iter().all(u8::is_ascii_hexdigit) {
         return Err(RejectReason::NonNumeric);
     }
-    byte(value)
+    std::str::from_utf8(value)
+        .ok()
+        .and_then(|s| u8::from_str_radix(s, 16).ok())
+        .ok_or(RejectReason::NonNumeric)
+}
+
+/// A whole number printed as a float (`912.00`): real-valued, in range,
+/// rounded to the nearest integer.
+pub(super) fn whole(value: &[u8], range: (f64, f64)) -> Result<u64, RejectReason> {
+    // `real` has checked the range, which starts at 0 for every caller.
+    Ok(real(value, range)?.round() as u64)
 }

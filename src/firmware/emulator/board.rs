@@ -467,10 +467,11 @@ impl Board {
         let r = self.readings(at);
         let t = self.target_us;
         format!(
-            "vout:{:.2};iout:{:.2};btti:{:.2};pres:{:.2};temp:{:.2};time:{};fmem:{};motorAttached:{};servo:{};starg:{};mtarg:{},{},{};ver:{};",
+            "vout:{:.2};iout:{:.2};BT1I:{:.2};BT2I:{:.2};pres:{:.2};temp:{:.2};time:{};fmem:{};motorAttached:{};servo:{};starg:{};mtarg:{},{},{};ver:{};",
             r.vout_v,
             r.iout_a,
-            r.btti_a,
+            r.btti_a / 2.0,
+            r.btti_a / 2.0,
             r.pressure_mbar,
             r.temp_c,
             self.now.as_millis(),

@@ -9,13 +9,7 @@ use crate::firmware::link::LinkState;
 impl Vehicle {
     pub(super) fn battery_ok(&self, now: Now) -> bool {
         let low = f64::from(self.params.batt_low_volt());
-        self.fresh(&self.board.status, now)
-            && self
-                .board
-                .status
-                .value
-                .vout_v
-                .is_some_and(|v| low <= 0.0 || v > low)
+        self.fresh(&self.board.vout_v, now) && (low <= 0.0 || self.board.vout_v.value > low)
     }
 
     /// Why the vehicle cannot arm, if it cannot.
@@ -32,7 +26,7 @@ impl Vehicle {
         if !self.fresh(&self.board.depth_m, now) || !self.fresh(&self.board.heading_deg, now) {
             return Some("no fresh depth and attitude from the board".into());
         }
-        if !self.fresh(&self.board.status, now) || self.board.status.value.vout_v.is_none() {
+        if !self.fresh(&self.board.vout_v, now) {
             return Some("no fresh battery voltage from the board".into());
         }
         if !self.battery_ok(now) {

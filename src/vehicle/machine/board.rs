@@ -1,14 +1,20 @@
 //! The board as the core knows it: the link state and the latest
-//! navigation and power readings, each stamped with when it arrived.
-//! Readings older than [`FRESH`] or from a link that is down are not
-//! reported as if they were current.
+//! navigation, power and environment readings, each stamped with when it
+//! arrived. Readings older than [`FRESH`] or from a link that is down are
+//! not reported as if they were current.
+//!
+//! The genuine board prints its status as about ten separate lines a
+//! second (`motorAttached`, `servo`/`starg`, `fmem`/`vout`/`iout`, `time`,
+//! `pres`/`temp`, `BRDT`/`BT1I`/`BT2I`, `mtarg`, `motors` …): each reading
+//! is kept and stamped on its own, so a line that stops coming goes stale by
+//! itself while the others stay current.
 
 use std::time::Duration;
 
 use super::texts::Topic;
 use super::{FRESH, Now, Output, SimTruth, Vehicle, holds};
 use crate::dialect::neptunus::*;
-use crate::firmware::codec::{Event, NavSample};
+use crate::firmware::codec::{Event, NavSample, StatusSample};
 use crate::firmware::link::LinkState;
 
 /// A reading and when it arrived.
@@ -46,11 +52,30 @@ pub(super) struct BoardState {
     prev_heading: Option<(Duration, f64)>,
     /// Yaw rate from successive headings (before the estimator starts).
     pub yaw_rate_rps: f64,
-    /// The last full power reading.
-    pub status: Stamped<crate::firmware::codec::StatusSample>,
+    /// Supply (battery) voltage, `vout`.
+    pub vout_v: Stamped<f64>,
+    /// Battery current: the battery tubes' `BT1I` + `BT2I`, else the
+    /// board's own `iout`.
+    pub current_a: Stamped<f64>,
+    /// Water pressure (mbar) and temperature (°C) from the depth sensor.
+    pub water: Stamped<(f64, Option<f64>)>,
+    /// Camera tilt servo position the board reports (`servo`, µs).
+    pub servo_us: Stamped<u16>,
+    /// Controller-board temperature (`BRDT`).
+    pub board_temp_c: Stamped<f64>,
+    /// The board's free RAM (`fmem`) and uptime (`time`).
+    pub fmem_bytes: Stamped<u32>,
+    pub uptime_ms: Stamped<u64>,
+    /// The firmware's `ver` and `cmpd`, once the board said them.
+    pub firmware: Option<(String, Option<String>)>,
+    /// The board's dead-man switch stopped the thrusters (`icmd:stop`) and
+    /// no ping has restarted them yet (`icmd:start`).
+    pub dead_man_tripped: bool,
     /// Charge used since start, integrated from the current (mAh).
     pub consumed_mah: f64,
     last_current: Option<(Duration, f64)>,
+    /// The current reading came from `iout` (no battery tube sensor on the line).
+    current_from_iout: bool,
     /// Ground truth of the built-in simulator.
     pub sim_truth: Stamped<SimTruth>,
 }
@@ -131,28 +156,136 @@ impl Vehicle {
                 }
                 self.stream_nav_line(now, out);
             }
-            Event::Status(s) => {
-                if s.vout_v.is_none() {
-                    // A `motors:` line on its own: keep the last full status.
-                    return;
-                }
-                if let Some(v) = s.vout_v {
-                    let low = f64::from(self.params.batt_low_volt());
-                    let crt = f64::from(self.params.batt_crt_volt());
-                    self.failsafes.battery[0].sample(v, low, now.mono);
-                    self.failsafes.battery[1].sample(v, crt, now.mono);
-                }
-                if let Some(i) = s.btti_a.or(s.iout_a) {
-                    if let Some((pt, pi)) = self.board.last_current {
-                        let h = now.mono.saturating_sub(pt).as_secs_f64() / 3600.0;
-                        self.board.consumed_mah += (pi + i) / 2.0 * h * 1000.0;
-                    }
-                    self.board.last_current = Some((now.mono, i));
-                }
-                self.board.status = Stamped::new(s, now.mono);
+            Event::Status(s) => self.on_status(s, now, out),
+            // While the board's dead-man has the lights blinking, its echoes
+            // are not the pilot's level: that is restored once it is over.
+            Event::Lights { level, .. } if !self.board.dead_man_tripped => {
+                self.payload.lights = level
             }
-            Event::Lights { level, .. } => self.payload.lights = level,
             Event::Laser(l) => self.payload.laser = l,
+            Event::Boot => self.on_board_boot(out),
+            Event::InternalCommand(cmd) => self.on_internal_command(&cmd, out),
+            _ => {}
+        }
+    }
+
+    fn on_status(&mut self, s: StatusSample, now: Now, out: &mut Vec<Output>) {
+        let at = now.mono;
+        if let Some(v) = s.vout_v {
+            let low = f64::from(self.params.batt_low_volt());
+            let crt = f64::from(self.params.batt_crt_volt());
+            self.failsafes.battery[0].sample(v, low, at);
+            self.failsafes.battery[1].sample(v, crt, at);
+            self.board.vout_v = Stamped::new(v, at);
+        }
+        // The battery tubes' sensors when the board has them on the line,
+        // else the board current printed beside the voltage.
+        let current = s.battery_current_a.or(s.iout_a.filter(|_| {
+            !self.board.current_a.recent(now) || self.board.current_from_iout
+        }));
+        if let Some(i) = current {
+            self.board.current_from_iout = s.battery_current_a.is_none();
+            if let Some((pt, pi)) = self.board.last_current {
+                let h = at.saturating_sub(pt).as_secs_f64() / 3600.0;
+                self.board.consumed_mah += (pi + i) / 2.0 * h * 1000.0;
+            }
+            self.board.last_current = Some((at, i));
+            self.board.current_a = Stamped::new(i, at);
+        }
+        if let Some(p) = s.pres_mbar {
+            self.board.water = Stamped::new((p, s.temp_c), at);
+        }
+        if let Some(us) = s.servo_us {
+            self.board.servo_us = Stamped::new(us, at);
+        }
+        if let Some(t) = s.board_temp_c {
+            self.board.board_temp_c = Stamped::new(t, at);
+        }
+        if let Some(b) = s.fmem_bytes {
+            self.board.fmem_bytes = Stamped::new(b, at);
+        }
+        if let Some(t) = s.time_ms {
+            // The board's clock went back: it restarted, even if its
+            // `boot:1` line was lost.
+            if self.board.uptime_ms.at.is_some() && t + 1000 < self.board.uptime_ms.value {
+                self.on_board_boot(out);
+            }
+            self.board.uptime_ms = Stamped::new(t, at);
+        }
+        if let Some(v) = s.version {
+            let first = self.board.firmware.is_none();
+            self.board.firmware = Some((v, s.compiled));
+            if first {
+                self.announce_firmware(out);
+            }
+        }
+    }
+
+    /// Says once which firmware the board runs (the operator's first
+    /// question when something behaves oddly).
+    fn announce_firmware(&mut self, out: &mut Vec<Output>) {
+        let Some((version, compiled)) = self.board.firmware.clone() else {
+            return;
+        };
+        let text = match compiled {
+            Some(c) => format!("Board firmware {version}, built {c}"),
+            None => format!("Board firmware {version}"),
+        };
+        self.statustext(Topic::BoardLink, MavSeverity::MAV_SEVERITY_INFO, &text, out);
+        self.log("board_firmware", None, text, out);
+    }
+
+    /// The board restarted (power, brown-out, watchdog, a reset by the
+    /// BeagleBone): whatever it was doing is gone, so the vehicle stops
+    /// and waits for the pilot to arm again.
+    fn on_board_boot(&mut self, out: &mut Vec<Output>) {
+        self.board.dead_man_tripped = false;
+        self.board.firmware = None;
+        self.board.uptime_ms = Stamped::default();
+        if self.armed {
+            self.statustext(
+                Topic::Stop,
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                "Board rebooted: thrusters stopped, arm again once the link is up",
+                out,
+            );
+            self.disarm("board rebooted", None, out);
+        } else {
+            self.send_neutral(out);
+        }
+    }
+
+    /// A command the board queued for itself. Its dead-man switch queues
+    /// `stop()` when two seconds pass without a ping, and `start()` at the
+    /// next ping: after that it obeys `go()` again, so driving may resume
+    /// only through the arming rules.
+    fn on_internal_command(&mut self, cmd: &str, out: &mut Vec<Output>) {
+        let name = cmd.split('(').next().unwrap_or_default();
+        match name {
+            "stop" if !self.board.dead_man_tripped => {
+                self.board.dead_man_tripped = true;
+                self.log(
+                    "board_dead_man",
+                    None,
+                    "the board's dead-man switch stopped the thrusters (no ping for 2 s)".into(),
+                    out,
+                );
+                if self.armed {
+                    self.statustext(
+                        Topic::Stop,
+                        MavSeverity::MAV_SEVERITY_CRITICAL,
+                        "Board dead-man tripped: no ping for 2 s, thrusters stopped",
+                        out,
+                    );
+                    self.disarm("board dead-man tripped", None, out);
+                }
+            }
+            "start" if self.board.dead_man_tripped => {
+                self.board.dead_man_tripped = false;
+                // The board blinked the lights meanwhile: give back the pilot's.
+                self.send_neutral(out);
+                self.payload_to_board(out);
+            }
             _ => {}
         }
     }
@@ -167,8 +300,8 @@ impl Vehicle {
         (self.board.roll_deg.value, self.board.pitch_deg.value)
     }
 
-    /// The output voltage of the last full power reading (V), for the app's log line.
+    /// The last supply voltage the board reported (V), for the app's log line.
     pub fn battery_v(&self) -> Option<f64> {
-        self.board.status.value.vout_v
+        self.board.vout_v.at.map(|_| self.board.vout_v.value)
     }
 }

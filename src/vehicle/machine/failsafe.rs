@@ -80,7 +80,7 @@ pub(super) const RULES: [Rule; RULE_COUNT] = [
         text: |v| {
             format!(
                 "battery low {:.1} V",
-                v.board.status.value.vout_v.unwrap_or(0.0)
+                v.board.vout_v.value
             )
         },
     },
@@ -92,7 +92,7 @@ pub(super) const RULES: [Rule; RULE_COUNT] = [
         text: |v| {
             format!(
                 "battery critical {:.1} V",
-                v.board.status.value.vout_v.unwrap_or(0.0)
+                v.board.vout_v.value
             )
         },
     },

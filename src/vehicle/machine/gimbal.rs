@@ -224,9 +224,8 @@ impl Vehicle {
                 // The device's attitude: where the board says the servo is
                 // (its status line, 1 Hz), else where it was told to go.
                 let reported = self
-                    .fresh(&self.board.status, now)
-                    .then_some(self.board.status.value.servo_us)
-                    .flatten();
+                    .fresh(&self.board.servo_us, now)
+                    .then_some(self.board.servo_us.value);
                 let us = reported.unwrap_or(self.payload.tilt_us);
                 let half = tilt_deg(us).to_radians() / 2.0;
                 Some(MavMessage::GIMBAL_DEVICE_ATTITUDE_STATUS(

@@ -17,16 +17,13 @@ impl Vehicle {
             // The board has one pressure sensor, the depth sensor: ArduSub
             // reports it as SCALED_PRESSURE2 (the external sensor, Cockpit's
             // water temperature) and, when it is the only one, as SCALED_PRESSURE.
-            SCALED_PRESSURE_DATA::ID
-                if self.fresh(&self.board.status, now)
-                    && self.board.status.value.pres_mbar.is_some() =>
-            {
-                let s = &self.board.status.value;
+            SCALED_PRESSURE_DATA::ID if self.fresh(&self.board.water, now) => {
+                let (pres, temp) = self.board.water.value;
                 Some(MavMessage::SCALED_PRESSURE(SCALED_PRESSURE_DATA {
                     time_boot_ms: self.boot_ms(now),
-                    press_abs: s.pres_mbar.unwrap_or(0.0) as f32,
+                    press_abs: pres as f32,
                     press_diff: 0.0,
-                    temperature: s.temp_c.map_or(0, |t| (t * 100.0).round() as i16),
+                    temperature: temp.map_or(0, |t| (t * 100.0).round() as i16),
                     temperature_press_diff: 0,
                 }))
             }

@@ -232,8 +232,26 @@ impl Vehicle {
         (present, enabled, health)
     }
 
-    fn battery_remaining(&self) -> i8 {
-        let Some(v) = self.board.status.value.vout_v else {
+    /// The supply voltage if it is current (a board that stopped reporting
+    /// it has an unknown voltage, not its last one).
+    fn fresh_vout(&self, now: Now) -> Option<f64> {
+        self.fresh(&self.board.vout_v, now)
+            .then_some(self.board.vout_v.value)
+    }
+
+    /// The battery current in cA if it is current, else MAVLink's unknown (−1).
+    fn fresh_current_ca(&self, now: Now) -> i16 {
+        if self.fresh(&self.board.current_a, now) {
+            (self.board.current_a.value * 100.0)
+                .round()
+                .clamp(0.0, 32767.0) as i16
+        } else {
+            -1
+        }
+    }
+
+    fn battery_remaining(&self, now: Now) -> i8 {
+        let Some(v) = self.fresh_vout(now) else {
             return -1;
         };
         let empty = f64::from(self.params.batt_low_volt());
@@ -342,20 +360,26 @@ impl Vehicle {
                     throttle,
                 })]
             }
-            SCALED_PRESSURE2_DATA::ID
-                if self.fresh(&self.board.status, now)
-                    && self.board.status.value.pres_mbar.is_some() =>
-            {
-                let s = &self.board.status.value;
+            SCALED_PRESSURE2_DATA::ID if self.fresh(&self.board.water, now) => {
+                let (pres, temp) = self.board.water.value;
                 vec![MavMessage::SCALED_PRESSURE2(SCALED_PRESSURE2_DATA {
                     time_boot_ms: boot_ms,
-                    press_abs: s.pres_mbar.unwrap_or(0.0) as f32,
+                    press_abs: pres as f32,
                     press_diff: 0.0,
-                    temperature: s.temp_c.map_or(0, |t| (t * 100.0).round() as i16),
+                    temperature: temp.map_or(0, |t| (t * 100.0).round() as i16),
                     temperature_press_diff: 0,
                 })]
             }
-            BATTERY_STATUS_DATA::ID => vec![self.battery_status()],
+            BATTERY_STATUS_DATA::ID => vec![self.battery_status(now)],
+            // The board's free RAM, as ArduPilot reports its own.
+            MEMINFO_DATA::ID if self.fresh(&self.board.fmem_bytes, now) => {
+                let free = self.board.fmem_bytes.value;
+                vec![MavMessage::MEMINFO(MEMINFO_DATA {
+                    brkval: 0,
+                    freemem: free.min(u32::from(u16::MAX)) as u16,
+                    freemem32: free,
+                })]
+            }
             NAMED_VALUE_FLOAT_DATA::ID => self.named_values(boot_ms),
             AUTOPILOT_VERSION_DATA::ID => vec![self.autopilot_version()],
             CONTROL_STATUS_DATA::ID => vec![self.control_status()],
@@ -386,19 +410,16 @@ impl Vehicle {
 
     fn sys_status(&self, now: Now) -> MavMessage {
         let (present, enabled, health) = self.sensors(now);
-        let s = &self.board.status.value;
         MavMessage::SYS_STATUS(SYS_STATUS_DATA {
             onboard_control_sensors_present: present,
             onboard_control_sensors_enabled: enabled,
             onboard_control_sensors_health: health,
             load: 0,
-            voltage_battery: s.vout_v.map_or(u16::MAX, |v| {
+            voltage_battery: self.fresh_vout(now).map_or(u16::MAX, |v| {
                 (v * 1000.0).round().clamp(0.0, 65534.0) as u16
             }),
-            current_battery: s
-                .btti_a
-                .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
-            battery_remaining: self.battery_remaining(),
+            current_battery: self.fresh_current_ca(now),
+            battery_remaining: self.battery_remaining(now),
             ..Default::default()
         })
     }
@@ -421,10 +442,9 @@ impl Vehicle {
         })
     }
 
-    fn battery_status(&self) -> MavMessage {
-        let s = &self.board.status.value;
+    fn battery_status(&self, now: Now) -> MavMessage {
         let mut voltages = [u16::MAX; 10];
-        voltages[0] = s.vout_v.map_or(u16::MAX, |v| {
+        voltages[0] = self.fresh_vout(now).map_or(u16::MAX, |v| {
             (v * 1000.0).round().clamp(0.0, 65534.0) as u16
         });
         MavMessage::BATTERY_STATUS(BATTERY_STATUS_DATA {
@@ -432,13 +452,11 @@ impl Vehicle {
             energy_consumed: -1,
             temperature: i16::MAX,
             voltages,
-            current_battery: s
-                .btti_a
-                .map_or(-1, |a| (a * 100.0).round().clamp(0.0, 32767.0) as i16),
+            current_battery: self.fresh_current_ca(now),
             id: 0,
             battery_function: MavBatteryFunction::MAV_BATTERY_FUNCTION_ALL,
             mavtype: MavBatteryType::MAV_BATTERY_TYPE_UNKNOWN,
-            battery_remaining: self.battery_remaining(),
+            battery_remaining: self.battery_remaining(now),
             ..Default::default()
         })
     }
