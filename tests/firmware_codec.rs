@@ -173,7 +173,7 @@ fn every_command_variant_has_its_text() {
         (Command::EscPower(true), "escp(1);", "escp"),
         (Command::EscPower(false), "escp(0);", "escp"),
         (Command::Ping(4_294_967_295), "ping(4294967295);", "ping"),
-        (Command::DeadMan(false), "dms(0);", "dms"),
+        (Command::DeadMan(false), "dms();", "dms"),
         (Command::DeadMan(true), "dms(1);", "dms"),
         (Command::DepthZero, "dzer();", "dzer"),
         (Command::DepthZero2016, "depth_zero();", "depth_zero"),
@@ -507,27 +507,35 @@ fn every_line_of_the_genuine_board_is_decoded_or_knowingly_ignored() {
     assert_eq!(stats.rejected_total(), 0, "{stats:?}");
     assert_eq!(stats.unknown_keys, 0, "{stats:?}");
     assert_eq!(stats.text_lines, 1, "the calibration heading is free text");
-    assert_eq!(stats.joined_lines, 1, "the status line broken before its `;`");
+    assert_eq!(
+        stats.joined_lines, 1,
+        "the status line broken before its `;`"
+    );
     assert!(events.contains(&Event::Boot));
-    let status = |f: fn(&StatusSample) -> bool| {
-        events
-            .iter()
-            .any(|e| matches!(e, Event::Status(s) if f(s)))
-    };
+    let status =
+        |f: fn(&StatusSample) -> bool| events.iter().any(|e| matches!(e, Event::Status(s) if f(s)));
     assert!(status(|s| s.vout_v == Some(11.79)
         && s.iout_a == Some(0.2)
         && s.fmem_bytes == Some(3572)
         && s.time_ms == Some(912)
         && s.version.as_deref() == Some("CUSTOM_BUILD")
-        && s.compiled.as_deref() == Some("Nov 26 2026, 15:43:05, 5.4.0")));
-    assert!(status(|s| s.board_temp_c == Some(-20.51) && s.battery_current_a == Some(0.0)));
+        && s.compiled.as_deref()
+            == Some("Nov 26 2026, 15:43:05, 5.4.0")));
+    assert!(status(
+        |s| s.board_temp_c == Some(-20.51) && s.battery_current_a == Some(0.0)
+    ));
     assert!(status(|s| s.motors_us == Some([1640, 1500, 1270])));
     assert!(events.contains(&Event::Log("Failed to read Depth from I2C".into())));
     assert!(events.contains(&Event::Pong("1,2499".into())));
     assert!(events.contains(&Event::CmdEcho("go(1600,1500,1400)".into())));
     let fail_at = events
         .iter()
-        .position(|e| *e == Event::CrcFail { calc: 0x9E, got: 0xCB })
+        .position(|e| {
+            *e == Event::CrcFail {
+                calc: 0x9E,
+                got: 0xCB,
+            }
+        })
         .expect("the CRC failure report");
     assert!(
         events[..fail_at].iter().any(|e| matches!(e, Event::Nav(_))),
@@ -557,7 +565,10 @@ fn a_held_line_is_decided_by_the_next_one() {
     decoder.push(b"log:Failed to read Depth from I2C\r\n", &mut events);
     assert!(events.is_empty());
     decoder.flush(&mut events);
-    assert_eq!(events, vec![Event::Log("Failed to read Depth from I2C".into())]);
+    assert_eq!(
+        events,
+        vec![Event::Log("Failed to read Depth from I2C".into())]
+    );
 }
 
 // ---------------------------------------------------------------------------
@@ -778,7 +789,11 @@ fn random_line(rng: &mut SmallRng) -> String {
             0 => "boot:1;".to_owned(),
             1 => format!("CAPA:{};", rng.random_range(0..=255u8)),
             2 => "crc:pass;".to_owned(),
-            3 => format!("crc:fail,{:X}/{:X};", rng.random::<u8>(), rng.random::<u8>()),
+            3 => format!(
+                "crc:fail,{:X}/{:X};",
+                rng.random::<u8>(),
+                rng.random::<u8>()
+            ),
             4 => format!(
                 "rawcmd:{:X},67,6F,;crc:pass;cmd:go({},1500,1500);",
                 rng.random::<u8>(),

@@ -302,11 +302,17 @@ pub fn free_udp_port() -> anyhow::Result<u16> {
 // ---------------------------------------------------------------------------
 
 pub fn manual_control(x: i16) -> MavMessage {
+    sticks(x, 500, 0)
+}
+
+/// MANUAL_CONTROL with forward `x`, throttle `z` (500 neutral, below dives)
+/// and yaw `r`.
+pub fn sticks(x: i16, z: i16, r: i16) -> MavMessage {
     MavMessage::MANUAL_CONTROL(MANUAL_CONTROL_DATA {
         x,
         y: 0,
-        z: 500,
-        r: 0,
+        z,
+        r,
         target: VEHICLE_SYSID,
         ..Default::default()
     })
@@ -331,6 +337,8 @@ pub enum Traffic {
     Heartbeats,
     /// HEARTBEAT at 1 Hz and MANUAL_CONTROL with this `x` (z neutral) at 25 Hz.
     Drive(i16),
+    /// HEARTBEAT at 1 Hz and MANUAL_CONTROL with these `x`, `z`, `r` at 25 Hz.
+    Sticks { x: i16, z: i16, r: i16 },
 }
 
 /// Whether a HEARTBEAT says the vehicle is armed.
@@ -452,11 +460,16 @@ impl Gcs {
             self.next_heartbeat = now + HEARTBEAT_PERIOD;
             self.last_life = Some(self.send(&gcs_heartbeat())?);
         }
-        if let Traffic::Drive(x) = traffic
+        let stick = match traffic {
+            Traffic::Drive(x) => Some(manual_control(x)),
+            Traffic::Sticks { x, z, r } => Some(sticks(x, z, r)),
+            Traffic::Silent | Traffic::Heartbeats => None,
+        };
+        if let Some(msg) = stick
             && now >= self.next_stick
         {
             self.next_stick = now + STICK_PERIOD;
-            self.last_life = Some(self.send(&manual_control(x))?);
+            self.last_life = Some(self.send(&msg)?);
         }
         Ok(())
     }
@@ -532,6 +545,29 @@ impl Gcs {
             },
         )?;
         result.with_context(|| format!("no COMMAND_ACK for {command:?} within 5 s"))
+    }
+
+    /// COMMAND_LONG `command` with all seven parameters; its result.
+    pub fn command_with(
+        &mut self,
+        vehicle: &mut Vehicle,
+        command: MavCmd,
+        p: [f32; 7],
+    ) -> anyhow::Result<MavResult> {
+        self.send(&MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: p[0],
+            param2: p[1],
+            param3: p[2],
+            param4: p[3],
+            param5: p[4],
+            param6: p[5],
+            param7: p[6],
+            command,
+            target_system: VEHICLE_SYSID,
+            target_component: 1,
+            ..Default::default()
+        }))?;
+        self.await_ack(vehicle, command)
     }
 
     /// COMMAND_LONG `command` with `param1`; its result.

@@ -75,7 +75,8 @@ pub enum Command {
     EscPower(bool),
     /// `ping(n);` resets the board's dead-man timer.
     Ping(u32),
-    /// `dms(0|1);` disarms/arms the board's dead-man switch.
+    /// `dms(1);` arms the board's dead-man switch, `dms();` disarms it: the
+    /// firmware counts the arguments, so `dms(0)` would arm it too.
     DeadMan(bool),
     /// `dzer();` zero the depth (2015 firmware).
     DepthZero,
@@ -145,7 +146,9 @@ impl Command {
             | Self::Capabilities => {}
             Self::Lights(n) | Self::Laser(n) => write_int(out, n.into()),
             Self::Tilt(us) => write_int(out, us.into()),
-            Self::EscPower(on) | Self::DeadMan(on) => write_int(out, i64::from(on)),
+            Self::EscPower(on) => write_int(out, i64::from(on)),
+            Self::DeadMan(true) => write_int(out, 1),
+            Self::DeadMan(false) => {}
             Self::Ping(n) => write_int(out, n.into()),
             Self::Throttle(n) | Self::Yaw(n) | Self::Lift(n) => write_int(out, n.into()),
         }

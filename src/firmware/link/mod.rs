@@ -2,12 +2,13 @@
 //! events, figures, errors) and the task that owns the serial device.
 //!
 //! It opens the device, performs the start-up handshake (wait for `boot`,
-//! `rcap()` once, `dms(1)`, `start()`), keeps the board's dead-man switch
-//! fed with `ping(0)` about once a second *only while the vehicle task says
-//! it is healthy*, coalesces thruster commands (the newest wins; a stale one
-//! is never written), and paces writes so the board's 80-byte buffer and
-//! 5-slot queue cannot overflow. When the device vanishes or goes silent it
-//! reports the link down, reopens with backoff and redoes the handshake.
+//! `dms(1)`, `start()`), keeps the board's dead-man switch fed with
+//! `ping(0)` about once a second *only while the vehicle task says it is
+//! healthy*, coalesces thruster commands (the newest wins; a stale one is
+//! never written), and paces writes so that what the board has not echoed
+//! yet always fits its 64-byte receive buffer. When the device vanishes or
+//! goes silent it reports the link down, reopens with backoff and redoes
+//! the handshake; when the board reboots it handshakes again.
 //!
 //! It never decides what to send: commands come from the vehicle task, which
 //! owns arming and authority. The link only delivers them faithfully, and
@@ -52,6 +53,15 @@ pub struct LinkConfig {
     /// How far ahead of the board (in wire time plus gaps) writes may run:
     /// about two `go()` frames, well inside the board's buffer and queue.
     pub max_ahead: Duration,
+    /// Bytes written and not yet echoed by the board, at most: its Arduino
+    /// serial receive buffer (64 bytes), where frames wait while its loop
+    /// is busy.
+    pub max_in_flight_bytes: usize,
+    /// A frame not echoed within this was lost by the board.
+    pub echo_timeout: Duration,
+    /// The board's dead-man timeout: after a gap in the pings this long,
+    /// its motors have been stopped.
+    pub dead_man_timeout: Duration,
 }
 
 impl LinkConfig {
@@ -69,6 +79,9 @@ impl LinkConfig {
             backoff_max: Duration::from_secs(5),
             frame_gap: Duration::from_millis(2),
             max_ahead: Duration::from_millis(8),
+            max_in_flight_bytes: 64,
+            echo_timeout: Duration::from_millis(500),
+            dead_man_timeout: Duration::from_secs(2),
         }
     }
 
@@ -113,6 +126,10 @@ pub struct LinkStats {
     pub handshakes: u64,
     /// Telemetry events dropped because the vehicle task lagged.
     pub events_dropped: u64,
+    /// Frames the board never echoed (lost, or it was busy or resetting).
+    pub echoes_missed: u64,
+    /// Times the board printed `boot` again while the link was handshaken.
+    pub board_reboots: u64,
 }
 
 impl Default for LinkStats {
@@ -132,6 +149,8 @@ impl Default for LinkStats {
             opens: 0,
             handshakes: 0,
             events_dropped: 0,
+            echoes_missed: 0,
+            board_reboots: 0,
         }
     }
 }

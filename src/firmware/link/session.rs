@@ -2,11 +2,22 @@
 //! to report, as a plain state machine over (state, event, now).
 //!
 //! Owns the start-up handshake (wait for `boot`, or `boot_wait` for a board
-//! that was already running; then `rcap()` once, `dms(1)`, `start()`), the
-//! keep-alive `ping(0)` gated on the vehicle task's health, the outbox that
-//! coalesces thruster commands (the newest wins), the pacing that keeps the
-//! board's 80-byte buffer and 5-slot queue from overflowing, the telemetry
-//! watchdog, the link state and its figures, and the reopen backoff.
+//! that was already running; then `dms(1)`, `start()`), the keep-alive
+//! `ping(0)` gated on the vehicle task's health, the outbox that coalesces
+//! thruster commands (the newest wins), the pacing that keeps the board's
+//! receive buffer from overflowing, the telemetry watchdog, the link state
+//! and its figures, and the reopen backoff.
+//!
+//! What the genuine firmware taught: `rcap()` blocks the board for five
+//! seconds (an I2C scan and a `delay(5000)`), so it is never sent; the
+//! board reads the serial line only between its loop's other work into a
+//! 64-byte buffer, so frames are written only while the ones not yet
+//! echoed (`rawcmd:` with CRC-8 framing, `cmd:` with plain) fit in it — a
+//! board that stops echoing (busy, resetting) gets nothing more; a board
+//! that prints `boot` again has restarted, and the link handshakes again
+//! before it reports itself up; and after a gap in the pings longer than
+//! the board's dead-man timeout, a thrust command decided before the gap is
+//! dropped rather than written to a board that has just stopped.
 //!
 //! It must never read a clock, sleep, or touch the serial device or a
 //! channel: the I/O loop (`io.rs`) passes the time in with every call, writes
@@ -17,7 +28,37 @@ use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
 use super::{LinkConfig, LinkEvent, LinkState, LinkStats};
-use crate::firmware::codec::{Command, Event, LineDecoder, encode};
+use crate::firmware::codec::{Command, Event, Framing, LineDecoder, encode};
+
+/// The bytes a `rawcmd:` echo lists (`9E,70,69,6E,67,28,30,29,3B,`: each
+/// received byte in hex, each followed by a comma).
+fn raw_frame(hex: &str) -> Option<Vec<u8>> {
+    hex.split(',')
+        .filter(|h| !h.is_empty())
+        .map(|h| u8::from_str_radix(h, 16).ok())
+        .collect()
+}
+
+/// Whether the board's `cmd:` echo (`go(1500,1500,1500)`, tokens re-joined
+/// with commas) is of `frame` (`go(1500,1500,1500);`, plain framing).
+fn echo_matches(frame: &[u8], echo: &str) -> bool {
+    let canon = |t: &[u8]| -> Vec<u8> {
+        t.iter()
+            .copied()
+            .filter(|&b| b != b' ' && b != b';')
+            .collect()
+    };
+    canon(frame) == canon(echo.as_bytes())
+}
+
+/// Removes the oldest in-flight frame that `is_it` recognises, and every
+/// older one (frames the board lost: it echoes in order). An echo of
+/// nothing in flight (another writer's frame, a garbled one) changes nothing.
+fn acknowledge(in_flight: &mut VecDeque<(Vec<u8>, Instant)>, is_it: impl Fn(&[u8]) -> bool) {
+    if let Some(i) = in_flight.iter().position(|(f, _)| is_it(f)) {
+        in_flight.drain(..=i);
+    }
+}
 
 /// How often the figures are published while the device is open.
 const STATS_PERIOD: Duration = Duration::from_millis(100);
@@ -52,6 +93,9 @@ impl Outbox {
     fn pop(&mut self) -> Option<Command> {
         self.control.pop_front().or_else(|| self.thrust.take())
     }
+    fn peek(&self) -> Option<Command> {
+        self.control.front().copied().or(self.thrust)
+    }
     fn is_empty(&self) -> bool {
         self.control.is_empty() && self.thrust.is_none()
     }
@@ -66,7 +110,11 @@ struct Connection {
     decoded: Vec<Event>,
     handshake_due: Option<Instant>,
     handshaken: bool,
-    rcap_sent: bool,
+    /// Frames written and not yet echoed by the board, oldest first: their
+    /// bytes (to recognise the echo) and when they were written.
+    in_flight: VecDeque<(Vec<u8>, Instant)>,
+    /// When the last `ping` was written.
+    last_ping: Option<Instant>,
     /// When the board will have taken everything written so far (a virtual
     /// finish time: each frame costs its wire time plus `frame_gap`). A
     /// frame may go out while that is at most `max_ahead` away, so a
@@ -162,7 +210,8 @@ impl Session {
             decoded: Vec::with_capacity(16),
             handshake_due: Some(now + self.cfg.boot_wait),
             handshaken: false,
-            rcap_sent: false,
+            in_flight: VecDeque::new(),
+            last_ping: None,
             line_free_at: now,
             next_ping: now,
             next_stats: now,
@@ -190,6 +239,7 @@ impl Session {
             return;
         };
         self.stats.bytes_in += bytes.len() as u64;
+        let mut reboot = false;
         conn.decoded.clear();
         conn.decoder.push(bytes, &mut conn.decoded);
         self.stats.decode = conn.decoder.stats().clone();
@@ -198,7 +248,17 @@ impl Session {
                 Event::Boot => {
                     tracing::info!("board booted; handshaking");
                     conn.handshake_due = Some(now);
-                    conn.rcap_sent = false;
+                    // Whatever it had not taken is gone with its old state.
+                    conn.in_flight.clear();
+                    reboot = conn.handshaken;
+                }
+                Event::RawCmd(hex) if self.cfg.framing == Framing::Crc8 => {
+                    if let Some(frame) = raw_frame(hex) {
+                        acknowledge(&mut conn.in_flight, |f| *f == frame);
+                    }
+                }
+                Event::CmdEcho(text) if self.cfg.framing == Framing::Plain => {
+                    acknowledge(&mut conn.in_flight, |f| echo_matches(f, text));
                 }
                 Event::CrcFail { calc, got } => {
                     self.stats.crc_failures_echoed += 1;
@@ -209,6 +269,10 @@ impl Session {
             }
             self.outputs
                 .push_back(Output::Event(LinkEvent::Telemetry(ev)));
+        }
+        if reboot {
+            self.stats.board_reboots += 1;
+            self.report(LinkState::Handshaking, Some("the board rebooted".into()));
         }
     }
 
@@ -225,10 +289,6 @@ impl Session {
             conn.handshaken = true;
             self.stats.handshakes += 1;
             self.outputs.push_back(Output::Stats(self.stats.clone()));
-            if !conn.rcap_sent {
-                conn.rcap_sent = true;
-                self.outbox.control.push_front(Command::Capabilities);
-            }
             self.outbox.control.push_back(Command::DeadMan(true));
             self.outbox.control.push_back(Command::Start);
             conn.lines_at_open = self.stats.decode.lines_accepted;
@@ -242,12 +302,41 @@ impl Session {
                 self.stats.pings_written += 1;
             }
         }
+        // The board's dead-man has (or may have) stopped it since the last
+        // ping: a thrust decided before then is not written now.
+        if conn
+            .last_ping
+            .is_some_and(|t| now.duration_since(t) > self.cfg.dead_man_timeout)
+            && self.outbox.thrust.take().is_some()
+        {
+            self.stats.thrust_coalesced += 1;
+        }
+        // Echoes that never came: the board lost those frames (or is busy
+        // and will not take them soon); they no longer hold the budget.
+        while conn
+            .in_flight
+            .front()
+            .is_some_and(|(_, at)| now.duration_since(*at) > self.cfg.echo_timeout)
+        {
+            conn.in_flight.pop_front();
+            self.stats.echoes_missed += 1;
+        }
+        let in_flight: usize = conn.in_flight.iter().map(|(f, _)| f.len()).sum();
         if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
             && conn.handshaken
-            && let Some(cmd) = self.outbox.pop()
+            && let Some(cmd) = self.outbox.peek()
         {
             frame.clear();
             encode(&cmd, self.cfg.framing, frame);
+            if in_flight + frame.len() > self.cfg.max_in_flight_bytes {
+                // Waits for the board's echo (or its timeout).
+                return None;
+            }
+            self.outbox.pop();
+            conn.in_flight.push_back((frame.clone(), now));
+            if cmd == Command::Ping(0) {
+                conn.last_ping = Some(now);
+            }
             return Some(cmd);
         }
         None
@@ -330,6 +419,10 @@ impl Session {
                     .checked_sub(self.cfg.max_ahead)
                     .unwrap_or(now),
             );
+            // Waiting for an echo: its timeout is the latest the budget frees.
+            if let Some((_, at)) = conn.in_flight.front() {
+                wake = wake.min(*at + self.cfg.echo_timeout);
+            }
         }
         // While the vehicle is not healthy no ping is due (a due-but-withheld
         // ping must not make the loop spin); its next `healthy` wakes the loop.
@@ -390,14 +483,12 @@ mod tests {
     //! loop would write and report, decision by decision.
 
     use super::*;
+    use crate::firmware::codec::encoded;
     use crate::vehicle::mixer::NEUTRAL_US;
 
-    /// What a handshake writes, in order.
-    const HANDSHAKE: [Command; 3] = [
-        Command::Capabilities,
-        Command::DeadMan(true),
-        Command::Start,
-    ];
+    /// What a handshake writes, in order: never `rcap()`, which blinds the
+    /// genuine board for five seconds.
+    const HANDSHAKE: [Command; 2] = [Command::DeadMan(true), Command::Start];
 
     const NAV: &[u8] = b"hdgd:10.00;deep:1.00;pitc:0.00;roll:0.00;yaw:10.00;fthr:0.00;\r\n";
 
@@ -415,15 +506,33 @@ mod tests {
         s
     }
 
-    /// Everything written at `now` (pacing permitting), as commands.
+    /// Everything written at `now` (pacing permitting), as commands; the
+    /// board echoes each frame at once, as the genuine 2015 firmware does.
     fn drain_writes(s: &mut Session, now: Instant) -> Vec<Command> {
+        drain(s, now, true)
+    }
+
+    fn drain(s: &mut Session, now: Instant, echo: bool) -> Vec<Command> {
         let mut frame = Vec::new();
         let mut written = Vec::new();
         while let Some(cmd) = s.poll_transmit(now, &mut frame) {
             s.transmitted(&cmd, frame.len(), now);
             written.push(cmd);
+            if echo {
+                s.received(&rawcmd(&frame), now);
+            }
         }
         written
+    }
+
+    /// The genuine board's echo of `frame`: `rawcmd:9E,70,…,3B,;`.
+    fn rawcmd(frame: &[u8]) -> Vec<u8> {
+        let mut line = b"rawcmd:".to_vec();
+        for b in frame {
+            line.extend_from_slice(format!("{b:X},").as_bytes());
+        }
+        line.extend_from_slice(b";\r\n");
+        line
     }
 
     fn states(s: &mut Session) -> Vec<LinkState> {
@@ -446,14 +555,11 @@ mod tests {
         );
         let t = t0 + s.cfg.boot_wait;
         assert_eq!(drain_writes(&mut s, t + Duration::from_secs(1)), HANDSHAKE);
-        // The handshake's frames fill `max_ahead`: the ping waits for them.
         let t = t + Duration::from_secs(1);
         s.healthy(t);
-        assert!(drain_writes(&mut s, t).is_empty());
+        assert_eq!(drain_writes(&mut s, t), [Command::Ping(0)]);
         s.poll_timers(t);
         assert!(s.next_wake(t) > t);
-        let t = t + Duration::from_millis(20);
-        assert_eq!(drain_writes(&mut s, t), [Command::Ping(0)]);
         // Unhealthy for longer than the window: no ping, so the board's
         // dead-man stops the vehicle.
         assert!(drain_writes(&mut s, t + Duration::from_secs(3)).is_empty());
@@ -473,7 +579,7 @@ mod tests {
     }
 
     #[test]
-    fn boot_line_handshakes_at_once_and_asks_rcap_again() {
+    fn boot_line_handshakes_at_once_and_again_after_a_reboot() {
         let t0 = Instant::now();
         let mut s = opened(t0);
         let t = t0 + Duration::from_millis(10);
@@ -482,11 +588,77 @@ mod tests {
             drain_writes(&mut s, t + Duration::from_millis(20)),
             HANDSHAKE
         );
+        s.received(NAV, t + Duration::from_millis(30));
+        s.poll_timers(t + Duration::from_millis(30));
+        assert_eq!(s.stats().state, LinkState::Up);
+        while s.poll_output().is_some() {}
+        // The board restarts: not up until it has been handshaken again and talks.
         let t = t + Duration::from_secs(1);
         s.received(b"boot:1;\r\n", t);
+        assert_eq!(s.stats().state, LinkState::Handshaking);
+        assert_eq!(s.stats().board_reboots, 1);
+        assert_eq!(states(&mut s), [LinkState::Handshaking]);
         assert_eq!(
             drain_writes(&mut s, t + Duration::from_millis(20)),
             HANDSHAKE
+        );
+        s.received(NAV, t + Duration::from_millis(30));
+        s.poll_timers(t + Duration::from_millis(30));
+        assert_eq!(s.stats().state, LinkState::Up);
+    }
+
+    #[test]
+    fn never_more_unechoed_than_the_boards_receive_buffer() {
+        let t0 = Instant::now();
+        let mut s = opened(t0);
+        s.received(b"boot:1;\r\n", t0);
+        drain_writes(&mut s, t0);
+        let t = t0 + Duration::from_millis(100);
+        for n in 0..20 {
+            s.command(Command::Lights(100 + n));
+        }
+        // A busy board echoes nothing: the writes stop within its 64 bytes.
+        let mut written = 0;
+        let mut now = t;
+        let mut frame = Vec::new();
+        for _ in 0..40 {
+            now += Duration::from_millis(5);
+            while let Some(cmd) = s.poll_transmit(now, &mut frame) {
+                s.transmitted(&cmd, frame.len(), now);
+                written += frame.len();
+            }
+        }
+        assert!(written > 0 && written <= 64, "{written} bytes unechoed");
+        // An echo frees its frame's room (and the older ones': echoes come in order).
+        let sent = written;
+        let first = encoded(&Command::Lights(100), Framing::Crc8);
+        s.received(&rawcmd(&first), now);
+        assert!(!drain(&mut s, now, false).is_empty());
+        // A frame never echoed stops holding the budget after the timeout.
+        let later = now + s.cfg.echo_timeout + Duration::from_millis(1);
+        assert!(!drain(&mut s, later, false).is_empty());
+        assert!(s.stats().echoes_missed > 0);
+        assert!(sent > 0);
+    }
+
+    #[test]
+    fn a_thrust_decided_before_a_gap_in_the_pings_is_dropped() {
+        let t0 = Instant::now();
+        let mut s = opened(t0);
+        s.received(b"boot:1;\r\n", t0);
+        s.healthy(t0);
+        assert!(drain_writes(&mut s, t0).contains(&Command::Ping(0)));
+        // The process stood still for three seconds with a thrust pending.
+        s.command(go(1700));
+        let t = t0 + Duration::from_secs(3);
+        s.healthy(t);
+        let written = drain_writes(&mut s, t);
+        assert_eq!(written, [Command::Ping(0)], "no stale go() after the gap");
+        // After the ping, new thrust goes as usual.
+        s.command(go(1600));
+        assert_eq!(
+            drain_writes(&mut s, t + Duration::from_millis(20)),
+            [go(1600)]
         );
     }
 

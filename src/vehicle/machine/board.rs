@@ -180,9 +180,9 @@ impl Vehicle {
         }
         // The battery tubes' sensors when the board has them on the line,
         // else the board current printed beside the voltage.
-        let current = s.battery_current_a.or(s.iout_a.filter(|_| {
-            !self.board.current_a.recent(now) || self.board.current_from_iout
-        }));
+        let current = s.battery_current_a.or(s
+            .iout_a
+            .filter(|_| !self.board.current_a.recent(now) || self.board.current_from_iout));
         if let Some(i) = current {
             self.board.current_from_iout = s.battery_current_a.is_none();
             if let Some((pt, pi)) = self.board.last_current {

@@ -77,24 +77,14 @@ pub(super) const RULES: [Rule; RULE_COUNT] = [
         raise: |v, now| v.failsafes.battery[0].held_below(now),
         clear: |v, now| v.failsafes.battery[0].held_above(now),
         action: ParamStore::batt_fs_low_act,
-        text: |v| {
-            format!(
-                "battery low {:.1} V",
-                v.board.vout_v.value
-            )
-        },
+        text: |v| format!("battery low {:.1} V", v.board.vout_v.value),
     },
     Rule {
         name: "battery_critical",
         raise: |v, now| v.failsafes.battery[1].held_below(now),
         clear: |v, now| v.failsafes.battery[1].held_above(now),
         action: ParamStore::batt_fs_crt_act,
-        text: |v| {
-            format!(
-                "battery critical {:.1} V",
-                v.board.vout_v.value
-            )
-        },
+        text: |v| format!("battery critical {:.1} V", v.board.vout_v.value),
     },
 ];
 

@@ -186,10 +186,9 @@ impl Vehicle {
         }
     }
 
-    /// The demand three pulse widths really produce (the estimator's input).
+    /// The demand three ESC pulse widths really produce (the estimator's input).
     pub(super) fn effective_demand(&self, us: [u16; 3]) -> Demand {
-        let deadzone = f64::from(self.params.esc_deadzone_us());
-        mixer::unmix(us, &self.mixer(), deadzone)
+        mixer::unmix(us, &self.mixer())
     }
 
     /// SET_POSITION_TARGET_GLOBAL_INT: only `alt` (depth, negative below the

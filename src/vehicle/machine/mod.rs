@@ -373,7 +373,17 @@ struct Clock {
     started: bool,
     booted: Duration,
     last_tick: Option<Duration>,
+    /// When the core last handled anything: a gap longer than [`STALL`]
+    /// means the process stood still.
+    last_input: Option<Duration>,
 }
+
+/// An armed vehicle handles something at least every tick (10 ms); this long
+/// without anything means the program itself stood still (stopped, swapped
+/// out, a hung disk): what it decided before is stale, and the board's
+/// dead-man (2 s) may already have stopped the thrusters, which it restarts
+/// at the next ping. Control is in doubt, so the vehicle disarms.
+pub const STALL: Duration = Duration::from_secs(1);
 
 /// Requests refused and only counted (the app reports them).
 #[derive(Debug, Default)]
@@ -495,6 +505,22 @@ impl Vehicle {
             self.clock.started = true;
             self.clock.booted = now.mono;
             self.streams.start(now.mono);
+        }
+        let gap = self.clock.last_input.map(|t| now.mono.saturating_sub(t));
+        self.clock.last_input = Some(now.mono);
+        if let Some(gap) = gap.filter(|g| *g > STALL)
+            && self.armed
+        {
+            self.statustext(
+                texts::Topic::Stop,
+                MavSeverity::MAV_SEVERITY_CRITICAL,
+                &format!(
+                    "Vehicle stalled {:.1} s: thrusters stopped, arm again",
+                    gap.as_secs_f64()
+                ),
+                out,
+            );
+            self.disarm("the vehicle's program stalled", None, out);
         }
         match input {
             Input::Tick => self.tick(now, out),

@@ -9,7 +9,7 @@ use super::defs::{BTN_NAMES, BUTTONS, ParamDef, ParamType, definitions, index_of
 use super::functions::{
     BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, ServoFunction, is_button_function,
 };
-use crate::vehicle::mixer::{MixerConfig, NEUTRAL_US};
+use crate::vehicle::mixer::{BoardMotors, MixerConfig, NEUTRAL_US};
 
 /// Rejected parameter writes.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -317,6 +317,14 @@ impl ParamStore {
         self.u16_of("NEPT_ESC_DEADZN")
     }
 
+    /// The board's motor mapping (deadzone skip, reverse multiplier).
+    pub fn board_motors(&self) -> BoardMotors {
+        BoardMotors {
+            deadzone_us: self.esc_deadzone_us(),
+            reverse_multiplier: self.num("NEPT_ESC_REVMUL").clamp(1.0, 4.0) as u8,
+        }
+    }
+
     pub fn mot_pwm_min(&self) -> u16 {
         self.u16_of("MOT_PWM_MIN")
     }
@@ -431,6 +439,7 @@ impl ParamStore {
             ],
             pwm_min_us: self.mot_pwm_min(),
             pwm_max_us: self.mot_pwm_max(),
+            deadzone_us: self.esc_deadzone_us(),
         }
     }
 
