@@ -12,6 +12,7 @@
 //! in as an argument (a `Duration` since an arbitrary origin), so the pty
 //! wrapper, the in-process loopback and the tests drive the same board.
 
+use std::collections::VecDeque;
 use std::time::Duration;
 
 use super::faults::FaultInjector;
@@ -30,12 +31,23 @@ const NEUTRAL_US: u16 = 1500;
 /// one prints a navigation line every 101 ms).
 const IDLE_WAKE: Duration = Duration::from_millis(200);
 
+/// A change on the ESC pins, from its time on.
+#[derive(Debug, Clone, Copy)]
+enum EscChange {
+    Pulses([u16; 3]),
+    Power(bool),
+}
+
 /// What the sketch's pins and buses reach: the simulated vehicle, the
 /// fault injector and the records.
 #[derive(Debug)]
 struct Wiring {
     plant: Plant,
     sim_time: Duration,
+    /// The physics never runs past the caller's `now`, even while a pass
+    /// of the sketch does: what it writes later waits here.
+    horizon: Duration,
+    pending: VecDeque<(Duration, EscChange)>,
     esc_us: [u16; 3],
     esc_power: bool,
     faults: FaultInjector,
@@ -44,18 +56,47 @@ struct Wiring {
 }
 
 impl Wiring {
-    /// Steps the physics to `t` with the ESC pulses in force.
+    /// Steps the physics towards `t` (not past the horizon) in 10 ms
+    /// steps, each with the ESC pulses written before its end.
     fn step_to(&mut self, t: Duration) {
-        let drive = if self.esc_power {
-            self.esc_us
-        } else {
-            // Unpowered ESCs push nothing, whatever their pulse.
-            [NEUTRAL_US; 3]
-        };
+        let t = t.min(self.horizon);
         while self.sim_time + SIM_STEP <= t {
+            let end = self.sim_time + SIM_STEP;
+            while let Some(&(at, change)) = self.pending.front() {
+                if at >= end {
+                    break;
+                }
+                self.pending.pop_front();
+                match change {
+                    EscChange::Pulses(us) => self.esc_us = us,
+                    EscChange::Power(on) => self.esc_power = on,
+                }
+            }
+            let drive = if self.esc_power {
+                self.esc_us
+            } else {
+                // Unpowered ESCs push nothing, whatever their pulse.
+                [NEUTRAL_US; 3]
+            };
             self.plant.step(drive, SIM_STEP.as_secs_f64());
-            self.sim_time += SIM_STEP;
+            self.sim_time = end;
         }
+        // Written by `t`: on the pins now, and driving the step under way.
+        while let Some(&(at, change)) = self.pending.front() {
+            if at > t {
+                break;
+            }
+            self.pending.pop_front();
+            match change {
+                EscChange::Pulses(us) => self.esc_us = us,
+                EscChange::Power(on) => self.esc_power = on,
+            }
+        }
+    }
+
+    fn change(&mut self, at: Duration, change: EscChange) {
+        self.step_to(at);
+        self.pending.push_back((at, change));
     }
 }
 
@@ -71,13 +112,11 @@ impl Hardware for Wiring {
     }
 
     fn write_escs(&mut self, at: Duration, us: [u16; 3]) {
-        self.step_to(at);
-        self.esc_us = us;
+        self.change(at, EscChange::Pulses(us));
     }
 
     fn esc_power(&mut self, at: Duration, on: bool) {
-        self.step_to(at);
-        self.esc_power = on;
+        self.change(at, EscChange::Power(on));
     }
 
     fn record(&mut self, r: BoardRecord) {
@@ -135,6 +174,8 @@ impl Board {
             wiring: Wiring {
                 plant,
                 sim_time: Duration::ZERO,
+                horizon: Duration::ZERO,
+                pending: VecDeque::new(),
                 esc_us: [NEUTRAL_US; 3],
                 esc_power: false,
                 faults: FaultInjector::new(opts.faults.clone()),
@@ -187,6 +228,7 @@ impl Board {
     pub fn start(&mut self, now: Duration, out: &mut Vec<u8>) {
         self.now = now;
         self.wiring.sim_time = now;
+        self.wiring.horizon = now;
         self.sketch.power_on(now);
         self.run(now, out);
     }
@@ -213,6 +255,7 @@ impl Board {
     }
 
     fn run(&mut self, now: Duration, out: &mut Vec<u8>) {
+        self.wiring.horizon = now;
         if self.stalled {
             // A hung board does nothing, but time and physics go on.
             self.uart.drop_input();
@@ -260,9 +303,9 @@ impl Board {
         BoardSnapshot {
             uptime_ms: self.now.as_millis() as u64,
             target_us: self.sketch.targets().map(c),
-            motors_us: self.sketch.escs(),
+            motors_us: self.wiring.esc_us,
             motors_attached: self.sketch.motors_attached(),
-            escs_powered: self.sketch.escs_powered(),
+            escs_powered: self.wiring.esc_power,
             dead_man_armed: armed,
             dead_man_tripped: tripped,
             lights: self.sketch.lights().clamp(0, 255) as u8,

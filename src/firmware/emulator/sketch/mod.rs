@@ -438,14 +438,6 @@ impl Sketch {
         self.target
     }
 
-    pub(super) fn escs(&self) -> [u16; 3] {
-        self.esc_us
-    }
-
-    pub(super) fn escs_powered(&self) -> bool {
-        self.escs_powered
-    }
-
     pub(super) fn motors_attached(&self) -> bool {
         self.matc
     }
