@@ -39,6 +39,9 @@ impl Rig {
             assert!(rig.t < Duration::from_secs(5), "{}", rig.text());
             rig.run(1);
         }
+        // Its first pass prints every line whose timer ran during set-up;
+        // a host that sends now loses bytes while that burst blocks it.
+        rig.run(300);
         rig
     }
 
@@ -181,8 +184,9 @@ fn the_2014_12_firmware_boots_with_its_own_chatter() {
         sensors: FittedSensors::none(),
         ..Default::default()
     });
+    let text = rig.text();
     assert_eq!(
-        rig.text(),
+        &text[..text.find("boot:1;\r\n").unwrap() + "boot:1;\r\n".len()],
         "log:pilot setup complete;\r\n\
 mpu_init failed with code: -1\r\n\
 log:Trying other MPU9150 address to init;\r\n\

@@ -2,7 +2,7 @@
 //! board firmware (`openrov-software-arduino`, release 30.0.2 or the
 //! December 2014 sketch), driving the simulator.
 //!
-//! - `sketch.rs`: the firmware's `setup()` and `loop()` re-told in Rust —
+//! - `sketch/`: the firmware's `setup()` and `loop()` re-told in Rust —
 //!   the frame buffer and its echo, the internal command queue, every
 //!   device in registration order with its `Timer`s, the status cycle and
 //!   the navigation line — on a modelled clock (the cost of a pass, the

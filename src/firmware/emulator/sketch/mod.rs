@@ -59,11 +59,12 @@ const ADC_READ: Duration = Duration::from_micros(112);
 const I2C_BYTE: Duration = Duration::from_micros(100);
 /// Reading the MPU-9150's DMP FIFO and compass over I2C (about 45 bytes).
 const MPU_READ: Duration = Duration::from_micros(4_500);
-/// `MPU9150Lib::init`: the chip's 100 ms reset, then the DMP's program
-/// written and read back in 16-byte chunks at 100 kHz. Nothing in the
-/// simulator measured this; it is what that I2C traffic takes.
+/// `MPU9150Lib::init`: the chip's 100 ms reset and its registers, then
+/// the DMP's 3062-byte program written and read back in 16-byte chunks
+/// (about 45 bytes of I2C at 100 kHz each, 192 chunks) and the FIFO reset.
+/// simavr has no MPU-9150 to measure; this is what that traffic takes.
 const MPU_RESET: Duration = Duration::from_millis(110);
-const MPU_DMP_LOAD: Duration = Duration::from_millis(540);
+const MPU_DMP_LOAD: Duration = Duration::from_millis(900);
 /// The MS5803's PROM (eight 2-byte reads) over I2C.
 const MS5803_PROM: Duration = Duration::from_micros(3_200);
 /// Calibration words the emulated MS5803-14BA reports (its PROM; the
