@@ -80,20 +80,17 @@ impl Uart {
         self.ring.pop_front()
     }
 
-    /// When the next host byte arrives, if one is on its way (the ring
-    /// itself is read at once, so it never makes the sketch wait).
-    pub(super) fn next_arrival(&self) -> Option<Duration> {
-        self.wire.front().map(|&(at, _)| at)
-    }
-
-    /// When the next frame on the wire has arrived (its `;`), or else the
-    /// last byte on the wire: the moment reading is worth waking for.
-    pub(super) fn next_frame_end(&self) -> Option<Duration> {
+    /// When the sketch next has to read: when the next frame's `;` has
+    /// arrived, or the byte that fills the ring (a later read would lose
+    /// what comes after it). Bytes of a frame still arriving can wait in
+    /// the ring: the sketch reads them all at once, in the same order.
+    pub(super) fn next_read_due(&self) -> Option<Duration> {
+        let room = RX_RING_BYTES.saturating_sub(self.ring.len());
         self.wire
             .iter()
-            .find(|(_, b)| *b == b';')
-            .or(self.wire.back())
-            .map(|&(at, _)| at)
+            .enumerate()
+            .find(|(i, (_, b))| *b == b';' || i + 1 >= room)
+            .map(|(_, &(at, _))| at)
     }
 
     /// Whether unread bytes wait in the ring.

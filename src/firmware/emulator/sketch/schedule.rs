@@ -21,10 +21,10 @@ impl Sketch {
         let cost = self.pass_cost.as_nanos().max(1);
         let span = |until: Duration| until.saturating_sub(self.clock).as_nanos();
         // Pass j starts at clock + j·cost. It is idle if it ends before the
-        // next timer is due and starts before the next byte arrives; only
-        // the passes that start by `now` are run now.
+        // next timer is due and starts before a frame has arrived (or the
+        // ring would fill); only the passes that start by `now` are run now.
         let mut passes = span(event) / cost;
-        if let Some(at) = uart.next_arrival() {
+        if let Some(at) = uart.next_read_due() {
             passes = passes.min(span(at).div_ceil(cost));
         }
         passes = passes.min(span(now) / cost + 1);
@@ -127,7 +127,7 @@ impl Sketch {
         if self.build.devices.contains(&Device::Bno055) {
             t = t.min(ms(self.bno_report_timer.due_ms(30_000)));
         }
-        if let Some(at) = uart.next_frame_end() {
+        if let Some(at) = uart.next_read_due() {
             t = t.min(at);
         }
         t.max(self.clock)
