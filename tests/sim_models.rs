@@ -693,10 +693,11 @@ fn no_thrust_while_the_dead_man_is_tripped_or_the_escs_are_off() {
         Duration::from_millis(1900),
     );
     assert!(b.snapshot().sim.thrust_n.iter().all(|t| t.abs() > 1.0));
+    // The dead-man's timer starts at its set-up, about a second after power.
     tick_until(
         &mut b,
         Duration::from_millis(1900),
-        Duration::from_millis(3500),
+        Duration::from_millis(4500),
     );
     let s = b.snapshot();
     assert!(s.dead_man_tripped);

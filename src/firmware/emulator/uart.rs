@@ -81,11 +81,14 @@ impl Uart {
     }
 
     /// When the sketch next has to read: when the next frame's `;` has
-    /// arrived, or the byte that fills the ring (a later read would lose
-    /// what comes after it). Bytes of a frame still arriving can wait in
-    /// the ring: the sketch reads them all at once, in the same order.
+    /// arrived, or a few bytes before the ring would fill (the first pass
+    /// after that time must find room for what arrives meanwhile). Bytes
+    /// of a frame still arriving can wait in the ring: the sketch reads
+    /// them all at once, in the same order.
     pub(super) fn next_read_due(&self) -> Option<Duration> {
-        let room = RX_RING_BYTES.saturating_sub(self.ring.len());
+        // More than an idle pass's worth of bytes (0.3 ms, 4 bytes).
+        const SLACK: usize = 8;
+        let room = RX_RING_BYTES.saturating_sub(self.ring.len() + SLACK).max(1);
         self.wire
             .iter()
             .enumerate()
