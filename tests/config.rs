@@ -339,3 +339,53 @@ fn hmi_transport_keys_resolve_and_bad_ones_name_the_key() {
         assert!(err.contains(needle), "{text:?} → {err}");
     }
 }
+
+#[test]
+fn the_emulated_firmware_sets_the_framing_unless_told() {
+    use neptunus::config::{CliCommand, resolve_emulator};
+    use neptunus::firmware::codec::Framing;
+    use neptunus::firmware::emulator::FirmwareVersion;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("n.toml");
+    std::fs::write(&path, "sim = true\n[emulator]\nfirmware = \"2014-12\"\n").unwrap();
+    let file = path.to_str().unwrap();
+    // --sim: the link speaks the emulated firmware's framing…
+    let s = resolve(&Cli::parse_from(["neptunus", "--config", file]).run).unwrap();
+    assert_eq!(s.link.framing, Framing::Plain);
+    let BoardSource::Simulated(emu) = s.board else {
+        panic!("file sets sim")
+    };
+    assert_eq!(emu.imitated(), FirmwareVersion::V2014_12);
+    // …and asking for crc8 from a firmware without a CRC check is refused.
+    let err = resolve(&Cli::parse_from(["neptunus", "--config", file, "--framing", "crc8"]).run)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("2014-12") && err.contains("plain"), "{err}");
+    // The default firmware, plain framing asked: the 2014-12 board.
+    let s = resolve(&Cli::parse_from(["neptunus", "--sim", "--framing", "plain"]).run).unwrap();
+    let BoardSource::Simulated(emu) = s.board else {
+        panic!("--sim")
+    };
+    assert_eq!(emu.imitated(), FirmwareVersion::V2014_12);
+
+    // emulate-board --firmware
+    let emulate = |args: &[&str]| {
+        let cli = Cli::parse_from(["neptunus", "emulate-board"].iter().chain(args));
+        let Some(CliCommand::EmulateBoard(a)) = cli.command else {
+            panic!("emulate-board")
+        };
+        resolve_emulator(&a, None)
+    };
+    let emu = emulate(&["--firmware", "2014-12"]).unwrap();
+    assert_eq!(
+        (emu.imitated(), emu.effective_framing()),
+        (FirmwareVersion::V2014_12, Framing::Plain)
+    );
+    let emu = emulate(&[]).unwrap();
+    assert_eq!(emu.imitated(), FirmwareVersion::V30_0_2);
+    assert!(emulate(&["--firmware", "2014-12", "--framing", "crc8"]).is_err());
+    let err = Cli::try_parse_from(["neptunus", "emulate-board", "--firmware", "30.0.3"])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("30.0.2") && err.contains("2014-12"), "{err}");
+}

@@ -118,17 +118,20 @@ fn board_thrust(pwm: [u16; 3]) -> [f64; 3] {
     b.snapshot().sim.thrust_n
 }
 
+/// The firmware skips its deadzone rather than zeroing inside it
+/// (`Motor::goms`): only 1500 itself is neutral, the least step off it
+/// gives the ESC 1550 µs (or 1448 µs) and thrust.
 #[test]
-fn deadzone_gives_no_thrust() {
+fn the_deadzone_is_skipped_not_zeroed() {
+    assert_eq!(board_thrust([1500, 1500, 1500]), [0.0; 3]);
     let thrust = board_thrust([1530, 1530, 1530]);
-    assert_eq!(thrust, [0.0; 3]);
-    let thrust = board_thrust([1470, 1450, 1550]);
-    assert_eq!(
-        thrust, [0.0; 3],
-        "±50 µs (10 %) is still inside the deadzone"
-    );
-    let thrust = board_thrust([1560, 1560, 1560]);
     assert!(thrust.iter().all(|t| t.abs() > 0.1), "{thrust:?}");
+    let thrust = board_thrust([1470, 1450, 1550]);
+    assert!(thrust.iter().all(|t| t.abs() > 0.1), "{thrust:?}");
+    let mut b = booted(EmulatorOptions::default());
+    go(&mut b, Duration::from_millis(5), [1501, 1499, 1530]);
+    tick_until(&mut b, Duration::from_millis(6), Duration::from_secs(2));
+    assert_eq!(b.snapshot().motors_us, [1550, 1448, 1577]);
 }
 
 #[test]
@@ -149,14 +152,17 @@ fn full_reverse_is_weaker_than_full_forward() {
     assert!(r.abs() < f && r.abs() > 0.4 * f, "{r} vs {f}");
 }
 
+/// The board doubles a reverse target before the deadzone mapping, which
+/// more than makes up for the propellers' weaker reverse on small
+/// commands; past half range the ESC saturates.
 #[test]
-fn reverse_multiplier_makes_small_commands_symmetric_and_large_reverse_saturate() {
+fn reverse_is_doubled_and_large_reverse_saturates() {
     for offset_us in [60, 100, 125] {
         let fwd = board_thrust([1500, 1500 + offset_us, 1500])[1];
         let rev = board_thrust([1500, 1500 - offset_us, 1500])[1];
         assert!(fwd > 0.0 && rev < 0.0);
         assert!(
-            (rev.abs() - fwd).abs() <= 0.2 * fwd,
+            rev.abs() > 0.6 * fwd && rev.abs() < 1.2 * fwd,
             "±{offset_us} µs: {fwd} N forward, {rev} N reverse"
         );
     }
@@ -618,17 +624,20 @@ fn nav_lines_carry_the_1_hz_depth_and_the_plants_pitch_and_roll() {
         ..EmulatorOptions::default()
     };
     let mut b = booted(opts);
+    // The board's set-up (the IMU's takes most of a second) before the pose.
+    let mut out = tick_until(&mut b, Duration::ZERO, Duration::from_secs(2));
+    assert!(String::from_utf8_lossy(&out).contains("boot:1;"));
     b.plant_mut().set_pose(0.0, 0.0, 2.0, 0.0);
     b.plant_mut().set_attitude(10f64.to_radians(), 0.0);
     // Vertical thrust down: deeper every second, and the nose comes up a little.
-    go(&mut b, Duration::from_millis(5), [1500, 1800, 1500]);
-    let mut out = Vec::new();
-    let mut t = Duration::from_millis(6);
+    let start = Duration::from_secs(2);
+    go(&mut b, start, [1500, 1800, 1500]);
+    let mut t = start + Duration::from_millis(1);
     let mut depth_changes = Vec::new();
     let mut last_depth = None;
     let mut first = true;
     let mut lines = 0;
-    while t < Duration::from_secs(20) {
+    while t < start + Duration::from_secs(20) {
         t += Duration::from_millis(10);
         out.clear();
         b.tick(t, &mut out);
@@ -636,17 +645,15 @@ fn nav_lines_carry_the_1_hz_depth_and_the_plants_pitch_and_roll() {
             lines += 1;
             let truth = b.snapshot().sim;
             let (pitch, roll) = (nav.pitch_deg.unwrap(), nav.roll_deg.unwrap());
-            // Two decimals on the line.
+            // The IMU is read every 50 ms: the line is at most that old,
+            // while the vehicle rights itself at up to some 20°/s.
             assert!(
-                (pitch - truth.pitch_deg).abs() <= 0.006,
+                (pitch - truth.pitch_deg).abs() <= 1.5,
                 "{pitch} vs {truth:?}"
             );
-            assert!(
-                (roll - truth.roll_deg).abs() <= 0.006,
-                "{roll} vs {truth:?}"
-            );
+            assert!((roll - truth.roll_deg).abs() <= 1.5, "{roll} vs {truth:?}");
             if first {
-                // 100 ms after release: still well heeled.
+                // At most 100 ms after release: still well heeled.
                 assert!(roll > 5.0, "the first line shows the roll we set: {roll}");
                 first = false;
             }
@@ -657,10 +664,12 @@ fn nav_lines_carry_the_1_hz_depth_and_the_plants_pitch_and_roll() {
             last_depth = Some(depth);
         }
     }
-    assert!((199..=200).contains(&lines), "10 Hz: {lines} lines");
+    // A line every 101 ms or so (the board's timer fires after more than 100 ms).
+    assert!((190..=200).contains(&lines), "10 Hz: {lines} lines");
     assert!(depth_changes.len() >= 18, "{depth_changes:?}");
+    // A sample a second, seen on the next line (a line every 101 ms).
     for pair in depth_changes.windows(2) {
-        assert!(pair[1] - pair[0] >= Duration::from_secs(1), "{pair:?}");
+        assert!(pair[1] - pair[0] >= Duration::from_millis(890), "{pair:?}");
     }
     let s = b.snapshot().sim;
     assert!(s.pitch_deg > 1.0, "nose up under down thrust: {s:?}");
@@ -684,10 +693,11 @@ fn no_thrust_while_the_dead_man_is_tripped_or_the_escs_are_off() {
         Duration::from_millis(1900),
     );
     assert!(b.snapshot().sim.thrust_n.iter().all(|t| t.abs() > 1.0));
+    // The dead-man's timer starts at its set-up, about a second after power.
     tick_until(
         &mut b,
         Duration::from_millis(1900),
-        Duration::from_millis(3500),
+        Duration::from_millis(4500),
     );
     let s = b.snapshot();
     assert!(s.dead_man_tripped);
@@ -707,29 +717,19 @@ fn no_thrust_while_the_dead_man_is_tripped_or_the_escs_are_off() {
         Duration::from_millis(2500),
     );
     let s = b.snapshot();
-    assert_eq!(s.motors_us, [1700; 3], "the board still outputs");
+    assert_eq!(s.motors_us, [1730; 3], "the board still outputs");
     assert!(s.sim.thrust_n.iter().all(|t| t.abs() < 0.01), "{:?}", s.sim);
 }
 
-/// The emulator before the plant, reproduced here: it stepped the thesis
-/// model with the demand of the accepted `go()` values after the deadzone
-/// (never the reverse multiplier), and reported `SensorModel::read`.
-fn old_demand(target_us: [u16; 3], deadzone_us: i32) -> Demand {
-    let applied = target_us.map(|v| {
-        if (i32::from(v) - 1500).abs() <= deadzone_us {
-            1500
-        } else {
-            v
-        }
-    });
-    demand_from_thrusters(applied, NEPTUNUS_WIRING)
-}
-
+/// With no deadzone and no reverse multiplier the board's ESC pulses are
+/// the `go()` values, written when its motor timer next fires; the ideal
+/// plant driven by them is the thesis model stepped with their demand, bit
+/// for bit, and the navigation lines show its heading.
 #[test]
-fn ideal_thesis_reproduces_the_old_emulator_bit_for_bit() {
+fn ideal_thesis_board_drives_the_thesis_model_bit_for_bit() {
     let opts = EmulatorOptions::ideal_thesis();
-    let deadzone = i32::from(opts.deadzone_us);
     let mut b = booted(opts);
+    tick_until(&mut b, Duration::ZERO, Duration::from_secs(1));
     let start = SimState {
         eta: [1.0, -2.0, 3.0, 0.5].into(),
         nu: [0.2, 0.0, -0.1, 0.05].into(),
@@ -748,21 +748,22 @@ fn ideal_thesis_reproduces_the_old_emulator_bit_for_bit() {
         (11_505, [1800, 1250, 1000]),
     ];
     let mut next = 0;
-    let mut t = Duration::ZERO;
+    let mut t = Duration::from_secs(1);
     let mut out = Vec::new();
     let mut nav_checked = 0;
     let mut path_m = 0.0;
-    while t < Duration::from_secs(15) {
+    while t < Duration::from_secs(16) {
         if let Some(&(at_ms, pwm)) = schedule.get(next)
-            && t + Duration::from_millis(10) > Duration::from_millis(at_ms)
+            && t + Duration::from_millis(10) > Duration::from_millis(1000 + at_ms)
         {
-            go(&mut b, Duration::from_millis(at_ms), pwm);
+            go(&mut b, Duration::from_millis(1000 + at_ms), pwm);
             next += 1;
         }
         t += Duration::from_millis(10);
         out.clear();
         b.tick(t, &mut out);
-        let d = old_demand(b.snapshot().target_us, deadzone);
+        let escs = b.snapshot().motors_us;
+        let d = demand_from_thrusters(escs, NEPTUNUS_WIRING);
         let before = old;
         old = model.step(&old, &d, 0.01);
         path_m += (old.eta.xyz() - before.eta.xyz()).norm();
@@ -779,19 +780,20 @@ fn ideal_thesis_reproduces_the_old_emulator_bit_for_bit() {
             );
         }
         for line in String::from_utf8_lossy(&out).split("\r\n") {
-            if line.starts_with("hdgd:") {
+            if let Some(rest) = line.strip_prefix("hdgd:") {
+                // The IMU's last read, at most 50 ms old.
                 let r = sensors.read(&old, &d);
-                let expected = format!(
-                    "hdgd:{:.2};deep:{:.2};pitc:{:.2};roll:{:.2};yaw:{:.2};fthr:{:.2};",
-                    r.heading_deg, r.depth_m, r.pitch_deg, r.roll_deg, r.yaw_deg, r.fthr_pct
-                );
-                assert_eq!(line, expected, "at {t:?}");
+                let hdgd: f64 = rest.split(';').next().unwrap().parse().unwrap();
+                let off = (hdgd - r.heading_deg + 540.0).rem_euclid(360.0) - 180.0;
+                let turned = 0.05 + sim.yaw_rate_dps.abs() * 0.1;
+                assert!(off.abs() < turned, "{line} vs {} at {t:?}", r.heading_deg);
+                assert!(line.contains(";deap:") && line.ends_with(';'), "{line}");
                 nav_checked += 1;
             }
         }
     }
     assert_eq!(next, schedule.len());
-    assert!(nav_checked >= 149, "{nav_checked}");
+    assert!(nav_checked >= 145, "{nav_checked}");
     // And it did move: a check against a frozen vehicle would prove nothing.
     assert!(path_m > 5.0, "{path_m} m");
 }

@@ -10,6 +10,7 @@ use clap::{Args, Parser, Subcommand};
 use serde::{Deserialize, Serialize};
 
 use crate::firmware::codec::Framing;
+use crate::firmware::emulator::FirmwareVersion;
 use crate::mavlink::endpoint::EndpointUrl;
 use crate::vehicle::machine::Identity;
 
@@ -127,7 +128,10 @@ impl std::str::FromStr for HttpAddr {
 
 #[derive(Debug, Subcommand)]
 pub enum CliCommand {
-    /// Run the OpenROV board emulator on a new pseudo-terminal and print its path.
+    /// Run the OpenROV board emulator on a new pseudo-terminal and print its
+    /// path. It imitates a genuine firmware release (`--firmware`): the same
+    /// bytes in give the same replies, set-up chatter and status lines, with
+    /// the readings of the built-in simulator.
     EmulateBoard(EmulateArgs),
     /// Run the genuine OpenROV controller-board firmware in the simavr AVR
     /// simulator on a new pseudo-terminal and print its path (built with the
@@ -230,7 +234,13 @@ pub struct EmulateArgs {
     /// Also make a symlink at PATH pointing to the pseudo-terminal (stable across restarts).
     #[arg(long, value_name = "PATH")]
     pub link: Option<PathBuf>,
-    /// Command framing the emulated board expects.
+    /// Which genuine firmware the emulated board imitates: 30.0.2 (2015,
+    /// crc8 framing, the default) or 2014-12 (December 2014, plain
+    /// framing). Overrides `[emulator] firmware` of the config file.
+    #[arg(long, value_name = "30.0.2|2014-12")]
+    pub firmware: Option<FirmwareVersion>,
+    /// Command framing the emulated board expects: plain picks the 2014-12
+    /// firmware (the one that speaks it); crc8 with 2014-12 is refused.
     #[arg(long, value_name = "crc8|plain")]
     pub framing: Option<Framing>,
     /// Probability per telemetry line of garbage bytes in front of it.

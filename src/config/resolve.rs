@@ -11,7 +11,8 @@ use super::cli::{EmulateArgs, RunArgs};
 use super::file::FileConfig;
 use super::hmi::resolve_hmi;
 use super::{ConfigError, DEFAULT_BAUD, DEFAULT_SERIAL, default_data_dir};
-use crate::firmware::emulator::{EmulatorOptions, FaultOptions};
+use crate::firmware::codec::Framing;
+use crate::firmware::emulator::{EmulatorOptions, FaultOptions, FirmwareVersion};
 use crate::firmware::link::LinkConfig;
 use crate::mavlink::endpoint::{DEFAULT_ENDPOINTS, EndpointUrl};
 use crate::vehicle::machine::Identity;
@@ -79,12 +80,25 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
             "--baud 0 — use the board's baud rate, 115200".into(),
         ));
     }
-    link.framing = args.framing.or(file.board.framing).unwrap_or_default();
+    let framing = args.framing.or(file.board.framing);
+    link.framing = framing.unwrap_or_default();
     // --serial on the command line wins over `sim = true` in the file.
     let sim = args.sim || (file.sim && args.serial.is_none());
     let board = if sim {
         let mut emu = file.emulator.clone();
-        emu.framing = link.framing;
+        match framing {
+            // The link speaks what it was told; the emulated board follows
+            // (plain framing is the 2014-12 firmware's).
+            Some(f) => {
+                check_firmware_framing(emu.firmware, f, "--framing / [board] framing")?;
+                emu.framing = f;
+            }
+            // Not told: the link speaks the emulated firmware's framing.
+            None => {
+                link.framing = emu.effective_framing();
+                emu.framing = link.framing;
+            }
+        }
         BoardSource::Simulated(emu)
     } else {
         BoardSource::Serial
@@ -146,6 +160,22 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
     })
 }
 
+/// The 2014-12 firmware has no CRC check: asking it for `crc8` is a mistake
+/// worth saying (plain framing with 30.0.2 simply picks 2014-12).
+fn check_firmware_framing(
+    firmware: FirmwareVersion,
+    framing: Framing,
+    what: &str,
+) -> Result<(), ConfigError> {
+    if firmware == FirmwareVersion::V2014_12 && framing == Framing::Crc8 {
+        return Err(ConfigError::Invalid(format!(
+            "{what} crc8 with emulator firmware 2014-12 — that firmware speaks plain framing: \
+             use framing plain, or firmware 30.0.2"
+        )));
+    }
+    Ok(())
+}
+
 /// Emulator options for `emulate-board`: flags over the file's `[emulator]`.
 pub fn resolve_emulator(
     args: &EmulateArgs,
@@ -156,9 +186,14 @@ pub fn resolve_emulator(
         None => FileConfig::default(),
     };
     let mut emu = file.emulator;
+    if let Some(v) = args.firmware {
+        emu.firmware = v;
+    }
     if let Some(f) = args.framing {
+        check_firmware_framing(emu.firmware, f, "--framing")?;
         emu.framing = f;
     }
+    emu.framing = emu.effective_framing();
     let faults: &mut FaultOptions = &mut emu.faults;
     for (slot, value, name) in [
         (&mut faults.garbage, args.garbage, "--garbage"),

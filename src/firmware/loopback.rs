@@ -163,6 +163,8 @@ mod tests {
             sim.healthy(now);
             sim.step(now, &mut events);
         }
+        // The board answers once its set-up (about a second) is done.
+        sim.step(Duration::from_secs(3), &mut events);
         let pongs = events
             .iter()
             .filter(|e| matches!(e, Event::Pong(_)))
