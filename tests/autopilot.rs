@@ -1,4 +1,4 @@
-//! Issue 6 acceptance: the autopilots and the estimator in closed loop with
+//! The autopilots and the estimator in closed loop with
 //! the board emulator and simulator, on simulated time (no waiting), with
 //! the simulator's fixed seeds; and the modes, setpoints and run mode seen
 //! from a ground station.
@@ -52,9 +52,11 @@ fn wild_points_never_jump_the_estimates() {
     let hj = o.metric("max_heading_estimate_jump");
     assert!(dj <= 0.2, "depth estimate jumped {dj} m");
     assert!(hj <= 5.0, "heading estimate jumped {hj} deg");
-    // The gate really had wild points to reject.
+    // The gate really had wild points to reject (the board's nav line has
+    // six values: about one wild point in six lands on the heading, and a
+    // depth repeated between the sensor's 1 Hz reads is not a measurement).
     assert!(o.metric("depth_rejected") >= 1.0, "{:?}", o.metrics);
-    assert!(o.metric("heading_rejected") >= 10.0, "{:?}", o.metrics);
+    assert!(o.metric("heading_rejected") >= 5.0, "{:?}", o.metrics);
 }
 
 #[test]
@@ -420,7 +422,7 @@ fn sim_report_writes_a_png_and_a_csv_per_scenario() {
     assert_eq!(written.len(), 3, "{written:?}");
 }
 
-/// Issue 14: Normal → Simulator → Normal at 1.5 m / 60° in ALT_HOLD once
+/// A defect once seen: Normal → Simulator → Normal at 1.5 m / 60° in ALT_HOLD once
 /// took the held depth and heading from the reset estimator (0 m, north):
 /// the ROV rose to the surface and turned north with no message.
 #[test]

@@ -23,7 +23,6 @@ fn cfg(gain: f64) -> MixerConfig {
         directions: [1, 1, 1],
         pwm_min_us: 1100,
         pwm_max_us: 1900,
-        deadzone_us: 0,
     }
 }
 
@@ -157,17 +156,13 @@ fn any_config() -> impl Strategy<Value = MixerConfig> {
         prop::array::uniform3(prop::sample::select(vec![-1i8, 0, 1])),
         1000u16..=1500,
         1500u16..=2000,
-        0u16..=200,
     )
-        .prop_map(
-            |(gain, directions, pwm_min_us, pwm_max_us, deadzone_us)| MixerConfig {
-                gain,
-                directions,
-                pwm_min_us,
-                pwm_max_us,
-                deadzone_us,
-            },
-        )
+        .prop_map(|(gain, directions, pwm_min_us, pwm_max_us)| MixerConfig {
+            gain,
+            directions,
+            pwm_min_us,
+            pwm_max_us,
+        })
 }
 
 proptest! {

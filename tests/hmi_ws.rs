@@ -1191,6 +1191,11 @@ async fn depth_hold_setpoint_and_run_mode_from_the_page() {
     pilot.send(json!({"type": "arm", "arm": true})).await;
     let ack = pilot.ack("COMPONENT_ARM_DISARM").await;
     assert_eq!(ack["result_name"], "ACCEPTED", "{ack}");
+    // Depth hold needs a depth: the board's first pressure reading comes
+    // about a second after its set-up.
+    pilot
+        .telemetry_until(|t| t["health"]["depth"] == true)
+        .await;
     pilot.send(json!({"type": "mode", "mode": 2})).await;
     let ack = pilot.ack("DO_SET_MODE").await;
     assert_eq!(ack["result_name"], "ACCEPTED", "{ack}");

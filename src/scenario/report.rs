@@ -63,7 +63,8 @@ pub fn options(seed: u64) -> EmulatorOptions {
 fn armed_in(mode: Mode, opts: EmulatorOptions, depth_m: f64, heading_deg: f64) -> Scenario {
     let mut s = Scenario::new(opts);
     s.place(depth_m, heading_deg);
-    // Telemetry first: the pre-arm checks want fresh depth and heading.
+    // Telemetry first: the pre-arm checks want a fresh heading, and the
+    // hold modes a depth estimate.
     s.run(Duration::from_secs(3));
     s.arm();
     s.set_mode(mode.number());

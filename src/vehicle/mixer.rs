@@ -1,16 +1,19 @@
-//! Thrust allocation: a normalised demand `[X, Z, M]` to the pulse width
-//! each ESC should get, and those to the board's `go(port, vertical,
-//! starboard)` values.
+//! Thrust allocation: a normalised demand `[X, Z, M]` to the board's
+//! `go(port, vertical, starboard)` values.
 //!
 //! This module owns the thesis allocation (section 9.3) with the pilot gain,
 //! the per-motor directions and the MOT_PWM_MIN/MAX range, and the board
-//! firmware's motor mapping ([`BoardMotors`]): the genuine OpenROV firmware
-//! does not pass `go()` values to the ESCs unchanged (`Motor.cpp`) — it
-//! skips the ESC deadzone and multiplies reverse commands — so the vehicle
-//! asks for the `go()` value that gives the ESC pulse it wants. It must
-//! never do I/O or keep state, and no input — NaN, infinity, a
-//! misconfigured range — may produce a pulse width outside
-//! `pwm_min_us..=pwm_max_us`.
+//! firmware's motor mapping ([`BoardMotors`]). The genuine OpenROV firmware
+//! does not pass `go()` values to the ESCs unchanged (`Motor.cpp`): it
+//! skips the ESC deadzone and doubles reverse commands, because the
+//! propellers push about half as hard backwards. That mapping is the
+//! thrusters' calibration, so `go()` values are linear in thrust — which is
+//! what this module sends, as OpenROV's own cockpit did: the reversed port
+//! thruster then pushes as hard as the starboard one at half stick. Reverse
+//! saturates at `1500 − 500 / multiplier` (1250 µs with the firmware's 2);
+//! [`BoardMotors::effective`] says what a value really gives. It must never
+//! do I/O or keep state, and no input — NaN, infinity, a misconfigured
+//! range — may produce a value outside `pwm_min_us..=pwm_max_us`.
 //!
 //! # Signs
 //! - surge X > 0: forward; heave Z > 0: **down** (body z axis, deeper);
@@ -24,11 +27,9 @@
 //!   wired reversed, so MOT_2_DIRECTION defaults to −1.
 //!
 //! # Pulse widths
-//! `u = −1 → pwm_min_us`, `0 → 1500`, `+1 → pwm_max_us`, linear on each side
-//! beyond the ESC deadzone (`deadzone_us`, where an ESC gives no thrust):
-//! the smallest thrust is `1500 ± deadzone_us`, as the board's firmware
-//! maps it. An asymmetric range (1100..1500..1950) still stops the thruster
-//! at 1500.
+//! `u = −1 → pwm_min_us`, `0 → 1500`, `+1 → pwm_max_us`, linear on each
+//! side. An asymmetric range (1100..1500..1950) still stops the thruster at
+//! 1500.
 
 use serde::Serialize;
 
@@ -58,8 +59,6 @@ pub struct MixerConfig {
     pub pwm_min_us: u16,
     /// Pulse width for full forward thrust.
     pub pwm_max_us: u16,
-    /// The ESC deadzone each side of 1500 µs: no thrust inside it.
-    pub deadzone_us: u16,
 }
 
 impl MixerConfig {
@@ -104,23 +103,15 @@ pub fn mix(d: &Demand, cfg: &MixerConfig) -> [u16; 3] {
     out
 }
 
-/// The mixer inverted: the demand three ESC pulse widths really produce
-/// (after direction, before the gain), with a thruster within the deadzone
-/// of neutral giving nothing. The estimator's model input.
+/// The mixer inverted: the demand three `go()` values produce (after
+/// direction, before the gain). With [`BoardMotors::effective`] first, the
+/// demand the thrusters really give: the estimator's model input.
 pub fn unmix(us: [u16; 3], cfg: &MixerConfig) -> Demand {
     let (lo, neutral, hi) = cfg.range();
-    let dz = f64::from(cfg.deadzone_us);
     let u = |i: usize| {
         let d = f64::from(us[i]) - neutral;
-        if d.abs() <= dz {
-            return 0.0;
-        }
-        let span = if d > 0.0 { hi - neutral } else { neutral - lo } - dz;
-        let v = if span > 0.0 {
-            d.signum() * (d.abs() - dz) / span
-        } else {
-            d.signum()
-        };
+        let span = if d > 0.0 { hi - neutral } else { neutral - lo };
+        let v = if span > 0.0 { d / span } else { d.signum() };
         v.clamp(-1.0, 1.0) * f64::from(cfg.directions[i].signum())
     };
     let (port, vertical, starboard) = (u(0), u(1), u(2));
@@ -138,19 +129,14 @@ pub fn thruster_us(u: f64, direction: i8, cfg: &MixerConfig) -> u16 {
 }
 
 /// `u` (already in `[-1, 1]`) with its direction to a pulse width: neutral
-/// at 0, and beyond the deadzone on each side linearly to the range's end.
+/// at 0, linear on each side to the range's end.
 fn to_us(u: f64, direction: i8, cfg: &MixerConfig) -> u16 {
     let (lo, neutral, hi) = cfg.range();
-    let dz = f64::from(cfg.deadzone_us);
     let v = u * f64::from(direction.signum());
-    let us = if v == 0.0 {
-        neutral
-    } else if v > 0.0 {
-        let start = (neutral + dz).min(hi);
-        start + v * (hi - start)
+    let us = if v >= 0.0 {
+        neutral + v * (hi - neutral)
     } else {
-        let start = (neutral - dz).max(lo);
-        start + v * (start - lo)
+        neutral + v * (neutral - lo)
     };
     // Clamped to a u16 range before the cast, so the cast cannot wrap.
     us.round().clamp(lo, hi) as u16
@@ -202,40 +188,18 @@ impl BoardMotors {
         esc.clamp(1000, 2000) as u16
     }
 
-    /// The `go()` value whose ESC pulse is nearest `esc_us`; 1500 for a
-    /// pulse inside the deadzone (an ESC gives no thrust there).
-    pub fn go_for(&self, esc_us: u16) -> u16 {
-        let dz = self.deadzone_us;
-        if esc_us.abs_diff(NEUTRAL_US) < dz || esc_us == NEUTRAL_US {
-            return NEUTRAL_US;
-        }
-        // `esc_us` is monotonic in `go`: search the side the pulse is on.
-        let (mut lo, mut hi) = if esc_us > NEUTRAL_US {
-            (NEUTRAL_US + 1, 2000)
-        } else {
-            (1000, NEUTRAL_US - 1)
-        };
-        while lo < hi {
-            let mid = lo + (hi - lo) / 2;
-            if self.esc_us(mid) < esc_us {
-                lo = mid + 1;
-            } else {
-                hi = mid;
-            }
-        }
-        // `lo` is the first go() reaching the pulse; its neighbour below may be nearer.
-        let below = lo.saturating_sub(1).max(1000);
-        let side = |g: u16| (g > NEUTRAL_US) == (esc_us > NEUTRAL_US) && g != NEUTRAL_US;
-        if side(below) && self.esc_us(below).abs_diff(esc_us) < self.esc_us(lo).abs_diff(esc_us) {
-            below
-        } else {
-            lo
-        }
+    /// The lowest `go()` value that still adds reverse thrust: below it
+    /// the multiplied value is past the ESC's end (1250 with the
+    /// firmware's 2).
+    pub fn reverse_limit(&self) -> u16 {
+        NEUTRAL_US - 500 / u16::from(self.reverse_multiplier.max(1))
     }
 
-    /// [`BoardMotors::go_for`] of each thruster.
-    pub fn go_values(&self, esc_us: [u16; 3]) -> [u16; 3] {
-        esc_us.map(|e| self.go_for(e))
+    /// The `go()` values as the thrusters feel them: a reverse value past
+    /// [`BoardMotors::reverse_limit`] gives no more than the limit.
+    pub fn effective(&self, go: [u16; 3]) -> [u16; 3] {
+        let limit = self.reverse_limit();
+        go.map(|g| g.max(limit))
     }
 }
 
@@ -249,12 +213,11 @@ mod tests {
             directions: [1, 1, 1],
             pwm_min_us: 1100,
             pwm_max_us: 1900,
-            deadzone_us: 0,
         }
     }
 
     #[test]
-    fn the_firmwares_mapping_and_its_inverse() {
+    fn the_firmwares_mapping_and_where_reverse_ends() {
         let b = BoardMotors::default();
         // Measured on the genuine 30.0.2 in simavr: go(1600) → 1640 µs, go(1400) → 1270 µs.
         assert_eq!(b.esc_us(1600), 1640);
@@ -268,37 +231,31 @@ mod tests {
         );
         assert_eq!(b.esc_us(1000), 1000);
         assert_eq!(b.esc_us(2000), 2000);
-        for esc in (1000..=2000).step_by(7) {
-            let go = b.go_for(esc);
-            if esc.abs_diff(1500) < 50 {
-                assert_eq!(go, 1500, "{esc}");
-            } else {
-                assert!(
-                    b.esc_us(go).abs_diff(esc) <= 2,
-                    "{esc} → go {go} → {}",
-                    b.esc_us(go)
-                );
-            }
-        }
-        assert_eq!(b.go_for(1900), 1889);
-        assert_eq!(b.go_for(1100), 1306);
+        assert_eq!(b.reverse_limit(), 1250);
+        assert_eq!(b.esc_us(b.reverse_limit()), 1000);
+        assert_eq!(b.effective([1100, 1300, 1700]), [1250, 1300, 1700]);
+        let thesis = BoardMotors {
+            deadzone_us: 0,
+            reverse_multiplier: 1,
+        };
+        assert_eq!(thesis.esc_us(1400), 1400);
+        assert_eq!(thesis.effective([1000, 1500, 2000]), [1000, 1500, 2000]);
     }
 
     #[test]
-    fn the_deadzone_is_skipped_both_ways() {
-        let c = MixerConfig {
-            deadzone_us: 50,
-            ..cfg()
-        };
-        assert_eq!(thruster_us(0.0, 1, &c), 1500);
-        assert_eq!(thruster_us(0.001, 1, &c), 1550);
-        assert_eq!(thruster_us(-0.001, 1, &c), 1450);
-        assert_eq!(thruster_us(1.0, 1, &c), 1900);
-        assert_eq!(thruster_us(-1.0, 1, &c), 1100);
-        assert_eq!(thruster_us(0.5, 1, &c), 1725);
-        let d = unmix([1725, 1500, 1275], &c);
+    fn half_stick_either_way_is_the_same_thrust_through_the_firmware() {
+        // The propellers push about half as hard backwards; the firmware's
+        // doubling makes up for it, so go() values stay linear in thrust.
+        let b = BoardMotors::default();
+        let fwd = f64::from(b.esc_us(thruster_us(0.5, 1, &cfg())) - 1500);
+        let rev = f64::from(1500 - b.esc_us(thruster_us(-0.5, 1, &cfg())));
         assert!(
-            (d.surge - 0.0).abs() < 1e-9 && (d.yaw - 0.5).abs() < 1e-9,
+            (rev * 0.5 - fwd).abs() / fwd < 0.15,
+            "forward {fwd} µs, reverse {rev} µs"
+        );
+        let d = unmix([1300, 1500, 1700], &cfg());
+        assert!(
+            (d.surge - 0.0).abs() < 1e-9 && (d.yaw + 0.5).abs() < 1e-9,
             "{d:?}"
         );
     }

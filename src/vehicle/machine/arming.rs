@@ -23,8 +23,13 @@ impl Vehicle {
                     .unwrap_or_else(|| "no telemetry".into())
             ));
         }
-        if !self.fresh(&self.board.depth_m, now) || !self.fresh(&self.board.heading_deg, now) {
-            return Some("no fresh depth and attitude from the board".into());
+        if !self.fresh(&self.board.heading_deg, now) {
+            return Some("no fresh attitude from the board".into());
+        }
+        // A depth is needed only by the modes that hold one (as in ArduSub):
+        // the basic OpenROV kit has no depth sensor and drives in MANUAL.
+        if let Some(why) = self.hold_unavailable(self.mode, now) {
+            return Some(format!("{} needs it: {why}", self.mode.name()));
         }
         if !self.fresh(&self.board.vout_v, now) {
             return Some("no fresh battery voltage from the board".into());

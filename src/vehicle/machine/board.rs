@@ -59,6 +59,11 @@ pub(super) struct BoardState {
     pub current_a: Stamped<f64>,
     /// Water pressure (mbar) and temperature (°C) from the depth sensor.
     pub water: Stamped<(f64, Option<f64>)>,
+    /// Whether the depth sensor has been read since the board started:
+    /// `Some(false)` while the board prints `pres:0` (the firmware's value
+    /// before its first conversion, and for ever without a sensor), `None`
+    /// before any `pres` since start or reboot.
+    pressure_read: Option<bool>,
     /// Camera tilt servo position the board reports (`servo`, µs).
     pub servo_us: Stamped<u16>,
     /// Controller-board temperature (`BRDT`).
@@ -81,6 +86,16 @@ pub(super) struct BoardState {
 }
 
 impl BoardState {
+    /// A `deap` reading is a measurement unless it is the firmware's unset
+    /// zero: the genuine board prints `deap:0.00` from boot until its depth
+    /// sensor's first conversion (about a second later), and always when no
+    /// sensor is fitted — with `pres:0` beside it. A zero depth before any
+    /// pressure reading is not trusted either; any other depth from a board
+    /// that never prints `pres` is.
+    fn depth_is_measured(&self, depth_m: f64) -> bool {
+        self.pressure_read.unwrap_or(depth_m != 0.0)
+    }
+
     pub fn on_sim_truth(&mut self, t: SimTruth, now: Now) {
         self.sim_truth = Stamped::new(t, now.mono);
     }
@@ -144,7 +159,7 @@ impl Vehicle {
                     self.board.heading_deg = Stamped::new(h, now.mono);
                     self.estimator_reading(holds::Reading::Heading(h), now, out);
                 }
-                if let Some(d) = depth_m {
+                if let Some(d) = depth_m.filter(|&d| self.board.depth_is_measured(d)) {
                     self.board.depth_m = Stamped::new(d, now.mono);
                     self.estimator_reading(holds::Reading::Depth(d), now, out);
                 }
@@ -193,7 +208,11 @@ impl Vehicle {
             self.board.current_a = Stamped::new(i, at);
         }
         if let Some(p) = s.pres_mbar {
-            self.board.water = Stamped::new((p, s.temp_c), at);
+            self.board.pressure_read = Some(p != 0.0);
+            // `pres:0` is no reading (see `depth_is_measured`).
+            if p != 0.0 {
+                self.board.water = Stamped::new((p, s.temp_c), at);
+            }
         }
         if let Some(us) = s.servo_us {
             self.board.servo_us = Stamped::new(us, at);
@@ -240,6 +259,7 @@ impl Vehicle {
     /// and waits for the pilot to arm again.
     fn on_board_boot(&mut self, out: &mut Vec<Output>) {
         self.board.dead_man_tripped = false;
+        self.board.pressure_read = None;
         self.board.firmware = None;
         self.board.uptime_ms = Stamped::default();
         if self.armed {

@@ -256,9 +256,9 @@ impl Vehicle {
         self.params.mixer_config(self.pilot.gain)
     }
 
-    /// The one place that decides what the thrusters get: the ESC pulses
-    /// (`motors_us`, what SERVO_OUTPUT_RAW reports) and the `go()` values
-    /// that make the board's firmware produce them.
+    /// The one place that decides what the thrusters get: the `go()`
+    /// values (`motors_us`, what SERVO_OUTPUT_RAW reports), linear in
+    /// thrust through the firmware's motor mapping.
     pub(super) fn update_thrusters(&mut self, now: Now, out: &mut Vec<Output>) {
         if let Some(t) = self.pilot.motor_test
             && (now.mono >= t.until || !self.armed)
@@ -322,8 +322,7 @@ impl Vehicle {
         if target != self.motors_us || resend {
             self.motors_us = target;
             self.pilot.last_go = Some(now.mono);
-            // The ESC pulses wanted, as the board's go() values that give them.
-            let [port_us, vertical_us, starboard_us] = self.params.board_motors().go_values(target);
+            let [port_us, vertical_us, starboard_us] = target;
             self.send_go(
                 Command::Go {
                     port_us,

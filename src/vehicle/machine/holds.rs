@@ -186,9 +186,10 @@ impl Vehicle {
         }
     }
 
-    /// The demand three ESC pulse widths really produce (the estimator's input).
-    pub(super) fn effective_demand(&self, us: [u16; 3]) -> Demand {
-        mixer::unmix(us, &self.mixer())
+    /// The demand three `go()` values really produce through the board's
+    /// motor mapping (the estimator's input).
+    pub(super) fn effective_demand(&self, go: [u16; 3]) -> Demand {
+        mixer::unmix(self.params.board_motors().effective(go), &self.mixer())
     }
 
     /// SET_POSITION_TARGET_GLOBAL_INT: only `alt` (depth, negative below the

@@ -313,15 +313,11 @@ impl ParamStore {
         if self.num(name) < 0.0 { -1 } else { 1 }
     }
 
-    pub fn esc_deadzone_us(&self) -> u16 {
-        self.u16_of("NEPT_ESC_DEADZN")
-    }
-
-    /// The board's motor mapping (deadzone skip, reverse multiplier).
+    /// The board's motor mapping (its reverse multiplier as set here).
     pub fn board_motors(&self) -> BoardMotors {
         BoardMotors {
-            deadzone_us: self.esc_deadzone_us(),
             reverse_multiplier: self.num("NEPT_ESC_REVMUL").clamp(1.0, 4.0) as u8,
+            ..BoardMotors::default()
         }
     }
 
@@ -439,7 +435,6 @@ impl ParamStore {
             ],
             pwm_min_us: self.mot_pwm_min(),
             pwm_max_us: self.mot_pwm_max(),
-            deadzone_us: self.esc_deadzone_us(),
         }
     }
 
