@@ -123,6 +123,13 @@ impl Command {
         )
     }
 
+    /// Whether the command sets a level (lights, laser, camera tilt) that a
+    /// newer one of the same kind replaces entirely: the link writes only
+    /// the newest pending one.
+    pub fn is_level(&self) -> bool {
+        matches!(self, Self::Lights(_) | Self::Laser(_) | Self::Tilt(_))
+    }
+
     /// Appends the command's text, e.g. `go(1500,1500,1500);` or `stop();`.
     pub fn write_text(&self, out: &mut Vec<u8>) {
         out.extend_from_slice(self.name().as_bytes());

@@ -139,7 +139,7 @@ impl LineDecoder {
             // Words, not `key:value;` pairs: a sensor's set-up chatter.
             self.stats.text_lines += 1;
         } else {
-            self.stats.count_rejected(RejectReason::Torn);
+            reject(&mut self.stats, RejectReason::Torn, text);
         }
     }
 
@@ -157,9 +157,16 @@ impl LineDecoder {
                 }
                 out.append(&mut self.pending);
             }
-            Err(reason) => self.stats.count_rejected(reason),
+            Err(reason) => reject(&mut self.stats, reason, text),
         }
     }
+}
+
+/// Counts a rejected line and logs it (at debug level: a noisy line would
+/// otherwise flood the log; the counters say how many).
+fn reject(stats: &mut DecodeStats, reason: RejectReason, text: &[u8]) {
+    stats.count_rejected(reason);
+    tracing::debug!(?reason, line = %String::from_utf8_lossy(text), "board line rejected");
 }
 
 /// Printable ASCII or `\r`: bytes that may belong to a line.

@@ -14,7 +14,7 @@
 //! owns arming and authority. The link only delivers them faithfully, and
 //! turns the board's bytes into decoded events.
 //!
-//! Every decision above lives in `session.rs`, a sans-IO state machine that
+//! Every decision above lives in `session/`, a sans-IO state machine that
 //! takes the time as an argument; `io.rs` is the tokio loop that owns the
 //! device and the channels and only moves bytes, requests and timers
 //! between them and the session. This file holds the types both share.
@@ -119,6 +119,9 @@ pub struct LinkStats {
     pub thrust_written: u64,
     /// Thruster commands superseded by a newer one before being written.
     pub thrust_coalesced: u64,
+    /// Lights, laser and tilt levels superseded by a newer one of the same
+    /// kind before being written.
+    pub settings_coalesced: u64,
     pub pings_written: u64,
     pub bytes_in: u64,
     pub bytes_out: u64,
@@ -128,7 +131,8 @@ pub struct LinkStats {
     pub events_dropped: u64,
     /// Frames the board never echoed (lost, or it was busy or resetting).
     pub echoes_missed: u64,
-    /// Times the board printed `boot` again while the link was handshaken.
+    /// Times the board printed `boot` again after it had talked on this
+    /// opening (a `boot` while it was still setting up is its first).
     pub board_reboots: u64,
 }
 
@@ -143,6 +147,7 @@ impl Default for LinkStats {
             commands_written: 0,
             thrust_written: 0,
             thrust_coalesced: 0,
+            settings_coalesced: 0,
             pings_written: 0,
             bytes_in: 0,
             bytes_out: 0,
