@@ -1,5 +1,5 @@
 //! The vehicle's footprint on the ROV's computer, side by side with
-//! MAVProxy under the same load (issue 18).
+//! MAVProxy under the same load.
 //!
 //! The release binary (`$NEPTUNUS_BIN`, else `target/release/neptunus`)
 //! runs as `neptunus --serial <pty>` against `neptunus emulate-board` in
@@ -190,7 +190,7 @@ fn header(bin: &Path, k: &Knobs) {
         })
         .unwrap_or_else(|| "?".into());
     let nproc = std::thread::available_parallelism().map_or(0, |n| n.get());
-    println!("neptunus footprint (issue 18)");
+    println!("neptunus footprint");
     println!(
         "date:     {}",
         out("date", &["-u", "+%Y-%m-%d %H:%M:%S UTC"])
@@ -308,7 +308,7 @@ fn measure_scenario(
 
 fn print_table(rows: &[Row], details: bool) {
     println!(
-        "\n{:<9} {:<9} {:>7} {:>9} {:>9} {:>11} {:>9}  target (issue 18)",
+        "\n{:<9} {:<9} {:>7} {:>9} {:>9} {:>11} {:>9}  target",
         "scenario", "process", "CPU %", "ctx sw/s", "RSS MB", "threads", "CPU vs MP"
     );
     let line = |name: &str, proc_: &str, f: &Figures, ratio: &str, target: &str| {

@@ -27,7 +27,7 @@ fn rig() -> CoreRig {
 }
 
 /// The 27 ids Cockpit's SET_MESSAGE_INTERVAL got UNSUPPORTED for before
-/// (the measurement) and the 9 we already streamed.
+/// (as measured against Cockpit) and the 9 we already streamed.
 const COCKPIT_IDS: [u32; 36] = [
     22, 24, 27, 29, 35, 65, 100, 116, 124, 125, 127, 128, 129, 132, 143, 152, 162, 163, 173, 178,
     191, 192, 193, 194, 241, 242, 285, // then the ones streamed all along

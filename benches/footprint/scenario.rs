@@ -62,7 +62,7 @@ impl Scenario {
         }
     }
 
-    /// The targets, printed beside the figures.
+    /// The footprint targets, printed beside the figures.
     pub fn target(self) -> &'static str {
         match self {
             Scenario::Idle => "<= 0.4 %, <= 120 cs/s",

@@ -1,4 +1,4 @@
-// The gamepad (issue 14 item 8), tested against the real binary (`--sim`)
+// The gamepad, tested against the real binary (`--sim`)
 // in Debian's headless Chromium. A headless browser has no gamepad, so the
 // one stand-in is `navigator.getGamepads`, replaced before the page's
 // scripts run by a fake pad the test presses; everything after it — the

@@ -1,4 +1,4 @@
-// The pilot's view (issue 14), tested as a pilot meets it: the real binary
+// The pilot's view, tested as a pilot meets it: the real binary
 // (`--sim`) and Debian's headless Chromium. Each test is one defect a pilot
 // at the pool side saw; waits poll a condition with a deadline.
 import { test, before, after } from 'node:test';

@@ -1,4 +1,4 @@
-// Snapshot, video recording and log downloads (issue 14 item 10), tested
+// Snapshot, video recording and log downloads, tested
 // against the real binary (`--sim`, whose synthetic camera streams MJPEG)
 // in Debian's headless Chromium. The files checked are the ones the
 // browser downloads. Waits poll a condition with a deadline.

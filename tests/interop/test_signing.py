@@ -1,5 +1,5 @@
-"""MAVLink 2 message signing, end to end (contract: the issue 5 behaviour
-spec, "Signing (MAVLink 2)").
+"""MAVLink 2 message signing, end to end (contract: the README's "Message
+signing").
 
 The key is set the way ground stations do it: SETUP_SIGNING (key =
 SHA-256 of a passphrase, as QGroundControl and MAVProxy derive it), sent
