@@ -33,13 +33,37 @@ if ! command -v faketime >/dev/null 2>&1; then
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q faketime
 fi
 
+# The genuine OpenROV firmware in the loop (feature hil, tests/genuine_*.rs):
+# avr-gcc and the Arduino AVR core build the firmware; simavr (built from
+# the simavr-ffi crate's sources) needs libclang for its bindings, libelf
+# and zstd to load ELF files.
+hil_packages="gcc-avr avr-libc arduino-core-avr libclang-dev libelf-dev libzstd-dev pkg-config"
+hil_missing=""
+for p in $hil_packages; do
+    dpkg -s "$p" >/dev/null 2>&1 || hil_missing="$hil_missing $p"
+done
+if [ -n "$hil_missing" ]; then
+    as_root apt-get update -q
+    # shellcheck disable=SC2086 # one word per package
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $hil_missing
+fi
+avr-gcc --version | sed -n 1p
+# The firmware snapshots the HIL tests build: ../shared/openrov-firmware
+# beside the repository unless OPENROV_FIRMWARE_DIR says otherwise.
+firmware_dir="${OPENROV_FIRMWARE_DIR:-$PWD/../shared/openrov-firmware}"
+if [ ! -f "$firmware_dir/30.0.2/OpenROV/OpenROV.ino" ] || [ ! -f "$firmware_dir/2014-12/OpenROV/OpenROV.ino" ]; then
+    echo "the genuine OpenROV firmware is not at $firmware_dir (30.0.2/ and 2014-12/) — set OPENROV_FIRMWARE_DIR; README 'Hardware in the loop' says how to get it" >&2
+    exit 1
+fi
+export OPENROV_FIRMWARE_DIR="$firmware_dir"
+
 echo "== formatting and lints"
 cargo fmt --all -- --check
+cargo clippy --all-targets --locked --features hil -- -D warnings
+# The vehicle as packaged (without the simulator of the genuine firmware).
 cargo clippy --all-targets --locked -- -D warnings
 # The API docs build without a warning (broken links included).
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked
-
-as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --features hil
 
 # The step-response plots (neptunus sim-report, tested) label axes with a system font.
 if ! find /usr/share/fonts -name '*.ttf' -print -quit 2>/dev/null | grep -q .; then
@@ -48,7 +72,7 @@ fi
 
 echo "== tests"
 status=0
-cargo test --all-targets --locked 2>&1 | tee target/test-output.txt || status=1
+cargo test --all-targets --locked --features hil 2>&1 | tee target/test-output.txt || status=1
 
 echo "== interoperability tests (real ground-station clients against the binary)"
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
