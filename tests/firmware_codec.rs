@@ -571,6 +571,26 @@ fn a_held_line_is_decided_by_the_next_one() {
     );
 }
 
+#[test]
+fn a_pong_then_an_unterminated_log_on_one_line_are_both_kept() {
+    // The genuine board prints `pong:` without a line end; when the depth
+    // sensor's failure comes next in the same loop pass they share a line.
+    let (events, stats) = decode(
+        b"pong:1,58102;log:Failed to read Depth from I2C\r\nhdgd:0.00;deap:0.00;pitc:0.00;roll:0.00;yaw:0.00;fthr:0.00;\r\n",
+    );
+    assert_eq!(events[0], Event::Pong("1,58102".into()));
+    assert_eq!(
+        events[1],
+        Event::Log("Failed to read Depth from I2C".into())
+    );
+    assert!(matches!(events[2], Event::Nav(_)), "{events:?}");
+    assert_eq!(stats.rejected_total(), 0, "{stats:?}");
+    // A torn pair before it is still torn: nothing of that line is kept.
+    let (events, stats) = decode(b"hdgd:1.0;deap:2.\r\nboot:1;\r\n");
+    assert_eq!(events, vec![Event::Boot]);
+    assert_eq!(stats.rejected_torn, 1);
+}
+
 // ---------------------------------------------------------------------------
 // decoding: rejection
 // ---------------------------------------------------------------------------

@@ -84,7 +84,7 @@ impl LineDecoder {
             return;
         }
         if self.line.len() + run.len() > MAX_LINE_BYTES + 1 {
-            self.stats.count_rejected(RejectReason::Overlong);
+            reject(&mut self.stats, RejectReason::Overlong, &self.line);
             self.skipping_overlong = true;
             self.line.clear();
         } else {
@@ -101,7 +101,7 @@ impl LineDecoder {
         let line = std::mem::take(&mut self.line);
         let text = line.strip_suffix(b"\r").unwrap_or(&line);
         if text.len() > MAX_LINE_BYTES {
-            self.stats.count_rejected(RejectReason::Overlong);
+            reject(&mut self.stats, RejectReason::Overlong, text);
         } else if !text.is_empty() {
             self.complete(text, out);
         }
@@ -131,6 +131,17 @@ impl LineDecoder {
 
     /// A line that ended without `;` and was not continued by one.
     fn unterminated(&mut self, text: &[u8], out: &mut Vec<Event>) {
+        // Pairs, then a log message without its `;` (a `pong:…;` printed
+        // without a line end, then the depth sensor's failure): the pairs
+        // are a line of their own.
+        if let Some(start) = text.windows(5).rposition(|w| w == b";log:") {
+            let (pairs, log) = text.split_at(start + 1);
+            if !log[4..].contains(&b';') {
+                self.decode(pairs, out);
+                self.unterminated(log, out);
+                return;
+            }
+        }
         if let Some(message) = text.strip_prefix(b"log:") {
             // The board's log messages are free text; some lack the `;`.
             self.stats.lines_accepted += 1;
