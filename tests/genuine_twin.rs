@@ -637,26 +637,15 @@ fn compare(genuine: &Capture, twin: &Capture) -> Result<(), String> {
         ));
     }
     for (i, ((gb, gn), (tb, tn))) in g.blinks.iter().zip(&t.blinks).enumerate() {
-        // The firmware's blink state outlives a trip: a later trip starts
-        // opposite to where the one before stopped, and where that was
-        // depends on how long it lasted (timing, not behaviour).
+        // The firmware's blink state outlives a trip, and a blink queued
+        // just before the ping may run after it: where a later trip starts
+        // depends on timing, not behaviour. Only the first is compared.
         if i == 0 && gb.first() != tb.first() {
             problems.push(format!(
                 "trip {i}: first blink {:?} (genuine) vs {:?} (emulator)",
                 gb.first(),
                 tb.first()
             ));
-        }
-        for (who, all) in [("genuine", &g.blinks), ("emulator", &t.blinks)] {
-            let before = i.checked_sub(1).and_then(|p| all[p].0.last());
-            if let (Some(last), Some(first)) = (before, all[i].0.first())
-                && last == first
-            {
-                problems.push(format!(
-                    "trip {i}: {who} starts blinking at {first}, where trip {} stopped",
-                    i - 1
-                ));
-            }
         }
         for (who, b, navs) in [("genuine", gb, gn), ("emulator", tb, tn)] {
             if b.windows(2).any(|w| w[0] == w[1]) || b.iter().any(|l| l != "0" && l != "50") {
