@@ -28,9 +28,12 @@ use neptunus::hil::{
 };
 use nix::sys::signal::Signal;
 
-/// The simulated board's servo neutral is a few microseconds above 1500
-/// (the Servo library's interrupt latency): "neutral" is within this.
-const NEUTRAL_TOL_US: f64 = 10.0;
+/// The simulated board's servo neutral is a few microseconds above 1500, and
+/// a pulse now and then ends 10–16 µs late while the UART's interrupts hold
+/// the Servo library's off (seen when the line is busy): "neutral" is within
+/// this. A real command is never that close: the firmware's motor mapping
+/// skips a 50 µs deadzone each side.
+const NEUTRAL_TOL_US: f64 = 25.0;
 /// Off neutral enough to be a command, not jitter.
 const MOVED_US: f64 = 40.0;
 const WAIT: Duration = Duration::from_secs(15);
@@ -144,7 +147,10 @@ impl GenuineRig {
             ],
             dir.path(),
             "",
-            &[("RUST_LOG", "warn,neptunus::app::vehicle_task=info")],
+            &[(
+                "RUST_LOG",
+                "warn,neptunus::app::vehicle_task=info,neptunus::firmware::codec=debug",
+            )],
         )
         .unwrap();
         gcs.await_vehicle(&mut vehicle, Duration::from_secs(30))
@@ -394,6 +400,7 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
         |p| port_forward(p) > MOVED_US,
     );
     for _ in rig.changes.try_iter() {}
+    let _ = rig.board_output();
     rig.vehicle.signal(Signal::SIGSTOP).unwrap();
     let stopped_board_s = rig.control.snapshot().sim_time_s;
     let stopped_wall = Instant::now();
@@ -416,7 +423,22 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
             }
         }
     }
-    let cycle = neutral_at.expect("the board's dead-man never brought the ESCs to neutral");
+    // The serial traffic from the stop on, for a failure's message.
+    let traffic: String = rig
+        .serial
+        .try_iter()
+        .map(|c| {
+            format!(
+                "{:>6.3} s {} {}\n",
+                c.at.saturating_duration_since(stopped_wall).as_secs_f64(),
+                if c.to_board { "→" } else { "←" },
+                String::from_utf8_lossy(&c.bytes).escape_debug()
+            )
+        })
+        .collect();
+    let cycle = neutral_at.unwrap_or_else(|| {
+        panic!("the board's dead-man never brought the ESCs to neutral:\n{traffic}")
+    });
     let board_s = cycle as f64 / F_CPU_HZ as f64 - stopped_board_s;
     eprintln!(
         "dead-man: ESCs neutral {board_s:.2} s (board time) after neptunus stopped ({:.2} s wall)",
@@ -424,7 +446,7 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
     );
     assert!(
         board_s < 3.0,
-        "ESCs neutral only {board_s:.2} s after the stop"
+        "ESCs neutral only {board_s:.2} s after the stop; the serial line since:\n{traffic}"
     );
     rig.vehicle.signal(Signal::SIGCONT).unwrap();
     // Back, the vehicle is disarmed and the board stays neutral although
@@ -563,12 +585,27 @@ fn steady_running_rejects_nothing(rig: &mut GenuineRig) {
         rejected_after,
         rejected_before,
         "rejected lines in a minute of normal running:\n{}",
-        rig.vehicle.stderr_tail()
+        strip_ansi(&rig.vehicle.stderr_text())
+            .lines()
+            .filter(|l| l.contains("rejected"))
+            .collect::<Vec<_>>()
+            .join("\n")
     );
+}
+
+/// One genuine board at a time: simavr paced to real time takes a good
+/// share of a core, and two at once on a small machine slip behind it.
+static ONE_BOARD: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_board() -> std::sync::MutexGuard<'static, ()> {
+    ONE_BOARD
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 #[test]
 fn the_genuine_2015_firmware_arms_drives_and_stops() {
+    let _one = one_board();
     let mut rig = GenuineRig::start("30.0.2");
     drives_the_board(&mut rig, "30.0.2");
 
@@ -609,6 +646,7 @@ fn the_genuine_2015_firmware_arms_drives_and_stops() {
 
 #[test]
 fn the_genuine_2014_firmware_with_plain_framing() {
+    let _one = one_board();
     let mut rig = GenuineRig::start("2014-12");
     assert_eq!(rig.board.firmware().framing.to_string(), "plain");
     drives_the_board(&mut rig, "2014-12");
