@@ -14,7 +14,8 @@
 //!   servo pulse widths from pin edges, lights and lasers from their timer.
 //! - [`runner`]: [`GenuineBoard`], the firmware paced to the wall clock on
 //!   its own thread, its UART0 on a pty, its analog inputs set in volts and
-//!   amperes, a reset line, and the records tests and benches read.
+//!   amperes, its depth sensor's water, a reset line, and the records
+//!   tests and benches read.
 //!
 //! The firmware is test data, not part of Neptunus: this module builds and
 //! runs it, it never changes it. Nothing here decides what the vehicle
