@@ -1,6 +1,6 @@
 //! simavr behind a safe face: one simulated ATmega2560 running a firmware
-//! ELF, with its UART0, ADC inputs, watched output pins, timer registers
-//! and reset reachable from Rust.
+//! ELF, with its UART0, ADC inputs, watched output pins, timer registers,
+//! I2C (TWI) slaves and reset reachable from Rust.
 //!
 //! This is the crate's one module with `unsafe` code: simavr's C API takes
 //! raw pointers and calls back into Rust from inside `avr_run`. The rules
@@ -16,9 +16,11 @@
     reason = "simavr is a C library: this module is the crate's one FFI boundary"
 )]
 
+use std::cell::RefCell;
 use std::ffi::{CString, c_int, c_void};
 use std::path::{Path, PathBuf};
 use std::ptr::NonNull;
+use std::rc::Rc;
 
 use simavr_ffi as ffi;
 
@@ -71,6 +73,41 @@ pub struct Edge {
     pub high: bool,
 }
 
+/// A device on the board's I2C bus, answering the firmware's TWI master.
+/// Called from inside [`Mcu::run_until`] with the cycle of each bus event;
+/// only for transfers addressed to it.
+pub trait TwiSlave {
+    /// The 7-bit bus address it answers (and acknowledges).
+    fn address(&self) -> u8;
+    /// The master addressed it: `read` is the direction of the transfer.
+    fn start(&mut self, read: bool, cycle: u64);
+    /// A byte the master wrote; the slave acknowledges every byte.
+    fn write(&mut self, byte: u8, cycle: u64);
+    /// The master clocks a byte out of the slave.
+    fn read(&mut self, cycle: u64) -> u8;
+    /// The master ended the transfer.
+    fn stop(&mut self, cycle: u64);
+}
+
+/// One attached slave's callback parameter.
+struct TwiHook {
+    avr: *const ffi::avr_t,
+    /// The TWI's input IRQ: where the slave's acknowledgements and data go.
+    input: *mut ffi::avr_irq_t,
+    slave: Rc<RefCell<dyn TwiSlave>>,
+    /// The SLA+R/W byte of the transfer addressed to this slave, if any.
+    selected: Option<u8>,
+}
+
+/// simavr's TWI message (`avr_twi_msg_t`): bit-fields `unused:8, msg:8,
+/// addr:8, data:8` from the least significant bit, as GCC lays them out on
+/// the little-endian hosts simavr builds for. Replies are built by simavr's
+/// own `avr_twi_irq_msg`; `twi_layout_matches_simavr` checks this split.
+fn twi_fields(value: u32) -> (u32, u8, u8) {
+    let [_, msg, addr, data] = value.to_le_bytes();
+    (u32::from(msg), addr, data)
+}
+
 /// What the callbacks write. Reached through a raw pointer from C; read by
 /// Rust only between calls into simavr.
 struct Io {
@@ -98,6 +135,8 @@ pub struct Mcu {
     firmware: NonNull<ffi::elf_firmware_t>,
     /// Millivolts on each ADC input, re-applied after a reset.
     adc_mv: [Option<u32>; 16],
+    /// One per attached I2C slave; simavr calls back with these.
+    twi_hooks: Vec<NonNull<TwiHook>>,
 }
 
 impl std::fmt::Debug for Mcu {
@@ -135,6 +174,46 @@ unsafe extern "C" fn on_pin(_: *mut ffi::avr_irq_t, value: u32, param: *mut c_vo
             cycle,
             high: value & 1 == 1,
         });
+    }
+}
+
+unsafe extern "C" fn on_twi(_: *mut ffi::avr_irq_t, value: u32, param: *mut c_void) {
+    // Safety: `param` is a `TwiHook` this module registered, alive until
+    // `Drop` (after the AVR is gone); `avr` and `input` belong to that AVR.
+    let hook = unsafe { &mut *param.cast::<TwiHook>() };
+    let cycle = unsafe { (*hook.avr).cycle };
+    // The runner never holds the slave across `run_until`; if something
+    // did, the byte is not acknowledged rather than a panic inside C.
+    let Ok(mut slave) = hook.slave.try_borrow_mut() else {
+        return;
+    };
+    let (msg, addr, data) = twi_fields(value);
+    let reply = |msg: u32, addr: u8, data: u8| {
+        // Safety: `input` is the live AVR's TWI input IRQ; simavr handles
+        // the reply synchronously, as the master expects.
+        unsafe {
+            let v = ffi::avr_twi_irq_msg(msg as u8, addr, data);
+            ffi::avr_raise_irq(hook.input, v);
+        }
+    };
+    if msg & ffi::TWI_COND_START != 0 {
+        hook.selected = None;
+        if addr >> 1 == slave.address() {
+            hook.selected = Some(addr);
+            slave.start(addr & 1 == 1, cycle);
+            reply(ffi::TWI_COND_ACK, addr, 1);
+        }
+    } else if let Some(sla) = hook.selected {
+        if msg & ffi::TWI_COND_WRITE != 0 {
+            slave.write(data, cycle);
+            reply(ffi::TWI_COND_ACK, sla, 1);
+        } else if msg & ffi::TWI_COND_READ != 0 {
+            let byte = slave.read(cycle);
+            reply(ffi::TWI_COND_READ, sla, byte);
+        }
+    }
+    if msg & ffi::TWI_COND_STOP != 0 && hook.selected.take().is_some() {
+        slave.stop(cycle);
     }
 }
 
@@ -201,6 +280,7 @@ impl Mcu {
                 adc: NonNull::dangling(),
                 firmware,
                 adc_mv: [None; 16],
+                twi_hooks: Vec::new(),
             };
             mcu.connect(watch)?;
             Ok(mcu)
@@ -339,6 +419,38 @@ impl Mcu {
         unsafe { ffi::avr_raise_irq(self.adc.as_ptr().add(channel), mv) };
     }
 
+    /// Puts `slave` on the I2C bus from now on (kept across resets: the
+    /// board's reset line does not reach its sensors). The caller keeps its
+    /// own `Rc` to change the slave between runs.
+    pub fn attach_twi(&mut self, slave: Rc<RefCell<dyn TwiSlave>>) -> Result<(), AvrError> {
+        let avr = self.avr.as_ptr();
+        // simavr names the ATmega2560's one TWI 0 (`AVR_IOCTL_TWI_GETIRQ`).
+        let ctl = ioctl(b't', b'w', b'i', 0);
+        // Safety: `avr` is live; simavr returns null for an unknown ioctl.
+        let (output, input) = unsafe {
+            (
+                ffi::avr_io_getirq(avr, ctl, ffi::TWI_IRQ_OUTPUT as c_int),
+                ffi::avr_io_getirq(avr, ctl, ffi::TWI_IRQ_INPUT as c_int),
+            )
+        };
+        if output.is_null() || input.is_null() {
+            return Err(AvrError::MissingIo {
+                mcu: "atmega2560",
+                what: "TWI (I2C)".into(),
+            });
+        }
+        let hook = NonNull::from(Box::leak(Box::new(TwiHook {
+            avr,
+            input,
+            slave,
+            selected: None,
+        })));
+        self.twi_hooks.push(hook);
+        // Safety: the hook matches simavr's notify signature and lives until Drop.
+        unsafe { ffi::avr_irq_register_notify(output, Some(on_twi), hook.as_ptr().cast()) };
+        Ok(())
+    }
+
     /// One byte of the MCU's data space (registers and RAM), e.g. a timer's
     /// compare register.
     pub fn data(&self, addr: u16) -> u8 {
@@ -380,8 +492,23 @@ impl Drop for Mcu {
             ffi::avr_terminate(self.avr.as_ptr());
             libc::free(self.avr.as_ptr().cast());
             drop(Box::from_raw(self.hooks.as_ptr()));
+            for hook in self.twi_hooks.drain(..) {
+                drop(Box::from_raw(hook.as_ptr()));
+            }
             drop(Box::from_raw(self.io.as_ptr()));
             drop(Box::from_raw(self.firmware.as_ptr()));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn twi_layout_matches_simavr() {
+        // Safety: a pure C function packing three bytes.
+        let v = unsafe { ffi::avr_twi_irq_msg(0x12, 0x34, 0x56) };
+        assert_eq!(twi_fields(v), (0x12, 0x34, 0x56));
     }
 }

@@ -7,11 +7,15 @@
 //! - [`compile`]: finds the sketch and builds it with avr-gcc and Debian's
 //!   Arduino AVR core, caching the ELF.
 //! - `avr`: simavr behind a safe face (the crate's one FFI boundary).
+//! - [`ms5803`]: the MS5803-14BA depth sensor on the board's I2C bus, its
+//!   raw readings worked back from a depth and water temperature through
+//!   the firmware's own arithmetic.
 //! - [`pins`]: the board's outputs as an instrument reads them: ESC and
 //!   servo pulse widths from pin edges, lights and lasers from their timer.
 //! - [`runner`]: [`GenuineBoard`], the firmware paced to the wall clock on
 //!   its own thread, its UART0 on a pty, its analog inputs set in volts and
-//!   amperes, a reset line, and the records tests and benches read.
+//!   amperes, its depth sensor's water, a reset line, and the records
+//!   tests and benches read.
 //!
 //! The firmware is test data, not part of Neptunus: this module builds and
 //! runs it, it never changes it. Nothing here decides what the vehicle
@@ -19,11 +23,13 @@
 
 mod avr;
 pub mod compile;
+pub mod ms5803;
 pub mod pins;
 pub mod runner;
 
 pub use avr::{AvrError, F_CPU_HZ};
 pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
+pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};
 pub use runner::{
     Analog, GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,

@@ -7,14 +7,17 @@
 //! assumed), the bridge (bytes from the host go onto the UART line at its
 //! baud rate, bytes the firmware prints go to the pty), the analog inputs
 //! (battery voltage, currents, board temperature, in volts and amperes
-//! converted to what the board's dividers put on its ADC pins), the output
+//! converted to what the board's dividers put on its ADC pins), the depth
+//! sensor on its I2C bus (depth and water temperature, [`super::ms5803`]), the output
 //! measurement ([`super::pins`]), a hardware reset, and the figures and
 //! records a test or a bench reads ([`GenuineControl`]). It never decides
 //! anything the board does: that is the firmware's.
 
+use std::cell::RefCell;
 use std::io;
 use std::os::fd::{AsFd, OwnedFd};
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 use std::sync::mpsc::{self, Receiver, Sender, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -24,6 +27,7 @@ use serde::Serialize;
 
 use super::avr::{AvrError, Edge, F_CPU_HZ, Mcu};
 use super::compile::Firmware;
+use super::ms5803::{Ms5803, Prom, Water};
 use super::pins::{Pins, PinsReport, PulseChange, WATCHED, reg};
 use crate::firmware::pty::{PtyError, open_raw, remove_link_to, symlink_to};
 
@@ -113,6 +117,8 @@ pub struct GenuineSnapshot {
     pub sim_time_s: f64,
     pub pins: PinsReport,
     pub analog: Analog,
+    /// What the depth sensor is in.
+    pub water: Water,
     /// Simulated seconds per wall second over the last second: 1.0 when the
     /// board keeps real time, below when it cannot.
     pub realtime_ratio: f64,
@@ -132,6 +138,7 @@ pub struct GenuineSnapshot {
 
 enum Ctl {
     Analog(Analog),
+    Water(Water),
     Reset,
     Inject(Vec<u8>),
     Serial(Sender<SerialChunk>),
@@ -150,6 +157,7 @@ impl std::fmt::Debug for Ctl {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Ctl::Analog(_) => "Analog",
+            Ctl::Water(_) => "Water",
             Ctl::Reset => "Reset",
             Ctl::Inject(_) => "Inject",
             Ctl::Serial(_) => "Serial",
@@ -171,6 +179,11 @@ impl GenuineControl {
     /// New analog inputs from the next slice on.
     pub fn set_analog(&self, analog: Analog) {
         let _ = self.tx.send(Ctl::Analog(analog));
+    }
+    /// New depth and water temperature for the depth sensor's next
+    /// conversion (the firmware reads it once a second).
+    pub fn set_water(&self, water: Water) {
+        let _ = self.tx.send(Ctl::Water(water));
     }
     /// Pulls the reset line: the firmware starts again from power-up.
     pub fn reset(&self) {
@@ -226,6 +239,7 @@ impl GenuineBoard {
             sim_time_s: 0.0,
             pins: PinsReport::default(),
             analog,
+            water: Water::default(),
             realtime_ratio: 0.0,
             speed_ratio: 0.0,
             slips: 0,
@@ -243,7 +257,13 @@ impl GenuineBoard {
             .name("genuine-board".into())
             .spawn(move || {
                 // simavr's objects never leave this thread.
-                let mcu = match Mcu::load(&elf, &WATCHED) {
+                let depth = Rc::new(RefCell::new(Ms5803::new(
+                    Prom::typical(),
+                    &Water::default(),
+                )));
+                let loaded = Mcu::load(&elf, &WATCHED)
+                    .and_then(|mut mcu| mcu.attach_twi(depth.clone()).map(|()| mcu));
+                let mcu = match loaded {
                     Ok(mcu) => {
                         let _ = ready_tx.send(Ok(()));
                         mcu
@@ -253,7 +273,7 @@ impl GenuineBoard {
                         return;
                     }
                 };
-                let mut runner = Runner::new(mcu, pty.master, analog, shared);
+                let mut runner = Runner::new(mcu, depth, pty.master, analog, shared);
                 runner.run(&rx);
                 drop(pty.slave);
                 if let Some((link, target)) = link {
@@ -311,6 +331,8 @@ struct Runner {
     mcu: Mcu,
     master: OwnedFd,
     analog: Analog,
+    depth: Rc<RefCell<Ms5803>>,
+    water: Water,
     shared: Arc<Mutex<GenuineSnapshot>>,
     pins: Pins,
     /// Host bytes not yet on the UART line.
@@ -330,6 +352,7 @@ struct Runner {
 impl Runner {
     fn new(
         mut mcu: Mcu,
+        depth: Rc<RefCell<Ms5803>>,
         master: OwnedFd,
         analog: Analog,
         shared: Arc<Mutex<GenuineSnapshot>>,
@@ -347,6 +370,8 @@ impl Runner {
             mcu,
             master,
             analog,
+            depth,
+            water: Water::default(),
             shared,
             pins: Pins::default(),
             from_host: Default::default(),
@@ -449,6 +474,10 @@ impl Runner {
                 for (channel, mv) in a.inputs() {
                     self.mcu.set_adc_mv(channel, mv);
                 }
+            }
+            Ctl::Water(w) => {
+                self.water = w;
+                self.depth.borrow_mut().set_water(&w);
             }
             Ctl::Reset => {
                 self.mcu.reset();
@@ -556,6 +585,7 @@ impl Runner {
         self.stats.sim_time_s = cycle as f64 / F_CPU_HZ as f64;
         self.stats.pins = self.pins.report(cycle);
         self.stats.analog = self.analog;
+        self.stats.water = self.water;
         if let Ok(mut s) = self.shared.lock() {
             *s = self.stats.clone();
         }

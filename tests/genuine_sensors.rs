@@ -1,0 +1,220 @@
+//! The genuine OpenROV firmware 30.0.2 reading its depth sensor: the
+//! MS5803-14BA simulated on the board's I2C bus (`src/hil/ms5803.rs`) with
+//! a depth and water temperature the runner is given, and the firmware's
+//! own code working `deap`, `pres` and `temp` out of the raw readings. No
+//! Neptunus here: the test reads the board's UART as the BeagleBone would.
+//!
+//! Waiting is counted in the firmware's own output (its `pres:` line comes
+//! once a second of simulated time, its sensor read once a second too), so
+//! a slow machine that runs the simulator below real time does not change
+//! what is asserted.
+#![cfg(feature = "hil")]
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::time::{Duration, Instant};
+
+use neptunus::hil::ms5803::Prom;
+use neptunus::hil::{Analog, GenuineBoard, GenuineControl, SerialChunk, Water, prepare};
+
+/// Only a guard against a hung simulator: nothing is judged by wall time.
+const WAIT: Duration = Duration::from_secs(60);
+const DEPTH_TOL_M: f64 = 0.05;
+const PRES_TOL_MBAR: f64 = 2.0;
+const TEMP_TOL_C: f64 = 0.1;
+const I2C_FAILURE: &str = "log:Failed to read Depth from I2C";
+
+fn firmware_dir(version: &str) -> PathBuf {
+    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
+        });
+    let dir = root.join(version);
+    assert!(
+        dir.join("OpenROV/OpenROV.ino").is_file(),
+        "the genuine OpenROV firmware {version} is not at {} — set OPENROV_FIRMWARE_DIR to a folder \
+         holding {version}/ (README \"Hardware in the loop\")",
+        dir.display()
+    );
+    dir
+}
+
+/// The board's output as `name:value` fields (each ended by `;`), and
+/// everything it printed, for the failure check.
+struct Uart {
+    rx: Receiver<SerialChunk>,
+    partial: String,
+    fields: std::collections::VecDeque<String>,
+    all: String,
+}
+
+impl Uart {
+    fn new(rx: Receiver<SerialChunk>) -> Self {
+        Self {
+            rx,
+            partial: String::new(),
+            fields: Default::default(),
+            all: String::new(),
+        }
+    }
+
+    fn take(&mut self, chunk: SerialChunk) {
+        if chunk.to_board {
+            return;
+        }
+        let text = String::from_utf8_lossy(&chunk.bytes);
+        self.all.push_str(&text);
+        for c in text.chars() {
+            match c {
+                ';' => self
+                    .fields
+                    .push_back(std::mem::take(&mut self.partial).trim().to_owned()),
+                '\r' | '\n' => self.partial.clear(),
+                c => self.partial.push(c),
+            }
+        }
+    }
+
+    /// The next field, waiting for the board to print it.
+    fn field(&mut self) -> String {
+        let deadline = Instant::now() + WAIT;
+        loop {
+            if let Some(f) = self.fields.pop_front() {
+                return f;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.rx.recv_timeout(left) {
+                Ok(chunk) => self.take(chunk),
+                Err(RecvTimeoutError::Timeout) => panic!("the board printed nothing for {WAIT:?}"),
+                Err(RecvTimeoutError::Disconnected) => panic!("the board stopped"),
+            }
+        }
+    }
+
+    /// The value of the next `name:` field.
+    fn next(&mut self, name: &str) -> String {
+        loop {
+            let f = self.field();
+            if let Some(v) = f.strip_prefix(name).and_then(|r| r.strip_prefix(':')) {
+                return v.to_owned();
+            }
+        }
+    }
+
+    fn next_f64(&mut self, name: &str) -> f64 {
+        let v = self.next(name);
+        v.parse()
+            .unwrap_or_else(|_| panic!("{name}:{v} is not a number"))
+    }
+
+    /// Forgets what the board printed so far (still kept in `all`).
+    fn drain(&mut self) {
+        while let Ok(chunk) = self.rx.try_recv() {
+            self.take(chunk);
+        }
+        self.fields.clear();
+        self.partial.clear();
+    }
+}
+
+/// What the firmware printed once it had read the sensor in `water`.
+#[derive(Debug)]
+struct Reading {
+    deap_m: Vec<f64>,
+    pres_mbar: f64,
+    temp_c: f64,
+}
+
+/// Gives the sensor `water`, waits until the firmware has read it, and
+/// returns what it printed.
+fn read_at(control: &GenuineControl, uart: &mut Uart, water: Water) -> Reading {
+    control.set_water(water);
+    // The runner shows the water once it has applied it.
+    while control.snapshot().water != water {
+        let _ = uart.field();
+    }
+    uart.drain();
+    // From here on every sensor read is in the new water. The next read is
+    // at most a second (and two 10 ms conversions) away, the `pres:` line
+    // comes once a second: the third one is surely from the new read.
+    for _ in 0..2 {
+        uart.next("pres");
+    }
+    let pres_mbar = uart.next_f64("pres");
+    let temp_c = uart.next_f64("temp");
+    let deap_m = (0..3).map(|_| uart.next_f64("deap")).collect();
+    Reading {
+        deap_m,
+        pres_mbar,
+        temp_c,
+    }
+}
+
+#[test]
+fn genuine_firmware_reads_depth_pressure_and_temperature() {
+    let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
+    let firmware = prepare(&firmware_dir("30.0.2"), &cache)
+        .unwrap_or_else(|e| panic!("building the 30.0.2 firmware: {e}"));
+    let board =
+        GenuineBoard::spawn(firmware, Analog::default(), None).expect("simavr runs the firmware");
+    let control = board.control();
+    let mut uart = Uart::new(control.serial());
+
+    // At set-up the firmware reads the PROM and prints C0..C7.
+    let prom = Prom::typical();
+    for (i, word) in prom.0.iter().enumerate() {
+        let got = uart.next(&format!("Depth.C{i}"));
+        assert_eq!(got, word.to_string(), "PROM word {i}");
+    }
+
+    let steps = [(0.0, 15.0), (2.0, 11.5), (5.5, 8.0)];
+    let mut deaps = Vec::new();
+    for (depth_m, temp_c) in steps {
+        let water = Water {
+            depth_m,
+            temp_c,
+            salt_water: false,
+        };
+        let r = read_at(&control, &mut uart, water);
+        let want_mbar = water.pressure_mbar();
+        eprintln!(
+            "depth {depth_m:.2} m, {temp_c:.1} °C: deap {:?} m, pres {:.2} mbar (want {want_mbar:.2}), temp {:.2} °C",
+            r.deap_m, r.pres_mbar, r.temp_c
+        );
+        for d in &r.deap_m {
+            assert!(
+                (d - depth_m).abs() <= DEPTH_TOL_M,
+                "deap:{d} at {depth_m} m"
+            );
+        }
+        assert!(
+            (r.pres_mbar - want_mbar).abs() <= PRES_TOL_MBAR,
+            "pres:{} where {want_mbar:.2} mbar was wanted",
+            r.pres_mbar
+        );
+        assert!(
+            (r.temp_c - temp_c).abs() <= TEMP_TOL_C,
+            "temp:{} in {temp_c} °C water",
+            r.temp_c
+        );
+        deaps.push(r.deap_m[0]);
+    }
+    assert!(
+        deaps.windows(2).all(|w| w[1] > w[0]),
+        "deeper must read deeper: {deaps:?}"
+    );
+    uart.drain();
+    assert!(
+        !uart.all.contains(I2C_FAILURE),
+        "the firmware could not read its depth sensor:\n{}",
+        uart.all
+    );
+    let snap = control.snapshot();
+    eprintln!(
+        "simulated {:.1} s, real-time ratio {:.2}, slips {}",
+        snap.sim_time_s, snap.realtime_ratio, snap.slips
+    );
+    assert!(snap.error.is_none(), "{:?}", snap.error);
+}
