@@ -286,9 +286,10 @@ impl Vehicle {
         }
     }
 
-    /// The owner showed life (its own HEARTBEAT or stick input).
+    /// The owner or the pending requester showed life (its own HEARTBEAT or
+    /// stick input; with signing on, only signed counts).
     pub(super) fn note_life(&mut self, from: Sender, now: Now) {
-        if !(from.signed || !self.signing_active) {
+        if !from.signed && self.signing_active {
             return;
         }
         if self.owner() == Some(from.sysid) {
