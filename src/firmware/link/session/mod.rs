@@ -3,8 +3,9 @@
 //!
 //! Owns the start-up handshake (wait for `boot`, or `boot_wait` for a board
 //! that was already running; then `dms(1)`, `start()`), the keep-alive
-//! `ping(0)` gated on the vehicle task's health, the outbox that coalesces
-//! thruster commands (the newest wins), the pacing that keeps the board's
+//! `ping(0)` gated on the vehicle task's health (queued ahead of pending
+//! levels), the outbox that coalesces thruster commands and lights, laser
+//! and tilt levels (the newest wins), the pacing that keeps the board's
 //! receive buffer from overflowing, the telemetry watchdog, the link state
 //! and its figures, and the reopen backoff.
 //!
