@@ -41,7 +41,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
 use common::{Gcs, Rig, Traffic, Vehicle, pct_ms};
-use neptunus::hil::{Analog, GenuineBoard, Output, prepare};
+use neptunus::hil::{GenuineBoard, Output, Wiring, prepare};
 
 const FORWARD: i16 = 800;
 const STEP: Duration = Duration::from_millis(600);
@@ -110,7 +110,7 @@ fn main() -> anyhow::Result<()> {
     // The genuine firmware.
     let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/openrov-firmware");
     let firmware = prepare(&firmware_dir(), &cache)?;
-    let board = GenuineBoard::spawn(firmware, Analog::default(), None)?;
+    let board = GenuineBoard::spawn(firmware, Wiring::default(), None)?;
     let control = board.control();
     let serial = control.serial();
     let changes = control.changes();

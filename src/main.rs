@@ -111,7 +111,7 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
 /// pty, prints the pty's path, and runs until interrupted.
 #[cfg(feature = "hil")]
 fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::Result<()> {
-    use neptunus::hil::{Analog, GenuineBoard, prepare};
+    use neptunus::hil::{Analog, GenuineBoard, Wiring, prepare};
     let cache = config::resolve(run)?.data_dir.join("openrov-firmware");
     let firmware = prepare(&args.firmware, &cache)?;
     let framing = firmware.framing;
@@ -119,7 +119,11 @@ fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::R
         battery_v: args.battery_v,
         ..Analog::default()
     };
-    let board = GenuineBoard::spawn(firmware, analog, args.link.clone())?;
+    let wiring = Wiring {
+        analog,
+        depth_sensor: !args.no_depth_sensor,
+    };
+    let board = GenuineBoard::spawn(firmware, wiring, args.link.clone())?;
     let mut out = std::io::stdout();
     writeln!(out, "{}", board.path().display())?;
     out.flush()?;

@@ -24,7 +24,7 @@ use common::{Gcs, Traffic, Vehicle};
 use neptunus::dialect::neptunus::*;
 use neptunus::hil::{
     Analog, F_CPU_HZ, GenuineBoard, GenuineControl, Output, PinsReport, SerialChunk, TimedChange,
-    prepare,
+    Wiring, prepare,
 };
 use nix::sys::signal::Signal;
 
@@ -114,9 +114,10 @@ struct GenuineRig {
 }
 
 impl GenuineRig {
-    /// Powers the genuine board `version` with 12.0 V on its battery input,
-    /// then starts `neptunus --serial <its pty>`.
-    fn start(version: &str) -> Self {
+    /// Powers the genuine board `version` with 12.0 V on its battery input
+    /// (and the depth sensor on its I2C bus if `depth_sensor`), then starts
+    /// `neptunus --serial <its pty>`.
+    fn start(version: &str, depth_sensor: bool) -> Self {
         let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
         let firmware = prepare(&firmware_dir(version), &cache)
             .unwrap_or_else(|e| panic!("building the {version} firmware: {e}"));
@@ -126,7 +127,11 @@ impl GenuineRig {
             battery_current_a: [0.4, 0.3],
             ..Analog::default()
         };
-        let board = GenuineBoard::spawn(firmware, analog, None).expect("simavr runs the firmware");
+        let wiring = Wiring {
+            analog,
+            depth_sensor,
+        };
+        let board = GenuineBoard::spawn(firmware, wiring, None).expect("simavr runs the firmware");
         let powered_at = Instant::now();
         let control = board.control();
         let serial = control.serial();
@@ -613,7 +618,8 @@ fn one_board() -> std::sync::MutexGuard<'static, ()> {
 #[test]
 fn the_genuine_2015_firmware_arms_drives_and_stops() {
     let _one = one_board();
-    let mut rig = GenuineRig::start("30.0.2");
+    // A ROV with the depth add-on.
+    let mut rig = GenuineRig::start("30.0.2", true);
     drives_the_board(&mut rig, "30.0.2");
 
     // Corrupted frames on the line: the board reports each, and Neptunus
@@ -654,7 +660,8 @@ fn the_genuine_2015_firmware_arms_drives_and_stops() {
 #[test]
 fn the_genuine_2014_firmware_with_plain_framing() {
     let _one = one_board();
-    let mut rig = GenuineRig::start("2014-12");
+    // A basic kit: no depth sensor, the firmware says so once a second.
+    let mut rig = GenuineRig::start("2014-12", false);
     assert_eq!(rig.board.firmware().framing.to_string(), "plain");
     drives_the_board(&mut rig, "2014-12");
     steady_running_rejects_nothing(&mut rig);

@@ -16,7 +16,7 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
 use neptunus::hil::ms5803::Prom;
-use neptunus::hil::{Analog, GenuineBoard, GenuineControl, SerialChunk, Water, prepare};
+use neptunus::hil::{GenuineBoard, GenuineControl, SerialChunk, Water, Wiring, prepare};
 
 /// Only a guard against a hung simulator: nothing is judged by wall time.
 const WAIT: Duration = Duration::from_secs(60);
@@ -158,7 +158,7 @@ fn genuine_firmware_reads_depth_pressure_and_temperature() {
     let firmware = prepare(&firmware_dir("30.0.2"), &cache)
         .unwrap_or_else(|e| panic!("building the 30.0.2 firmware: {e}"));
     let board =
-        GenuineBoard::spawn(firmware, Analog::default(), None).expect("simavr runs the firmware");
+        GenuineBoard::spawn(firmware, Wiring::default(), None).expect("simavr runs the firmware");
     let control = board.control();
     let mut uart = Uart::new(control.serial());
 

@@ -6,8 +6,8 @@
 //! with a burst sent into its 5-second blindness that overruns the internal
 //! command queue — goes to the genuine firmware in simavr (feature `hil`)
 //! and to the emulator ([`Board`] driven with the same times from boot),
-//! for 30.0.2 and 2014-12. Both boards have no I2C sensors (simavr has
-//! none), so their set-up chatter is the same.
+//! for 30.0.2 and 2014-12. Both boards have no I2C sensors wired, so their
+//! set-up chatter is the same.
 //!
 //! # How the two outputs are compared
 //! Each byte stream is cut into items: the text up to a `;` (terminated)
@@ -49,7 +49,7 @@ use std::time::{Duration, Instant};
 
 use neptunus::firmware::codec::crc8;
 use neptunus::firmware::emulator::{Board, EmulatorOptions, FirmwareVersion, FittedSensors};
-use neptunus::hil::{Analog, GenuineBoard, prepare};
+use neptunus::hil::{Analog, GenuineBoard, Wiring, prepare};
 
 /// One thing the host sends, `at` after `boot:1;`.
 struct Step {
@@ -253,7 +253,12 @@ fn run_genuine(version: FirmwareVersion) -> (Capture, Vec<Duration>) {
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
     let firmware = prepare(&firmware_dir(&version.to_string()), &cache)
         .unwrap_or_else(|e| panic!("building the genuine firmware {version}: {e}"));
-    let board = GenuineBoard::spawn(firmware, Analog::default(), None)
+    // No I2C sensor wired, as on the emulator's side.
+    let wiring = Wiring {
+        analog: Analog::default(),
+        depth_sensor: false,
+    };
+    let board = GenuineBoard::spawn(firmware, wiring, None)
         .unwrap_or_else(|e| panic!("starting the genuine firmware {version}: {e}"));
     let mut port = std::fs::OpenOptions::new()
         .read(true)

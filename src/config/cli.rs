@@ -226,6 +226,10 @@ pub struct GenuineArgs {
     /// Battery voltage on the board's voltage divider (V).
     #[arg(long, value_name = "V", default_value_t = 12.0)]
     pub battery_v: f64,
+    /// A basic kit: no depth sensor on the board's I2C bus (the firmware
+    /// then reads zeros and says so once a second).
+    #[arg(long)]
+    pub no_depth_sensor: bool,
 }
 
 /// Options of `emulate-board`.

@@ -33,4 +33,5 @@ pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};
 pub use runner::{
     Analog, GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
+    Wiring,
 };

@@ -53,6 +53,25 @@ pub struct Analog {
     pub board_temp_c: f64,
 }
 
+/// What is wired to the simulated board besides its serial line.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wiring {
+    /// The analog inputs at power-up.
+    pub analog: Analog,
+    /// The MS5803-14BA depth sensor on the I2C bus (the kit's depth add-on).
+    /// Without it the firmware reads zeros and says so, as a basic kit does.
+    pub depth_sensor: bool,
+}
+
+impl Default for Wiring {
+    fn default() -> Self {
+        Self {
+            analog: Analog::default(),
+            depth_sensor: true,
+        }
+    }
+}
+
 impl Default for Analog {
     fn default() -> Self {
         Self {
@@ -181,7 +200,8 @@ impl GenuineControl {
         let _ = self.tx.send(Ctl::Analog(analog));
     }
     /// New depth and water temperature for the depth sensor's next
-    /// conversion (the firmware reads it once a second).
+    /// conversion (the firmware reads it once a second); nothing changes on
+    /// a board wired without one.
     pub fn set_water(&self, water: Water) {
         let _ = self.tx.send(Ctl::Water(water));
     }
@@ -218,14 +238,14 @@ pub struct GenuineBoard {
 }
 
 impl GenuineBoard {
-    /// Loads `firmware`, powers the board up with `analog` on its inputs and
-    /// runs it in real time behind a fresh pty (reachable at `symlink` if
-    /// given).
+    /// Loads `firmware`, powers the board up wired as `rig` says and runs it
+    /// in real time behind a fresh pty (reachable at `symlink` if given).
     pub fn spawn(
         firmware: Firmware,
-        analog: Analog,
+        rig: Wiring,
         symlink: Option<PathBuf>,
     ) -> Result<Self, GenuineError> {
+        let analog = rig.analog;
         let elf = firmware.elf.clone();
         let pty = open_raw()?;
         let path = match &symlink {
@@ -257,12 +277,16 @@ impl GenuineBoard {
             .name("genuine-board".into())
             .spawn(move || {
                 // simavr's objects never leave this thread.
-                let depth = Rc::new(RefCell::new(Ms5803::new(
-                    Prom::typical(),
-                    &Water::default(),
-                )));
-                let loaded = Mcu::load(&elf, &WATCHED)
-                    .and_then(|mut mcu| mcu.attach_twi(depth.clone()).map(|()| mcu));
+                let depth = rig.depth_sensor.then(|| {
+                    Rc::new(RefCell::new(Ms5803::new(
+                        Prom::typical(),
+                        &Water::default(),
+                    )))
+                });
+                let loaded = Mcu::load(&elf, &WATCHED).and_then(|mut mcu| match &depth {
+                    Some(sensor) => mcu.attach_twi(sensor.clone()).map(|()| mcu),
+                    None => Ok(mcu),
+                });
                 let mcu = match loaded {
                     Ok(mcu) => {
                         let _ = ready_tx.send(Ok(()));
@@ -331,7 +355,8 @@ struct Runner {
     mcu: Mcu,
     master: OwnedFd,
     analog: Analog,
-    depth: Rc<RefCell<Ms5803>>,
+    /// The depth sensor, if one is wired.
+    depth: Option<Rc<RefCell<Ms5803>>>,
     water: Water,
     shared: Arc<Mutex<GenuineSnapshot>>,
     pins: Pins,
@@ -352,7 +377,7 @@ struct Runner {
 impl Runner {
     fn new(
         mut mcu: Mcu,
-        depth: Rc<RefCell<Ms5803>>,
+        depth: Option<Rc<RefCell<Ms5803>>>,
         master: OwnedFd,
         analog: Analog,
         shared: Arc<Mutex<GenuineSnapshot>>,
@@ -477,7 +502,9 @@ impl Runner {
             }
             Ctl::Water(w) => {
                 self.water = w;
-                self.depth.borrow_mut().set_water(&w);
+                if let Some(sensor) = &self.depth {
+                    sensor.borrow_mut().set_water(&w);
+                }
             }
             Ctl::Reset => {
                 self.mcu.reset();
