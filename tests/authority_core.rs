@@ -9,7 +9,9 @@ use std::time::Duration;
 use common::core_rig::{CoreRig, NEUTRAL, ack_of, gos, has_event, has_text, msgs, sends, texts};
 use neptunus::dialect::neptunus::*;
 use neptunus::firmware::codec::Command;
-use neptunus::vehicle::machine::{HmiEvent, Identity, Input, Now, Output, Sender, To, Vehicle};
+use neptunus::vehicle::machine::{
+    FailsafeKind, HmiEvent, Identity, Input, Now, Output, Sender, To, Topic, Vehicle,
+};
 use neptunus::vehicle::params::ParamStore;
 
 /// Primary station (SYSID_MYGCS 255), QGC-like.
@@ -807,6 +809,59 @@ fn a_request_dies_with_its_requesters_hmi_session() {
     assert_eq!(r.v.owner(), None);
     assert!(!has_event(&out, "control_granted", Some(254)));
     assert_eq!(msgs!(&out, CONTROL_STATUS).last().unwrap().gcs_main, 0);
+}
+
+#[test]
+fn an_owner_leaving_while_armed_raises_the_gcs_failsafe_at_once() {
+    // The owner's page closes while armed: the vehicle knows control is
+    // gone now, not FS_GCS_TIMEOUT later (nor when the board's dead-man
+    // trips because nobody feeds it).
+    let mut r = driving(A);
+    r.stick(A, 500);
+    let mut out = r.input(Input::Hmi {
+        sysid: 255,
+        event: HmiEvent::Disconnected,
+    });
+    out.extend(r.run(Duration::from_millis(100)));
+    let raised = out.iter().find_map(|o| match o {
+        Output::Text {
+            topic,
+            msg: MavMessage::STATUSTEXT(s),
+            ..
+        } if *topic == Topic::FailsafeChange(FailsafeKind::Gcs, true) => Some((
+            s.severity,
+            String::from_utf8_lossy(s.text.as_ref()).into_owned(),
+        )),
+        _ => None,
+    });
+    let (severity, text) = raised.expect("the GCS failsafe raised");
+    assert_eq!(severity, MavSeverity::MAV_SEVERITY_CRITICAL);
+    assert!(
+        text.starts_with("Failsafe: GCS 255 left (HMI session closed)"),
+        "{text}"
+    );
+    // FS_GCS_ENABLE's default: disarm.
+    assert!(!r.v.armed());
+    assert_eq!(r.v.motors_us(), NEUTRAL);
+
+    // Releasing control while armed is the same: nobody drives an armed ROV.
+    let mut r = driving(A);
+    let mut out = r.request_control(A, 0.0, 0.0, 0.0);
+    out.extend(r.run(Duration::from_millis(100)));
+    assert!(has_text(&out, "Failsafe: GCS 255 left"), "{out:?}");
+    assert!(!r.v.armed());
+
+    // Handed over to a live requester instead: no failsafe.
+    let mut r = driving(A);
+    r.alive.push(B);
+    r.request_control(B, 1.0, 0.0, 30.0);
+    let mut out = r.input(Input::Hmi {
+        sysid: 255,
+        event: HmiEvent::Disconnected,
+    });
+    out.extend(r.run(Duration::from_millis(500)));
+    assert_eq!(r.v.owner(), Some(254));
+    assert!(!has_text(&out, "Failsafe:"), "{out:?}");
 }
 
 #[test]

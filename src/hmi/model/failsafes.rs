@@ -7,92 +7,44 @@
 //! (`vehicle/machine/telemetry.rs::sensors`: RC_RECEIVER unhealthy while the
 //! GCS or pilot-input failsafe is active or the board link is down,
 //! MOTOR_OUTPUTS while the board link is down, BATTERY while the battery is
-//! low or its reading stale). The failsafe texts this session saw (topic
-//! `failsafe`: "Failsafe: battery low 10.2 V" … "Failsafe cleared: …")
-//! refine a bit into the core's own words when they agree with it.
+//! low or its reading stale). The failsafe raises and clears this session
+//! saw — each tagged by the core with its kind ([`Kind`]), never told apart
+//! by their words — refine a bit into the core's own words ("battery low
+//! 10.2 V") when they agree with it.
 //!
 //! This file only reads: it never sends anything.
 
 use crate::dialect::neptunus::MavSysStatusSensor as S;
+use crate::vehicle::machine::FailsafeKind as Kind;
 
 /// When CRITICAL and nothing says why.
 pub(super) const UNEXPLAINED: &str = "vehicle critical (reason not reported)";
 
-/// The failsafes the core raises, told apart by the words of their texts
-/// (`vehicle/machine/failsafe.rs`, `RULES[..].text`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Kind {
-    /// "GCS 255 heartbeat lost" or "no GCS in control".
-    Gcs,
-    /// "lost manual control".
-    PilotInput,
-    /// "board link lost (…)".
-    BoardLink,
-    /// "battery low 10.2 V".
-    BatteryLow,
-    /// "battery critical 9.8 V".
-    BatteryCritical,
-}
-
-impl Kind {
-    fn of(text: &str) -> Option<Self> {
-        if text == "no GCS in control"
-            || (text.starts_with("GCS ") && text.contains("heartbeat lost"))
-        {
-            Some(Self::Gcs)
-        } else if text.starts_with("lost manual control") {
-            Some(Self::PilotInput)
-        } else if text.starts_with("board link lost") {
-            Some(Self::BoardLink)
-        } else if text.starts_with("battery low") {
-            Some(Self::BatteryLow)
-        } else if text.starts_with("battery critical") {
-            Some(Self::BatteryCritical)
-        } else {
-            None
-        }
-    }
-}
-
 /// One failsafe raise this session saw and has not seen cleared.
 #[derive(Debug, Clone, PartialEq, Eq)]
 struct Raised {
-    /// `None`: a text this code does not know (a failsafe added to the
-    /// core later); shown as it is while the vehicle is critical.
-    kind: Option<Kind>,
-    /// The core's words after "Failsafe: ".
+    kind: Kind,
+    /// The core's words after "Failsafe: ", shown as they are.
     text: String,
 }
 
-/// Texts of a kind the session keeps at most (a flood of unknown
-/// failsafe texts must not grow the model).
-const MAX_RAISED: usize = 16;
-
-/// The failsafe texts a session saw raised and not yet cleared.
+/// The failsafes a session saw raised and not yet cleared (one per kind).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub(super) struct FailsafeTexts {
     raised: Vec<Raised>,
 }
 
 impl FailsafeTexts {
-    /// A complete STATUSTEXT the core filed under `failsafe`.
-    pub fn on_text(&mut self, text: &str) {
-        let (raise, words) = if let Some(w) = text.strip_prefix("Failsafe cleared: ") {
-            (false, w)
-        } else if let Some(w) = text.strip_prefix("Failsafe: ") {
-            (true, w)
-        } else {
-            // "Failsafe gcs: ALT_HOLD is refused, disarming instead": what a
-            // failsafe did, not a failsafe.
-            return;
-        };
-        let words = words.trim();
-        let kind = Kind::of(words);
-        self.raised.retain(|r| match kind {
-            Some(_) => r.kind != kind,
-            None => r.kind.is_some() || r.text != words,
-        });
-        if raise && self.raised.len() < MAX_RAISED {
+    /// A whole STATUSTEXT the core tagged as the raise (`raised`) or clear
+    /// of failsafe `kind`.
+    pub fn on_change(&mut self, kind: Kind, raised: bool, text: &str) {
+        let words = text
+            .strip_prefix("Failsafe cleared: ")
+            .or_else(|| text.strip_prefix("Failsafe: "))
+            .unwrap_or(text)
+            .trim();
+        self.raised.retain(|r| r.kind != kind);
+        if raised {
             self.raised.push(Raised {
                 kind,
                 text: words.to_owned(),
@@ -108,7 +60,7 @@ impl FailsafeTexts {
     fn texts(&self, kind: Kind) -> impl Iterator<Item = &str> {
         self.raised
             .iter()
-            .filter(move |r| r.kind == Some(kind))
+            .filter(move |r| r.kind == kind)
             .map(|r| r.text.as_str())
     }
 
@@ -158,12 +110,6 @@ impl FailsafeTexts {
                 out.push("battery low".to_owned());
             }
         }
-        out.extend(
-            self.raised
-                .iter()
-                .filter(|r| r.kind.is_none())
-                .map(|r| r.text.clone()),
-        );
         if out.is_empty() {
             out.push(UNEXPLAINED.to_owned());
         }
@@ -198,7 +144,7 @@ mod tests {
     #[test]
     fn nothing_when_not_critical_whatever_the_bits_and_texts() {
         let mut t = FailsafeTexts::default();
-        t.on_text("Failsafe: battery low 10.2 V");
+        t.on_change(Kind::BatteryLow, true, "Failsafe: battery low 10.2 V");
         // Below the threshold but not yet for BATTERY_DEBOUNCE: no failsafe.
         assert!(
             t.reasons(false, without(S::MAV_SYS_STATUS_SENSOR_BATTERY))
@@ -236,8 +182,8 @@ mod tests {
     #[test]
     fn texts_refine_the_bits_they_agree_with() {
         let mut t = FailsafeTexts::default();
-        t.on_text("Failsafe: lost manual control");
-        t.on_text("Failsafe: battery low 10.2 V");
+        t.on_change(Kind::PilotInput, true, "Failsafe: lost manual control");
+        t.on_change(Kind::BatteryLow, true, "Failsafe: battery low 10.2 V");
         assert_eq!(
             t.reasons(
                 true,
@@ -251,7 +197,11 @@ mod tests {
             ["battery low 10.2 V"]
         );
         // Cleared in the core's words.
-        t.on_text("Failsafe cleared: battery low 11.9 V");
+        t.on_change(
+            Kind::BatteryLow,
+            false,
+            "Failsafe cleared: battery low 11.9 V",
+        );
         assert_eq!(
             t.reasons(true, without(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER)),
             ["no pilot input: lost manual control"]
@@ -261,13 +211,21 @@ mod tests {
     #[test]
     fn gcs_and_board_link_texts() {
         let mut t = FailsafeTexts::default();
-        t.on_text("Failsafe: GCS 255 heartbeat lost");
+        t.on_change(Kind::Gcs, true, "Failsafe: GCS 255 heartbeat lost");
         assert_eq!(
             t.reasons(true, without(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER)),
             ["no pilot input: GCS 255 heartbeat lost"]
         );
-        t.on_text("Failsafe: board link lost (no telemetry for 1.0 s)");
-        t.on_text("Failsafe: battery critical 9.8 V");
+        t.on_change(
+            Kind::BoardLink,
+            true,
+            "Failsafe: board link lost (no telemetry for 1.0 s)",
+        );
+        t.on_change(
+            Kind::BatteryCritical,
+            true,
+            "Failsafe: battery critical 9.8 V",
+        );
         let down = without(
             S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
                 | S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER
@@ -282,7 +240,11 @@ mod tests {
             ]
         );
         // Before any SYS_STATUS the texts stand on their own.
-        t.on_text("Failsafe cleared: board link lost (no telemetry)");
+        t.on_change(
+            Kind::BoardLink,
+            false,
+            "Failsafe cleared: board link lost (no telemetry)",
+        );
         assert_eq!(
             t.reasons(true, None),
             [
@@ -295,19 +257,30 @@ mod tests {
     }
 
     #[test]
-    fn other_failsafe_texts_and_actions() {
+    fn a_kind_raised_again_replaces_its_words() {
         let mut t = FailsafeTexts::default();
-        // What a failsafe did is not a failsafe.
-        t.on_text("Failsafe gcs: ALT_HOLD is refused, disarming instead");
-        t.on_text("Failsafe: leak detected");
-        assert_eq!(t.reasons(true, Some(healthy())), ["leak detected"]);
-        t.on_text("Failsafe cleared: leak detected");
-        assert_eq!(t.reasons(true, Some(healthy())), [UNEXPLAINED]);
-        // A flood of texts stays bounded.
-        for i in 0..1000 {
-            t.on_text(&format!("Failsafe: thing {i}"));
-        }
-        assert_eq!(t.reasons(true, Some(healthy())).len(), MAX_RAISED);
+        t.on_change(Kind::BatteryLow, true, "Failsafe: battery low 10.2 V");
+        t.on_change(Kind::BatteryLow, true, "Failsafe: battery low 10.0 V");
+        assert_eq!(
+            t.reasons(true, without(S::MAV_SYS_STATUS_SENSOR_BATTERY)),
+            ["battery low 10.0 V"]
+        );
+        // The words are the core's; the kind alone says which failsafe.
+        t.on_change(
+            Kind::Gcs,
+            true,
+            "Failsafe: GCS 200 left (HMI session closed)",
+        );
+        assert_eq!(
+            t.reasons(
+                true,
+                without(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER | S::MAV_SYS_STATUS_SENSOR_BATTERY)
+            ),
+            [
+                "no pilot input: GCS 200 left (HMI session closed)",
+                "battery low 10.0 V"
+            ]
+        );
     }
 
     #[test]
@@ -346,22 +319,26 @@ mod tests {
         let mut m = Model::new(Some(200), now);
         let mut ev = Vec::new();
         m.on_message(&heartbeat(MavState::MAV_STATE_ACTIVE), now, &mut ev);
-        let ev = text(
-            &mut m,
-            Topic::Failsafe,
-            "Failsafe: lost manual control",
-            now,
-        );
+        let raised = Topic::FailsafeChange(Kind::PilotInput, true);
+        let ev = text(&mut m, raised, "Failsafe: lost manual control", now);
         assert!(matches!(
             &ev[..],
-            [ServerMsg::Statustext {
-                category: Topic::Failsafe,
-                ..
-            }]
+            [ServerMsg::Statustext { category, .. }] if *category == raised
         ));
-        text(&mut m, Topic::Failsafe, "Failsafe: battery low 10.2 V", now);
-        // Words alone are not a failsafe: only the failsafe topic counts.
+        text(
+            &mut m,
+            Topic::FailsafeChange(Kind::BatteryLow, true),
+            "Failsafe: battery low 10.2 V",
+            now,
+        );
+        // Words alone are not a failsafe: only a failsafe change counts.
         text(&mut m, Topic::General, "Failsafe: made up", now);
+        text(
+            &mut m,
+            Topic::Failsafe,
+            "Failsafe gcs: ALT_HOLD is refused, disarming instead",
+            now,
+        );
         let mut ev = Vec::new();
         m.on_message(
             &sys_status(S::MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS, 10_200),
@@ -375,7 +352,7 @@ mod tests {
         );
         text(
             &mut m,
-            Topic::Failsafe,
+            Topic::FailsafeChange(Kind::PilotInput, false),
             "Failsafe cleared: lost manual control",
             now,
         );

@@ -334,8 +334,8 @@ impl Model {
 
     /// A whole text: to the browser, and into the failsafe reasons.
     fn text_done(&mut self, p: Pending, events: &mut Vec<ServerMsg>) {
-        if p.topic == Topic::Failsafe {
-            self.failsafe_texts.on_text(&p.text);
+        if let Topic::FailsafeChange(kind, raised) = p.topic {
+            self.failsafe_texts.on_change(kind, raised, &p.text);
         }
         events.push(ServerMsg::Statustext {
             severity: p.severity,

@@ -90,6 +90,8 @@ pub(super) struct Authority {
     pub pickup_notes: RateLimit,
     /// The last station that owned the vehicle (for failsafe texts).
     pub last_owner: Option<u8>,
+    /// Why the last owner is no longer in control, while nobody is.
+    pub owner_left: Option<String>,
 }
 
 /// What kind of state-changing traffic is being checked.
@@ -385,6 +387,7 @@ impl Vehicle {
         self.safety_stop(transfer || self.armed, out);
         self.auth.owner = Some(to);
         self.auth.last_owner = Some(to.sysid);
+        self.auth.owner_left = None;
         self.auth.takeover_allowed = takeover_allowed;
         self.auth.last_life = Some(now.mono);
         if self.auth.pending.is_some_and(|p| p.from.sysid == to.sysid) {
@@ -438,6 +441,7 @@ impl Vehicle {
             out,
         );
         self.log(kind, Some(old.sysid), why.to_owned(), out);
+        self.auth.owner_left = Some(why.to_owned());
         if let Some(p) = self.live_request(now) {
             self.auth.pending = None;
             self.grant(p.from, Grant::Handover, false, now, out);

@@ -17,15 +17,41 @@ use crate::vehicle::params::{FailsafeAction, ParamStore};
 /// clear a battery failsafe (ArduPilot's BATT_LOW_TIMER default).
 pub(super) const BATTERY_DEBOUNCE: Duration = Duration::from_secs(10);
 
+/// Which failsafe: carried with each raise and clear text
+/// ([`Topic::FailsafeChange`]), so the browser HMI knows the reason by its
+/// kind and keeps the words only to show them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailsafeKind {
+    /// The station in control went silent or left while armed.
+    Gcs,
+    /// No stick input in a mode the pilot drives.
+    PilotInput,
+    /// The board link is down.
+    BoardLink,
+    BatteryLow,
+    BatteryCritical,
+}
+
+impl FailsafeKind {
+    /// Short name for logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Gcs => "gcs",
+            Self::PilotInput => "pilot_input",
+            Self::BoardLink => "board_link",
+            Self::BatteryLow => "battery_low",
+            Self::BatteryCritical => "battery_critical",
+        }
+    }
+}
+
 /// One failsafe.
 pub(super) struct Rule {
-    /// Short name for logs.
-    pub name: &'static str,
+    pub kind: FailsafeKind,
     raise: fn(&Vehicle, Now) -> bool,
     clear: fn(&Vehicle, Now) -> bool,
     action: fn(&ParamStore) -> FailsafeAction,
-    /// What the operator reads ("GCS 255 heartbeat lost"). The browser
-    /// HMI tells the rows apart by these words (`hmi/model/failsafes.rs`).
+    /// What the operator reads ("GCS 255 heartbeat lost").
     text: fn(&Vehicle) -> String,
 }
 
@@ -38,30 +64,29 @@ const RULE_COUNT: usize = 5;
 
 pub(super) const RULES: [Rule; RULE_COUNT] = [
     Rule {
-        name: "gcs",
-        // Armed, and neither the owner nor anyone else showed life for FS_GCS_TIMEOUT.
-        raise: |v, now| {
-            v.armed
-                && v.auth
-                    .last_life
-                    .is_none_or(|t| now.mono.saturating_sub(t) > v.gcs_timeout())
-        },
+        kind: FailsafeKind::Gcs,
+        // Armed, and no station in control showed life for FS_GCS_TIMEOUT —
+        // or none is in control: the owner left (its HMI session closed, it
+        // released control), and nobody took over.
+        raise: |v, now| v.armed && !v.owner_alive(now, v.gcs_timeout()),
         clear: |v, now| v.owner_alive(now, v.gcs_timeout()),
         action: ParamStore::fs_gcs_enable,
-        text: |v| match v.auth.last_owner {
-            Some(o) => format!("GCS {o} heartbeat lost"),
-            None => "no GCS in control".into(),
+        text: |v| match (v.auth.owner, v.auth.last_owner, &v.auth.owner_left) {
+            (Some(o), ..) => format!("GCS {} heartbeat lost", o.sysid),
+            (None, Some(o), Some(why)) => format!("GCS {o} left ({why})"),
+            (None, Some(o), None) => format!("GCS {o} heartbeat lost"),
+            (None, None, _) => "no GCS in control".into(),
         },
     },
     Rule {
-        name: "pilot_input",
+        kind: FailsafeKind::PilotInput,
         raise: |v, now| v.armed && v.pilot_input_stale(now),
         clear: |v, now| !v.pilot_input_stale(now),
         action: ParamStore::fs_pilot_input,
         text: |_| "lost manual control".into(),
     },
     Rule {
-        name: "board_link",
+        kind: FailsafeKind::BoardLink,
         raise: |v, _| v.board.link_seen_up && v.board.link != LinkState::Up,
         clear: |v, _| v.board.link == LinkState::Up,
         action: |_| FailsafeAction::Disarm,
@@ -73,14 +98,14 @@ pub(super) const RULES: [Rule; RULE_COUNT] = [
         },
     },
     Rule {
-        name: "battery_low",
+        kind: FailsafeKind::BatteryLow,
         raise: |v, now| v.failsafes.battery[0].held_below(now),
         clear: |v, now| v.failsafes.battery[0].held_above(now),
         action: ParamStore::batt_fs_low_act,
         text: |v| format!("battery low {:.1} V", v.board.vout_v.value),
     },
     Rule {
-        name: "battery_critical",
+        kind: FailsafeKind::BatteryCritical,
         raise: |v, now| v.failsafes.battery[1].held_below(now),
         clear: |v, now| v.failsafes.battery[1].held_above(now),
         action: ParamStore::batt_fs_crt_act,
@@ -140,7 +165,7 @@ impl Vehicle {
             .iter()
             .zip(self.failsafes.active)
             .filter(|(_, a)| *a)
-            .map(|(r, _)| r.name)
+            .map(|(r, _)| r.kind.name())
             .collect()
     }
 
@@ -177,7 +202,7 @@ impl Vehicle {
                 self.failsafes.active[i] = true;
                 let text = (rule.text)(self);
                 self.statustext(
-                    Topic::Failsafe,
+                    Topic::FailsafeChange(rule.kind, true),
                     MavSeverity::MAV_SEVERITY_CRITICAL,
                     &format!("Failsafe: {text}"),
                     out,
@@ -185,15 +210,15 @@ impl Vehicle {
                 self.log(
                     "failsafe_raised",
                     self.auth.last_owner,
-                    format!("{}: {text} (action {action:?})", rule.name),
+                    format!("{}: {text} (action {action:?})", rule.kind.name()),
                     out,
                 );
-                self.failsafe_act(rule.name, action, now, out);
+                self.failsafe_act(rule.kind.name(), action, now, out);
             } else if active && (action == FailsafeAction::Off || (rule.clear)(self, now)) {
                 self.failsafes.active[i] = false;
                 let text = (rule.text)(self);
                 self.statustext(
-                    Topic::Failsafe,
+                    Topic::FailsafeChange(rule.kind, false),
                     MavSeverity::MAV_SEVERITY_INFO,
                     &format!("Failsafe cleared: {text}"),
                     out,
@@ -201,7 +226,7 @@ impl Vehicle {
                 self.log(
                     "failsafe_cleared",
                     self.owner(),
-                    format!("{}: {text}", rule.name),
+                    format!("{}: {text}", rule.kind.name()),
                     out,
                 );
                 if !self.failsafe_active() {

@@ -11,6 +11,7 @@ use std::time::Duration;
 
 use mavlink_core::types::CharArray;
 
+use super::failsafe::FailsafeKind;
 use super::{Now, Output, Sender, To, Vehicle};
 use crate::dialect::neptunus::*;
 
@@ -57,8 +58,7 @@ impl ReplyKind {
 /// What a text is about, chosen where it is written: the browser HMI files
 /// it under the developer logger's category of the same name (thesis 7.2);
 /// `general` texts appear only in the message list.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Topic {
     /// Safety-mode stops: arming, disarming, mode and run-mode changes.
     Stop,
@@ -70,12 +70,39 @@ pub enum Topic {
     ApDepth,
     /// The heading autopilot and its setpoints.
     ApHeading,
-    /// Failsafes raised and cleared.
+    /// A failsafe raised (`true`) or cleared (`false`): which one, typed, so
+    /// a reader never has to tell them apart by their words.
+    FailsafeChange(FailsafeKind, bool),
+    /// What a failsafe did ("Failsafe gcs: ALT_HOLD is refused, disarming
+    /// instead").
     Failsafe,
     /// The board link.
     BoardLink,
     /// Anything else (parameters, signing, payload, telemetry rates).
     General,
+}
+
+impl Topic {
+    /// The developer logger's category (a failsafe's change and its
+    /// action are both `failsafe`).
+    pub fn category(self) -> &'static str {
+        match self {
+            Self::Stop => "stop",
+            Self::Control => "control",
+            Self::Gain => "gain",
+            Self::ApDepth => "ap_depth",
+            Self::ApHeading => "ap_heading",
+            Self::FailsafeChange(..) | Self::Failsafe => "failsafe",
+            Self::BoardLink => "board_link",
+            Self::General => "general",
+        }
+    }
+}
+
+impl serde::Serialize for Topic {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.category())
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

@@ -312,7 +312,7 @@ const HEAD: &[ParamDef] = &[
 #[rustfmt::skip]
 const SAFETY: &[ParamDef] = &[
     def("FS_GCS_ENABLE", Int8, 2.0, 0.0, 4.0, "", Neptunus,
-        "Action when the station in control shows no life (heartbeat or stick input) for FS_GCS_TIMEOUT while armed: 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface (3 and 4 disarm instead while those modes are not available)."),
+        "Action when the station in control shows no life (heartbeat or stick input) for FS_GCS_TIMEOUT while armed, or leaves control (releases it, its HMI page closes) with nobody taking over: 0 off, 1 warn, 2 disarm, 3 depth hold, 4 surface (3 and 4 disarm instead while those modes are not available)."),
     def("FS_GCS_TIMEOUT", Real32, 5.0, 2.0, 120.0, "s", Neptunus,
         "Time without a heartbeat or stick input from the station in control before it loses control and, if armed, the GCS failsafe acts."),
     def("FS_PILOT_INPUT", Int8, 2.0, 0.0, 2.0, "", Neptunus,
