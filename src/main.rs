@@ -26,9 +26,11 @@ fn main() -> std::process::ExitCode {
 fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
     let runtime = || {
         // One thread for the vehicle, its sockets and the serial link; the
-        // browser side starts its own (see `app::run`).
+        // browser side starts its own (see `app::run`). Few blocking
+        // threads: the unit's TasksMax is a ceiling, not a target.
         tokio::runtime::Builder::new_current_thread()
             .enable_all()
+            .max_blocking_threads(4)
             .build()
             .context("cannot start the async runtime")
     };

@@ -785,6 +785,48 @@ fn the_dead_man_is_fed_by_the_owners_life_while_armed() {
 // ---- safety-mode stops from the HMI ----
 
 #[test]
+fn a_request_dies_with_its_requesters_hmi_session() {
+    // Page A (255) drives, page B (254) asks for control, B's page closes,
+    // then A's: nobody may end up in control, least of all the closed B.
+    let mut r = driving(A);
+    r.alive.push(B);
+    r.request_control(B, 1.0, 0.0, 30.0);
+    let out = r.input(Input::Hmi {
+        sysid: 254,
+        event: HmiEvent::Disconnected,
+    });
+    assert!(
+        has_event(&out, "control_request_withdrawn", Some(254)),
+        "{out:?}"
+    );
+    r.alive.retain(|s| s.sysid != 254);
+    let out = r.input(Input::Hmi {
+        sysid: 255,
+        event: HmiEvent::Disconnected,
+    });
+    assert_eq!(r.v.owner(), None);
+    assert!(!has_event(&out, "control_granted", Some(254)));
+    assert_eq!(msgs!(&out, CONTROL_STATUS).last().unwrap().gcs_main, 0);
+}
+
+#[test]
+fn a_silent_requester_is_not_handed_control() {
+    let mut r = driving(A);
+    r.alive.push(B);
+    r.request_control(B, 1.0, 0.0, 60.0);
+    // B's heartbeats stop; A keeps driving.
+    r.alive.retain(|s| s.sysid != 254);
+    // FS_GCS_TIMEOUT is 5 s.
+    let out = r.run(Duration::from_secs(6));
+    assert!(has_event(&out, "control_request_withdrawn", Some(254)));
+    assert!(has_text(&out, "withdrawn"));
+    // The owner releases: nobody had a live request, so nobody gets control.
+    let out = r.request_control(A, 0.0, 0.0, 0.0);
+    assert_eq!(r.v.owner(), None);
+    assert!(!has_event(&out, "control_granted", Some(254)));
+}
+
+#[test]
 fn hmi_focus_loss_of_the_owner_stops_and_needs_pick_up() {
     let mut r = driving(A);
     let out = r.input(Input::Hmi {

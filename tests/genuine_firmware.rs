@@ -405,6 +405,9 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
     let stopped_board_s = rig.control.snapshot().sim_time_s;
     let stopped_wall = Instant::now();
     let mut neutral_at = None;
+    // Each ESC's width as its own pin changes say (the snapshot of the
+    // others may not have measured their next pulse yet at one's change).
+    let mut widths = rig.pins().esc_us;
     while neutral_at.is_none() && stopped_wall.elapsed() < WAIT {
         rig.gcs
             .pump(Traffic::Sticks {
@@ -415,11 +418,15 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
             .unwrap();
         let _ = rig.gcs.recv();
         for c in rig.changes.try_iter() {
-            if c.change.output == Output::EscPort {
-                let p = rig.control.snapshot().pins;
-                if neutral(c.change.to_us) && p.esc_us.iter().all(|u| neutral(*u)) {
-                    neutral_at = Some(c.change.cycle);
-                }
+            let slot = match c.change.output {
+                Output::EscPort => 0,
+                Output::EscVertical => 1,
+                Output::EscStarboard => 2,
+                Output::Tilt => continue,
+            };
+            widths[slot] = c.change.to_us;
+            if neutral_at.is_none() && widths.iter().all(|u| neutral(*u)) {
+                neutral_at = Some(c.change.cycle);
             }
         }
     }

@@ -85,7 +85,8 @@ verify=$(cd "$work/unit" && systemd-analyze verify ./neptunus.service 2>&1) || f
 [ -z "$verify" ] || fail "systemd-analyze verify warns: $verify"
 echo "systemd-analyze verify: clean"
 for want in 'Type=notify' 'WatchdogSec=' 'Restart=always' 'NoNewPrivileges=yes' 'ProtectSystem=strict' \
-    'ProtectHome=yes' 'PrivateTmp=yes' 'CapabilityBoundingSet=$' 'StateDirectory=neptunus' 'User=neptunus'; do
+    'ProtectHome=yes' 'PrivateTmp=yes' 'CapabilityBoundingSet=$' 'StateDirectory=neptunus' 'User=neptunus' \
+    'MemoryMax=' 'TasksMax='; do
     grep -Eq "^$want" "$unit" || fail "the unit lacks $want"
 done
 score=$(systemd-analyze security --offline=true "$unit" 2>/dev/null | sed -n 's/.*Overall exposure level for neptunus.service: \([0-9.]*\).*/\1/p')

@@ -85,7 +85,7 @@ fi
 
 echo "== tests"
 status=0
-cargo test --all-targets --locked --features hil 2>&1 | tee target/test-output.txt || status=1
+cargo test --all-targets --locked --features hil --no-fail-fast 2>&1 | tee target/test-output.txt || status=1
 
 echo "== interoperability tests (real ground-station clients against the binary)"
 # A venv in target/ with the pinned clients; reinstalled when the pins change.

@@ -139,6 +139,35 @@ fn no_attitude_or_depth_while_the_board_link_is_down() {
     );
 }
 
+/// A board whose power lines stop (the rest of its telemetry still
+/// coming): the last voltage is not reported as live — MAVLink's "unknown"
+/// in SYS_STATUS and BATTERY_STATUS once it is older than a second and a
+/// half.
+#[test]
+fn a_board_that_stops_its_power_lines_reports_the_battery_unknown() {
+    let mut r = rig();
+    link_up(&mut r);
+    let out = r.run(Duration::from_secs(1));
+    assert_eq!(
+        msgs!(&out, SYS_STATUS).pop().unwrap().voltage_battery,
+        12000
+    );
+    r.feed.status.vout_v = None;
+    r.feed.status.iout_a = None;
+    r.feed.status.battery_current_a = None;
+    let out = r.run(Duration::from_secs(3));
+    let sys = msgs!(&out, SYS_STATUS).pop().unwrap();
+    assert_eq!(sys.voltage_battery, u16::MAX, "{sys:?}");
+    assert_eq!(sys.current_battery, -1, "{sys:?}");
+    assert_eq!(sys.battery_remaining, -1, "{sys:?}");
+    let bat = msgs!(&out, BATTERY_STATUS).pop().unwrap();
+    assert_eq!(bat.voltages[0], u16::MAX, "{bat:?}");
+    assert_eq!(bat.current_battery, -1, "{bat:?}");
+    assert_eq!(bat.battery_remaining, -1, "{bat:?}");
+    // Navigation kept coming: attitude is still live.
+    assert!(count_sent(&out, 30, To::Endpoint(0)) > 0);
+}
+
 #[test]
 fn ready_when_link_up_and_fresh() {
     let mut r = rig();

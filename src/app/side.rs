@@ -29,6 +29,9 @@ impl Side {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .thread_name("neptunus-hmi-blocking")
+            // Password checks and the like: a flood of logins queues here
+            // instead of spawning a thread each (the unit's TasksMax).
+            .max_blocking_threads(4)
             .build()?;
         let handle = rt.handle().clone();
         let (stop, stopped) = oneshot::channel::<()>();

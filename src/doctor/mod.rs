@@ -1,6 +1,7 @@
 //! `neptunus doctor`: what an operator runs at the pool side when something
-//! is not there. One line per check, with the fix when it fails; exit
-//! status 0 only when every check passes; `--json` for scripts.
+//! is not there. One line per check, with the fix when it fails or warns;
+//! exit status 0 only when no check fails (a warning is harmless now: the
+//! clock behind at an offline pool); `--json` for scripts.
 //!
 //! The checks: the configuration parses (`config`); the serial device
 //! exists and this user may use it (`serial`); a board answers on it in the
@@ -27,10 +28,13 @@ pub use host::parse_formats;
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
 pub struct Check {
     pub name: &'static str,
+    /// Nothing stops the vehicle here (a warning is ok too).
     pub ok: bool,
+    /// Worth knowing and fixing some day, but harmless now.
+    pub warning: bool,
     /// What was found.
     pub detail: String,
-    /// What to do about it (failed checks only).
+    /// What to do about it (failed checks and warnings).
     pub fix: Option<String>,
 }
 
@@ -39,6 +43,7 @@ impl Check {
         Self {
             name,
             ok: true,
+            warning: false,
             detail: detail.into(),
             fix: None,
         }
@@ -47,6 +52,16 @@ impl Check {
         Self {
             name,
             ok: false,
+            warning: false,
+            detail: detail.into(),
+            fix: Some(fix.into()),
+        }
+    }
+    pub fn warn(name: &'static str, detail: impl Into<String>, fix: impl Into<String>) -> Self {
+        Self {
+            name,
+            ok: true,
+            warning: true,
             detail: detail.into(),
             fix: Some(fix.into()),
         }
@@ -72,7 +87,11 @@ impl Report {
     pub fn text(&self) -> String {
         let mut s = String::new();
         for c in &self.checks {
-            let mark = if c.ok { "ok  " } else { "FAIL" };
+            let mark = match (c.ok, c.warning) {
+                (false, _) => "FAIL",
+                (true, true) => "warn",
+                (true, false) => "ok  ",
+            };
             // A long detail (a TOML error with its excerpt) stays under its check.
             let detail = c.detail.trim_end().replace('\n', "\n                ");
             s.push_str(&format!("{mark}  {:<9} {detail}\n", c.name));
@@ -81,7 +100,10 @@ impl Report {
             }
         }
         let failed = self.checks.iter().filter(|c| !c.ok).count();
-        if failed == 0 {
+        let warned = self.checks.iter().filter(|c| c.warning).count();
+        if failed == 0 && warned > 0 {
+            s.push_str(&format!("all checks passed ({warned} warning)\n"));
+        } else if failed == 0 {
             s.push_str("all checks passed\n");
         } else {
             s.push_str(&format!(

@@ -49,6 +49,10 @@ impl Station {
 pub(super) struct Pending {
     pub from: Station,
     pub deadline: Duration,
+    /// The requester's last sign of life: a request dies with its
+    /// requester (no heartbeat for FS_GCS_TIMEOUT, or its HMI session
+    /// closed), so control never passes to a station that is gone.
+    pub last_life: Duration,
 }
 
 /// Counts events and says whether one is due for a report.
@@ -282,11 +286,42 @@ impl Vehicle {
         }
     }
 
-    /// The owner showed life (its own HEARTBEAT or stick input).
+    /// The owner or the pending requester showed life (its own HEARTBEAT or
+    /// stick input; with signing on, only signed counts).
     pub(super) fn note_life(&mut self, from: Sender, now: Now) {
-        if (from.signed || !self.signing_active) && self.owner() == Some(from.sysid) {
+        if !from.signed && self.signing_active {
+            return;
+        }
+        if self.owner() == Some(from.sysid) {
             self.auth.last_life = Some(now.mono);
         }
+        if let Some(p) = self.auth.pending.as_mut()
+            && p.from.sysid == from.sysid
+        {
+            p.last_life = now.mono;
+        }
+    }
+
+    /// A pending request is withdrawn because its requester is gone.
+    pub(super) fn withdraw_request(&mut self, why: &str, out: &mut Vec<Output>) {
+        let Some(p) = self.auth.pending.take() else {
+            return;
+        };
+        let text = format!("Control request from GCS {} withdrawn: {why}", p.from.sysid);
+        self.statustext(
+            Topic::Control,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &text,
+            out,
+        );
+        self.log("control_request_withdrawn", Some(p.from.sysid), text, out);
+    }
+
+    /// The pending requester, if it still shows life.
+    fn live_request(&self, now: Now) -> Option<Pending> {
+        self.auth
+            .pending
+            .filter(|p| now.mono.saturating_sub(p.last_life) <= self.gcs_timeout())
     }
 
     /// Whether the owner showed life within `window`.
@@ -403,15 +438,20 @@ impl Vehicle {
             out,
         );
         self.log(kind, Some(old.sysid), why.to_owned(), out);
-        if let Some(p) = self.auth.pending.take() {
+        if let Some(p) = self.live_request(now) {
+            self.auth.pending = None;
             self.grant(p.from, Grant::Handover, false, now, out);
         } else {
+            self.withdraw_request("no heartbeat from it for FS_GCS_TIMEOUT", out);
             self.send_control_status(out);
         }
     }
 
     /// Request timeouts and the owner's disappearance.
     pub(super) fn authority_tick(&mut self, now: Now, out: &mut Vec<Output>) {
+        if self.auth.pending.is_some() && self.live_request(now).is_none() {
+            self.withdraw_request("no heartbeat from it for FS_GCS_TIMEOUT", out);
+        }
         if let Some(p) = self.auth.pending
             && now.mono >= p.deadline
         {

@@ -126,6 +126,7 @@ impl Vehicle {
                         self.auth.pending = Some(Pending {
                             from: me,
                             deadline: now.mono + Duration::from_secs_f32(timeout_s),
+                            last_life: now.mono,
                         });
                         out.push(Output::Send {
                             to: o.reply,

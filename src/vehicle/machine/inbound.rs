@@ -176,6 +176,9 @@ impl Vehicle {
                     format!("owner: {owner}"),
                     out,
                 );
+                if self.auth.pending.is_some_and(|p| p.from.sysid == sysid) {
+                    self.withdraw_request("its HMI session closed", out);
+                }
                 if owner {
                     self.drop_owner("control_released", "HMI session closed", now, out);
                 }
