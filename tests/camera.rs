@@ -942,13 +942,16 @@ fn the_splitter_survives_random_bytes() {
 // ---------------------------------------------------------------- config
 
 #[test]
-fn the_readme_camera_config_parses_and_is_valid() {
-    let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).expect("README");
-    let start = readme
+fn the_guides_camera_config_parses_and_is_valid() {
+    let page = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/docs/guide/src/video.md"
+    ))
+    .expect("the guide's video page");
+    let start = page
         .find("```toml\n[camera]")
-        .expect("README has the camera config");
-    let body = &readme[start + "```toml\n".len()..];
+        .expect("docs/guide/src/video.md has the camera config");
+    let body = &page[start + "```toml\n".len()..];
     let text = &body[..body.find("```").expect("end of block")];
     let table: toml::Table = toml::from_str(text).expect("TOML");
     let cfg: CameraConfig = table

@@ -1,26 +1,30 @@
-//! Configuration: the README's example parses, precedence holds, bad input is refused clearly.
+//! Configuration: the user guide's example parses, precedence holds, bad input is refused clearly.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use clap::Parser;
 use neptunus::config::{BoardSource, Cli, FileConfig, resolve};
 use neptunus::sim::{ModelKind, NoiseOptions, SimOptions, TetherOptions};
 
-fn readme_example() -> String {
-    let readme =
-        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md")).unwrap();
-    let start = readme
+/// The example configuration of the guide's "Running and configuration".
+fn guide_example() -> String {
+    let page = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/docs/guide/src/running.md"
+    ))
+    .unwrap();
+    let start = page
         .find("```toml\nsim = false")
-        .expect("README has the example config");
-    let body = &readme[start + "```toml\n".len()..];
+        .expect("docs/guide/src/running.md has the example config");
+    let body = &page[start + "```toml\n".len()..];
     body[..body.find("```").unwrap()].to_owned()
 }
 
 #[test]
-fn readme_example_config_parses() {
-    let cfg = FileConfig::parse(&readme_example()).unwrap();
+fn the_guides_example_config_parses() {
+    let cfg = FileConfig::parse(&guide_example()).unwrap();
     assert_eq!(cfg.emulator.wiring_directions, [-1, 1, 1]);
     assert_eq!(cfg.mavlink.endpoints.as_ref().unwrap().len(), 2);
-    // The README documents the simulator's defaults: they must be the defaults.
+    // The guide documents the simulator's defaults: they must be the defaults.
     assert_eq!(cfg.emulator.sim, SimOptions::default());
 }
 
@@ -281,7 +285,7 @@ fn hmi_access_keys_resolve() {
     assert!(s.hmi.allowed_origins.is_empty());
 }
 
-/// `[hmi]` transport keys: the defaults, the README's values, and refusals
+/// `[hmi]` transport keys: the defaults, the guide's values, and refusals
 /// that name the key, the value and the fix.
 #[test]
 fn hmi_transport_keys_resolve_and_bad_ones_name_the_key() {

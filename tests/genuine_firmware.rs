@@ -7,8 +7,8 @@
 //! firmware's pins, the lights' PWM, and the bytes on the serial line.
 //!
 //! The firmware comes from `$OPENROV_FIRMWARE_DIR`, else from
-//! `../shared/openrov-firmware` beside the repository (README "Hardware in
-//! the loop" says how to get it). Times the firmware decides (its dead-man)
+//! `../shared/openrov-firmware` beside the repository (the user guide's
+//! "Hardware in the loop", docs/guide/src/hil.md, says how to get it). Times the firmware decides (its dead-man)
 //! are judged in the board's own simulated time, so a busy machine that
 //! slows the simulator does not fail them.
 #![cfg(feature = "hil")]

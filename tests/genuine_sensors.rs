@@ -35,7 +35,7 @@ fn firmware_dir(version: &str) -> PathBuf {
     assert!(
         dir.join("OpenROV/OpenROV.ino").is_file(),
         "the genuine OpenROV firmware {version} is not at {} — set OPENROV_FIRMWARE_DIR to a folder \
-         holding {version}/ (README \"Hardware in the loop\")",
+         holding {version}/ (docs/guide/src/hil.md says how to get it)",
         dir.display()
     );
     dir

@@ -1,5 +1,5 @@
 //! The parameter set: what QGroundControl needs, validation, TOML storage and
-//! the README table.
+//! the user guide's table.
 
 use std::collections::HashSet;
 use std::fs;
@@ -737,38 +737,44 @@ fn partly_bad_file_applies_the_good_values() {
 
 const BEGIN: &str = "<!-- params:begin -->";
 const END: &str = "<!-- params:end -->";
+/// The guide's parameter page, which embeds the table.
+const PAGE: &str = "docs/guide/src/parameters.md";
+/// Set to 1 to rewrite the table instead of comparing (named `UPDATE_README`
+/// while the table lived in README.md).
+const UPDATE: &str = "UPDATE_GUIDE";
 
-/// README.md's parameter section is `markdown_table()`. With
-/// `UPDATE_README=1` this rewrites the section instead of comparing.
+/// The guide's parameter page holds exactly `markdown_table()` between its
+/// markers. With `UPDATE_GUIDE=1` this rewrites the table instead of
+/// comparing.
 #[test]
-fn readme_parameter_table_is_current() {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md");
-    let readme = fs::read_to_string(&path).expect("README.md");
+fn guide_parameter_table_is_current() {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(PAGE);
+    let page = fs::read_to_string(&path).expect(PAGE);
     let table = markdown_table();
     let section = format!("{BEGIN}\n{table}{END}");
-    let current = match (readme.find(BEGIN), readme.find(END)) {
+    let current = match (page.find(BEGIN), page.find(END)) {
         (Some(b), Some(e)) if b < e => Some((b, e + END.len())),
         _ => None,
     };
-    if std::env::var("UPDATE_README").as_deref() == Ok("1") {
+    let regenerate = format!("run `{UPDATE}=1 cargo test --test params`");
+    if std::env::var(UPDATE).as_deref() == Ok("1") {
         let updated = match current {
-            Some((b, e)) => format!("{}{section}{}", &readme[..b], &readme[e..]),
+            Some((b, e)) => format!("{}{section}{}", &page[..b], &page[e..]),
             None => format!(
-                "{}\n## Parameters\n\nEvery MAVLink parameter of Neptunus, generated from \
-                 `src/vehicle/params/defs.rs` (`UPDATE_README=1 cargo test --test params` \
-                 regenerates it).\n\n{section}\n",
-                readme.trim_end()
+                "{}\n\n## Every parameter\n\nGenerated from `src/vehicle/params/defs.rs` \
+                 (`{UPDATE}=1 cargo test --test params` rewrites it).\n\n{section}\n",
+                page.trim_end()
             ),
         };
-        fs::write(&path, updated).expect("write README.md");
+        fs::write(&path, updated).expect(PAGE);
         return;
     }
-    let (b, e) = current.expect(
-        "README.md has no parameter section: run `UPDATE_README=1 cargo test --test params`",
-    );
+    let (b, e) = current.unwrap_or_else(|| {
+        panic!("{PAGE} has no parameter table between its markers: {regenerate}")
+    });
     assert!(
-        readme[b..e] == section,
-        "README.md's parameter table is out of date: run `UPDATE_README=1 cargo test --test params`"
+        page[b..e] == section,
+        "{PAGE}'s parameter table is out of date: {regenerate}"
     );
 }
 

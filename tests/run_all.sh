@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs every Neptunus test on a fresh machine: installs what the tests need,
-# then checks formatting and lints, then runs the whole test suite.
+# then checks formatting and lints, the API docs and the user guide, then
+# runs the whole test suite.
 # This is the README's test command; .ci/run calls exactly this.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -52,7 +53,7 @@ avr-gcc --version | sed -n 1p
 # beside the repository unless OPENROV_FIRMWARE_DIR says otherwise.
 firmware_dir="${OPENROV_FIRMWARE_DIR:-$PWD/../shared/openrov-firmware}"
 if [ ! -f "$firmware_dir/30.0.2/OpenROV/OpenROV.ino" ] || [ ! -f "$firmware_dir/2014-12/OpenROV/OpenROV.ino" ]; then
-    echo "the genuine OpenROV firmware is not at $firmware_dir (30.0.2/ and 2014-12/) — set OPENROV_FIRMWARE_DIR; README 'Hardware in the loop' says how to get it" >&2
+    echo "the genuine OpenROV firmware is not at $firmware_dir (30.0.2/ and 2014-12/) — set OPENROV_FIRMWARE_DIR; the guide's docs/guide/src/hil.md says how to get it" >&2
     exit 1
 fi
 export OPENROV_FIRMWARE_DIR="$firmware_dir"
@@ -64,6 +65,18 @@ cargo clippy --all-targets --locked --features hil -- -D warnings
 cargo clippy --all-targets --locked -- -D warnings
 # The API docs build without a warning (broken links included).
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --features hil
+
+echo "== the user guide (mdBook: docs/guide -> target/guide)"
+# Debian has no mdbook package: cargo installs the pinned version once. Only
+# the search feature: the guide is built here, never served or watched.
+mdbook_version=0.4.52
+if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$mdbook_version" ]; then
+    cargo install mdbook --locked --version "$mdbook_version" --no-default-features --features search
+fi
+mdbook --version
+# --dest-dir is relative to the book's folder. Its links are checked by
+# tests/docs_links.rs; a chapter that fails to render fails the run here.
+mdbook build docs/guide --dest-dir ../../target/guide
 
 # The step-response plots (neptunus sim-report, tested) label axes with a system font.
 if ! find /usr/share/fonts -name '*.ttf' -print -quit 2>/dev/null | grep -q .; then

@@ -195,8 +195,9 @@ fn settle(p: &mut Plant, seconds: f64, deg: f64) -> (f64, f64) {
     (settled_at, largest)
 }
 
-/// Documented in the README: back within 2° of level in under 1 s
-/// (measured 0.89 s in pitch, 0.53 s in roll); the bound leaves margin.
+/// Documented in the user guide (docs/guide/src/simulator.md): back within
+/// 2° of level in under 1 s (measured 0.89 s in pitch, 0.53 s in roll); the
+/// bound leaves margin.
 const RIGHTING_TIME_S: f64 = 1.5;
 
 #[test]

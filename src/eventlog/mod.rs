@@ -38,7 +38,8 @@ pub use writer::EventLog;
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct LogEvent {
     /// snake_case event name, e.g. "armed", "control_granted",
-    /// "failsafe_raised" (the list is in README.md, "Event log").
+    /// "failsafe_raised" (the list is in the user guide,
+    /// docs/guide/src/safety.md, "Event log").
     pub kind: &'static str,
     /// The ground station involved, if any.
     pub sysid: Option<u8>,

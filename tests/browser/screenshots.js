@@ -1,12 +1,13 @@
-// Takes the README's screenshots of the operator interface (laptop 1366×768,
-// tablet 768×1024) and the developer interface (docs/screenshots/*.png)
+// Takes the user guide's screenshots of the operator interface (laptop
+// 1366×768, tablet 768×1024) and the developer interface
+// (docs/guide/src/screenshots/*.png, which the README shows too)
 // from the real binary in --sim:
 //   cargo build && (cd tests/browser && npm ci && node screenshots.js)
 import { mkdirSync } from 'node:fs';
 import { join } from 'node:path';
 import { startVehicle, launchBrowser, openPage, takeControlAndArm, until, telemetry, REPO } from './harness.js';
 
-const out = join(REPO, 'docs', 'screenshots');
+const out = join(REPO, 'docs', 'guide', 'src', 'screenshots');
 mkdirSync(out, { recursive: true });
 const v = await startVehicle();
 const browser = await launchBrowser();

@@ -1,6 +1,7 @@
 """Control authority and operator handover, end to end from the ground
-stations' side (contract: the README's "Control authority and safety",
-the owner and the handover by MAV_CMD_REQUEST_OPERATOR_CONTROL).
+stations' side (contract: the user guide's "Control authority and safety",
+docs/guide/src/safety.md: the owner and the handover by
+MAV_CMD_REQUEST_OPERATOR_CONTROL).
 
 Two pymavlink ground stations talk to one `neptunus --sim` over real UDP,
 each on a socket of its own: 255/190 (SYSID_MYGCS, the primary) and 254/190

@@ -1,5 +1,6 @@
-"""Failsafes, end to end (contract: the README's "Control authority and
-safety": the failsafes and the owner's signs of life).
+"""Failsafes, end to end (contract: the user guide's "Control authority
+and safety", docs/guide/src/safety.md: the failsafes and the owner's signs
+of life).
 
 The owner whose process dies is a real separate process: a small pymavlink
 script that arms, drives and heartbeats until it is killed with SIGKILL, so

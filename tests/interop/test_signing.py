@@ -1,5 +1,5 @@
-"""MAVLink 2 message signing, end to end (contract: the README's "Message
-signing").
+"""MAVLink 2 message signing, end to end (contract: the user guide's
+docs/guide/src/security.md, "Message signing").
 
 The key is set the way ground stations do it: SETUP_SIGNING (key =
 SHA-256 of a passphrase, as QGroundControl and MAVProxy derive it), sent

@@ -1,13 +1,14 @@
-//! The parameter table README.md embeds between `<!-- params:begin -->`
+//! The parameter table the user guide's parameter page
+//! (`docs/guide/src/parameters.md`) embeds between `<!-- params:begin -->`
 //! and `<!-- params:end -->`, generated from the definitions.
-//! `tests/params.rs` checks that README.md holds exactly this text (and
-//! rewrites it with `UPDATE_README=1`); this module never writes a file.
+//! `tests/params.rs` checks that the page holds exactly this text (and
+//! rewrites it with `UPDATE_GUIDE=1`); this module never writes a file.
 
 use std::fmt::Write as _;
 
 use super::defs::{Use, definitions, format_value};
 
-/// Markdown table of every parameter, for README.md.
+/// Markdown table of every parameter, for the user guide.
 pub fn markdown_table() -> String {
     let mut out = String::from(
         "| Name | Type | Default | Range | Units | Used | Description |\n\

@@ -19,7 +19,7 @@
 //!
 //! The pieces: `defs` is the table of definitions (and the wire types),
 //! `store` the values with their validation and typed accessors, `file`
-//! `params.toml` and its TOML text, `doc` the table README.md embeds, `functions` what the
+//! `params.toml` and its TOML text, `doc` the table the user guide embeds, `functions` what the
 //! button and servo-output function codes mean.
 //! Everything is re-exported here, so users name `vehicle::params::X`.
 
