@@ -791,8 +791,9 @@ fn self_signed_tls_serves_the_page_and_websocket_and_keeps_its_certificate() {
             .expect("the TLS port kept a junk connection open");
         assert!(!String::from_utf8_lossy(&got).contains("200 OK"));
         next_of(&mut ws, "telemetry").await;
-        // With a password the REST API needs the login cookie, over TLS too.
-        assert_eq!(tls_get(&tls, http, "/api/status").await.status, 401);
+        // With a password the vehicle's records need the login cookie, over
+        // TLS too.
+        assert_eq!(tls_get(&tls, http, "/api/logs").await.status, 401);
     });
 
     // The log and the CLI give the same fingerprint.

@@ -741,9 +741,9 @@ async fn open_control_none_without_login_cannot_arm() {
     let v: Value = serde_json::from_str(&body).unwrap();
     assert_eq!(v["sessions_free"], 10, "{v}");
     assert_eq!(rig.control().snapshot().motors_us, NEUTRAL_US);
-    // Logs and parameters are for the addresses open_control admits.
+    // The records are for those who may pilot; what a watcher sees is open.
     assert_eq!(rig.get("/api/logs").await.0, 401);
-    assert_eq!(rig.get("/api/params").await.0, 401);
+    assert_eq!(rig.get("/api/params").await.0, 200);
     assert_eq!(rig.get("/api/status").await.0, 200);
 }
 
@@ -851,23 +851,77 @@ async fn password_guessing_is_throttled_and_quiet() {
     assert!(!log.contains("guess-"), "a guess reached the log");
 }
 
-/// L1: with a password, the REST API needs the login cookie (HttpOnly,
-/// SameSite=Strict), and logging out ends it.
+/// One read rule for the page, the REST API and mavlink2rest: with a pilot
+/// password set, an HTTP client without the login reads what a watcher
+/// sees everywhere (status, parameters, mavlink2rest's messages and
+/// WebSocket) and nowhere the vehicle's records; nothing it sends acts.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn rest_needs_the_login_cookie() {
-    let rig = with_password("");
-    for path in [
-        "/api/status",
-        "/api/params",
-        "/api/logs",
-        "/api/logs/tlogs/x",
-    ] {
+async fn without_the_login_reading_follows_one_rule_everywhere() {
+    let rig = with_password("open_control = \"none\"");
+    let (status, _, body) = rig.get("/api/params").await;
+    assert_eq!(status, 200, "{body}");
+    let v: Value = serde_json::from_str(&body).unwrap();
+    assert!(v["count"].as_u64().unwrap() > 100, "{v}");
+    assert_eq!(rig.get("/api/status").await.0, 200);
+    let (status, _, body) = rig
+        .get("/mavlink2rest/mavlink/vehicles/1/components/1/messages/HEARTBEAT")
+        .await;
+    assert_eq!(status, 200, "{body}");
+    assert!(body.contains("HEARTBEAT"), "{body}");
+    // mavlink2rest's WebSocket admits a watcher, which hears the vehicle.
+    let url = format!("ws://{}/mavlink2rest/ws/mavlink?filter=HEARTBEAT", rig.http);
+    let (mut ws, _) = tokio_tungstenite::connect_async(url).await.unwrap();
+    let heard = tokio::time::timeout(Duration::from_secs(20), async {
+        while let Some(Ok(m)) = ws.next().await {
+            if let Message::Text(t) = m
+                && t.contains("HEARTBEAT")
+            {
+                return true;
+            }
+        }
+        false
+    })
+    .await;
+    assert_eq!(heard, Ok(true), "the watcher heard no HEARTBEAT");
+    // The records are not for it, through any path.
+    for path in ["/api/logs", "/api/logs/events/x", "/api/logs/tlogs/x"] {
+        let (status, _, body) = rig.get(path).await;
+        assert_eq!(status, 401, "{path}: {body}");
+        assert!(body.contains("records are for pilots"), "{body}");
+    }
+    // Acting is not for it either.
+    let arm = json!({"header": {"system_id": 255, "component_id": 240, "sequence": 0},
+        "message": {"type": "COMMAND_LONG", "target_system": 1, "target_component": 1,
+            "command": {"type": "MAV_CMD_COMPONENT_ARM_DISARM"}, "confirmation": 0,
+            "param1": 1.0, "param2": 0.0, "param3": 0.0, "param4": 0.0,
+            "param5": 0.0, "param6": 0.0, "param7": 0.0}});
+    let (status, _, body) = rig
+        .request(
+            "POST",
+            "/mavlink2rest/mavlink",
+            &["Content-Type: application/json".into()],
+            &arm.to_string(),
+        )
+        .await;
+    assert_eq!(status, 401, "{body}");
+    assert_eq!(rig.control().snapshot().motors_us, NEUTRAL_US);
+}
+
+/// L1: with a password, the vehicle's records need the login cookie
+/// (HttpOnly, SameSite=Strict), and logging out ends it; what a watcher
+/// sees does not.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn records_need_the_login_cookie() {
+    let rig = with_password("open_control = \"none\"");
+    for path in ["/api/logs", "/api/logs/tlogs/x"] {
         let (status, _, body) = rig.get(path).await;
         assert_eq!(status, 401, "{path}: {body}");
         assert!(body.contains("log in"), "{body}");
     }
-    assert_eq!(rig.get("/api/video").await.0, 200);
-    assert_eq!(rig.get("/").await.0, 200);
+    for path in ["/api/status", "/api/params", "/api/video", "/"] {
+        let (status, _, body) = rig.get(path).await;
+        assert_eq!(status, 200, "{path}: {body}");
+    }
     let (status, body, cookie) = rig.login("not-it-at-all").await;
     assert_eq!(
         (status, &body["message"]),

@@ -134,7 +134,8 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
         );
     }
     let path = req.uri().path();
-    let upgrade = path == "/ws" || super::m2r::is_ws_path(path);
+    // Every WebSocket (the page's, mavlink2rest's) starts as an upgrade.
+    let upgrade = req.headers().contains_key(header::UPGRADE);
     let changes_state = !matches!(*req.method(), Method::GET | Method::HEAD | Method::OPTIONS);
     if (upgrade || changes_state)
         && let Some(origin) = req.headers().get(header::ORIGIN)
@@ -156,30 +157,34 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
             );
         }
     }
-    if path.starts_with("/api/") && !matches!(path, "/api/login" | "/api/logout" | "/api/video") {
-        let open_to_all = path == "/api/status";
-        let ok = if shared.password.is_some() {
-            logged_in(&shared, req.headers())
+    if is_record(path) && !may_pilot(&shared, ip, logged_in(&shared, req.headers())) {
+        let message = if shared.password.is_some() {
+            "the vehicle's records are for pilots: log in first (POST /api/login {\"password\": …} sets the login cookie)".to_owned()
         } else {
-            open_to_all || ip.is_some_and(|i| shared.open_control.admits(i))
-        };
-        if !ok {
-            let message = if shared.password.is_some() {
-                "log in first: POST /api/login {\"password\": …} sets the login cookie".to_owned()
-            } else {
-                format!(
-                    "{path} is open only to addresses [hmi] open_control admits ({}) — set a pilot password on the vehicle with `neptunus hmi set-password` and log in",
-                    shared.open_control
-                )
-            };
-            return (
-                StatusCode::UNAUTHORIZED,
-                axum::Json(serde_json::json!({ "error": message })),
+            format!(
+                "the vehicle's records are for pilots: open only to addresses [hmi] open_control admits ({}) — set a pilot password on the vehicle with `neptunus hmi set-password` and log in",
+                shared.open_control
             )
-                .into_response();
-        }
+        };
+        return (
+            StatusCode::UNAUTHORIZED,
+            axum::Json(serde_json::json!({ "error": message })),
+        )
+            .into_response();
     }
     next.run(req).await
+}
+
+/// The one read rule, the same for the page, the REST API and mavlink2rest:
+/// what the vehicle shows anyone watching — live telemetry and state, the
+/// parameters, the video (the page's WebSocket as a watcher, `/api/status`,
+/// `/api/params`, `/api/video`, mavlink2rest's GET and WebSocket) — is open
+/// to every client the Host and Origin checks admit, as it is to any
+/// MAVLink station that listens; the vehicle's records (`/api/logs`: tlogs,
+/// the event log with its client addresses, `neptunus.log`) are for those
+/// who may pilot ([`may_pilot`]), like every request that acts.
+pub(crate) fn is_record(path: &str) -> bool {
+    path == "/api/logs" || path.starts_with("/api/logs/")
 }
 
 /// The outcome of one pilot login attempt.

@@ -55,13 +55,6 @@ const OUT_CAPACITY: usize = 1024;
 /// Largest client frame or POST body.
 const MAX_FRAME_BYTES: usize = 16 * 1024;
 
-/// Whether `path` is one of the API's WebSocket paths (the Origin rule).
-pub fn is_ws_path(path: &str) -> bool {
-    PREFIXES
-        .iter()
-        .any(|p| path.strip_prefix(p) == Some("/ws/mavlink"))
-}
-
 fn is_api_path(path: &str) -> bool {
     PREFIXES.iter().any(|p| {
         path.strip_prefix(p).is_some_and(|rest| {
