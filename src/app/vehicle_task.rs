@@ -15,11 +15,10 @@ use crate::dialect::neptunus::{MavMessage, MavType};
 use crate::firmware::codec::Event;
 use crate::firmware::emulator::SimSnapshot;
 use crate::firmware::link::LinkEvent;
-use crate::firmware::loopback::sim_truth;
 use crate::mavlink::endpoint::Inbound;
 use crate::mavlink::frame::{Frame, Undecodable};
 use crate::vehicle::machine::{
-    BUSY_TICK, Input, NEUTRAL_US, Now, Output, RunMode, Sender, Vehicle,
+    BUSY_TICK, Input, NEUTRAL_US, Now, Output, RunMode, Sender, SimTruth, Vehicle,
 };
 
 /// The camera's scene follows the vehicle at most this often.
@@ -105,7 +104,7 @@ impl VehicleTask {
         self.last_tick = now.mono;
         if let Some(sim) = self.io.simulator.as_mut() {
             sim.step(now.mono, &mut self.sim_events);
-            let truth = sim.truth();
+            let truth = sim_truth(&sim.truth());
             for ev in self.sim_events.drain(..) {
                 self.vehicle
                     .handle(Input::SimBoard(ev), now, &mut self.outputs);
@@ -253,5 +252,22 @@ fn scene(v: &Vehicle, now: Now) -> crate::camera::Scene {
         tilt_deg: (f64::from(v.tilt_us()) - f64::from(NEUTRAL_US)) / 500.0 * 90.0,
         simulated: v.run_mode() == RunMode::Simulator,
         armed: v.armed(),
+    }
+}
+
+/// A simulator's state (the emulator's, in or out of process) as the core
+/// takes it.
+fn sim_truth(s: &SimSnapshot) -> SimTruth {
+    SimTruth {
+        north_m: s.north_m,
+        east_m: s.east_m,
+        depth_m: s.depth_m,
+        heading_rad: s.heading_deg.to_radians(),
+        surge_mps: s.surge_mps,
+        sway_mps: s.sway_mps,
+        heave_mps: s.heave_mps,
+        yaw_rate_rps: s.yaw_rate_dps.to_radians(),
+        roll_rad: s.roll_deg.to_radians(),
+        pitch_rad: s.pitch_deg.to_radians(),
     }
 }

@@ -13,7 +13,6 @@ use std::time::Duration;
 
 use super::codec::{self, Command, Event, Framing, LineDecoder};
 use super::emulator::{Board, BoardSnapshot, EmulatorOptions, SimSnapshot};
-use crate::vehicle::machine::SimTruth;
 
 /// A board emulator driven by calls instead of a serial line.
 #[derive(Debug)]
@@ -119,9 +118,9 @@ impl BuiltinSim {
         }
     }
 
-    /// Where the simulated vehicle really is, for the core.
-    pub fn truth(&self) -> SimTruth {
-        sim_truth(&self.board.snapshot().sim)
+    /// Where the simulated vehicle really is.
+    pub fn truth(&self) -> SimSnapshot {
+        self.board.snapshot().sim
     }
 
     pub fn snapshot(&self) -> BoardSnapshot {
@@ -130,23 +129,6 @@ impl BuiltinSim {
 
     pub fn loopback(&self) -> &LoopbackBoard {
         &self.board
-    }
-}
-
-/// A simulator's state (the emulator's, in or out of process) as the core
-/// takes it.
-pub fn sim_truth(s: &SimSnapshot) -> SimTruth {
-    SimTruth {
-        north_m: s.north_m,
-        east_m: s.east_m,
-        depth_m: s.depth_m,
-        heading_rad: s.heading_deg.to_radians(),
-        surge_mps: s.surge_mps,
-        sway_mps: s.sway_mps,
-        heave_mps: s.heave_mps,
-        yaw_rate_rps: s.yaw_rate_dps.to_radians(),
-        roll_rad: s.roll_deg.to_radians(),
-        pitch_rad: s.pitch_deg.to_radians(),
     }
 }
 
@@ -178,6 +160,6 @@ mod tests {
         sim.place(12.0, 90.0);
         let t = sim.truth();
         assert!((t.depth_m - 12.0).abs() < 1e-9);
-        assert!((t.heading_rad - 90f64.to_radians()).abs() < 1e-9);
+        assert!((t.heading_deg - 90.0).abs() < 1e-9);
     }
 }
