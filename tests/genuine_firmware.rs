@@ -130,6 +130,7 @@ impl GenuineRig {
         let wiring = Wiring {
             analog,
             depth_sensor,
+            imu: false,
         };
         let board = GenuineBoard::spawn(firmware, wiring, None).expect("simavr runs the firmware");
         let powered_at = Instant::now();
