@@ -122,6 +122,7 @@ fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::R
     let wiring = Wiring {
         analog,
         depth_sensor: !args.no_depth_sensor,
+        imu: !args.no_imu,
     };
     let board = GenuineBoard::spawn(firmware, wiring, args.link.clone())?;
     let mut out = std::io::stdout();

@@ -321,6 +321,19 @@ fn nav_line_decodes_every_field() {
     );
 }
 
+/// With a BNO055 the genuine 30.0.2 firmware prints its heading as `yaw`
+/// too (line as printed in simavr, the vehicle heading 200°).
+#[test]
+fn yaw_past_180_from_the_bno055_is_accepted() {
+    let nav = nav_of("hdgd:200.00;deap:0.00;pitc:0.00;roll:0.00;yaw:200.00;fthr:0.00;");
+    assert_eq!(nav.heading_deg, Some(200.0));
+    assert_eq!(nav.yaw_deg, Some(200.0));
+    assert_eq!(nav_of("yaw:360.00;").yaw_deg, Some(360.0));
+    assert_eq!(nav_of("yaw:-180.00;").yaw_deg, Some(-180.0));
+    assert_rejected("yaw:360.07;", RejectReason::OutOfRange);
+    assert_rejected("yaw:-180.07;", RejectReason::OutOfRange);
+}
+
 #[test]
 fn deap_and_deep_both_give_depth() {
     assert_eq!(nav_of("deap:4.50;").depth_m, Some(4.5));
@@ -493,6 +506,55 @@ crc:pass;cmd:go(1600,1500,1400);\r\n\
 motors:1640,1500,1270;\r\n\
 rawcmd:CB,70,69,6E,67,28,30,29,3B,;\r\n\
 crc:fail,9E/CB;hdgd:0.00;deap:0.00;pitc:0.00;roll:0.00;yaw:0.00;fthr:0.00;\r\n";
+
+/// What the genuine 30.0.2 firmware printed in simavr with the BNO055 on
+/// its I2C bus: the IMU's set-up (each self-test result ends its line
+/// before the `;`), `boot`, a navigation line with the vehicle heading 200°
+/// (`yaw` is the heading too), and the IMU's once-a-second report.
+const GENUINE_30_0_2_IMU: &str = "\
+log:setting dev #10;log:setting dev #11;BNO055.Address:40;\r\n\
+BNO055.WHO_AM_I:0;\r\n\
+BNO055.IAM_160:160;\r\n\
+BNO055.status:online;\r\n\
+BNO055.status: step2;\r\n\
+BNO055.SW_Revision_ID:3.11;\r\n\
+BNO055.bootloader:21;\r\n\
+BNO055.selftest.acc:passed\r\n;\r\n\
+BNO055.selftest.mag:passed\r\n;\r\n\
+BNO055.selftest.gyro:passed\r\n;\r\n\
+BNO055.selftest.mcu:passed\r\n;\r\n\
+BNO055.selftest2.acc:passed\r\n;\r\n\
+BNO055.selftest2.mag:passed\r\n;\r\n\
+BNO055.selftest2.gyro:passed\r\n;\r\n\
+BNO055.Initial_Mode:0;\r\n\
+BNO055.status:initialized;\r\n\
+boot:1;\r\n\
+hdgd:200.00;deap:0.00;pitc:0.00;roll:-20.00;yaw:200.00;fthr:0.00;\r\n\
+BNO055.CALIB_MAG:3;\r\n\
+BNO055.CALIB_ACC:3;\r\n\
+BNO055.CALIB_GYR:3;\r\n\
+BNO055.CALIB_SYS:3;\r\n\
+BNO055.MODE:12;\r\n";
+
+#[test]
+fn the_genuine_boards_imu_lines_are_decoded_or_knowingly_ignored() {
+    let (events, stats) = decode(GENUINE_30_0_2_IMU.as_bytes());
+    assert_eq!(stats.rejected_total(), 0, "{stats:?}");
+    assert_eq!(stats.unknown_keys, 0, "{stats:?}");
+    assert_eq!(stats.joined_lines, 7, "the self-test lines: {stats:?}");
+    assert!(events.contains(&Event::Boot));
+    let nav: Vec<_> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Nav(n) => Some(*n),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(nav.len(), 1, "{events:?}");
+    assert_eq!(nav[0].heading_deg, Some(200.0));
+    assert_eq!(nav[0].roll_deg, Some(-20.0));
+    assert_eq!(nav[0].yaw_deg, Some(200.0));
+}
 
 #[test]
 fn every_line_of_the_genuine_board_is_decoded_or_knowingly_ignored() {

@@ -23,8 +23,8 @@ use std::time::{Duration, Instant};
 use common::{Gcs, Traffic, Vehicle};
 use neptunus::dialect::neptunus::*;
 use neptunus::hil::{
-    Analog, F_CPU_HZ, GenuineBoard, GenuineControl, Output, PinsReport, SerialChunk, TimedChange,
-    Wiring, prepare,
+    Analog, Attitude, F_CPU_HZ, GenuineBoard, GenuineControl, Output, PinsReport, SerialChunk,
+    TimedChange, Wiring, prepare,
 };
 use nix::sys::signal::Signal;
 
@@ -115,9 +115,11 @@ struct GenuineRig {
 
 impl GenuineRig {
     /// Powers the genuine board `version` with 12.0 V on its battery input
-    /// (and the depth sensor on its I2C bus if `depth_sensor`), then starts
-    /// `neptunus --serial <its pty>`.
-    fn start(version: &str, depth_sensor: bool) -> Self {
+    /// (and, if `add_ons`, the depth sensor and the IMU on its I2C bus, the
+    /// vehicle heading south-west, a little bow-up and port side down, so
+    /// that every attitude field has a sign and `yaw` is past 180), then
+    /// starts `neptunus --serial <its pty>`.
+    fn start(version: &str, add_ons: bool) -> Self {
         let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
         let firmware = prepare(&firmware_dir(version), &cache)
             .unwrap_or_else(|e| panic!("building the {version} firmware: {e}"));
@@ -129,9 +131,15 @@ impl GenuineRig {
         };
         let wiring = Wiring {
             analog,
-            depth_sensor,
+            depth_sensor: add_ons,
+            imu: add_ons,
         };
         let board = GenuineBoard::spawn(firmware, wiring, None).expect("simavr runs the firmware");
+        board.control().set_attitude(Attitude {
+            heading_deg: 225.0,
+            pitch_deg: 4.0,
+            roll_deg: -3.0,
+        });
         let powered_at = Instant::now();
         let control = board.control();
         let serial = control.serial();
@@ -618,7 +626,7 @@ fn one_board() -> std::sync::MutexGuard<'static, ()> {
 #[test]
 fn the_genuine_2015_firmware_arms_drives_and_stops() {
     let _one = one_board();
-    // A ROV with the depth add-on.
+    // A ROV with the depth and IMU add-ons.
     let mut rig = GenuineRig::start("30.0.2", true);
     drives_the_board(&mut rig, "30.0.2");
 

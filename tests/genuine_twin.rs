@@ -257,6 +257,7 @@ fn run_genuine(version: FirmwareVersion) -> (Capture, Vec<Duration>) {
     let wiring = Wiring {
         analog: Analog::default(),
         depth_sensor: false,
+        imu: false,
     };
     let board = GenuineBoard::spawn(firmware, wiring, None)
         .unwrap_or_else(|e| panic!("starting the genuine firmware {version}: {e}"));

@@ -230,6 +230,10 @@ pub struct GenuineArgs {
     /// then reads zeros and says so once a second).
     #[arg(long)]
     pub no_depth_sensor: bool,
+    /// No BNO055 IMU on the board's I2C bus (the firmware then finds no
+    /// IMU and prints a level attitude heading north).
+    #[arg(long)]
+    pub no_imu: bool,
 }
 
 /// Options of `emulate-board`.

@@ -420,8 +420,9 @@ impl Mcu {
     }
 
     /// Puts `slave` on the I2C bus from now on (kept across resets: the
-    /// board's reset line does not reach its sensors). The caller keeps its
-    /// own `Rc` to change the slave between runs.
+    /// board's reset line does not reach its sensors). Several slaves share
+    /// the bus: each hears every transfer and answers only its own address.
+    /// The caller keeps its own `Rc` to change the slave between runs.
     pub fn attach_twi(&mut self, slave: Rc<RefCell<dyn TwiSlave>>) -> Result<(), AvrError> {
         let avr = self.avr.as_ptr();
         // simavr names the ATmega2560's one TWI 0 (`AVR_IOCTL_TWI_GETIRQ`).

@@ -7,6 +7,9 @@
 //! - [`compile`]: finds the sketch and builds it with avr-gcc and Debian's
 //!   Arduino AVR core, caching the ELF.
 //! - `avr`: simavr behind a safe face (the crate's one FFI boundary).
+//! - [`bno055`]: the BNO055 IMU on the board's I2C bus, its fused Euler
+//!   registers worked out from the vehicle's attitude so that the firmware
+//!   prints it back in its own convention (documented there).
 //! - [`ms5803`]: the MS5803-14BA depth sensor on the board's I2C bus, its
 //!   raw readings worked back from a depth and water temperature through
 //!   the firmware's own arithmetic.
@@ -14,20 +17,22 @@
 //!   servo pulse widths from pin edges, lights and lasers from their timer.
 //! - [`runner`]: [`GenuineBoard`], the firmware paced to the wall clock on
 //!   its own thread, its UART0 on a pty, its analog inputs set in volts and
-//!   amperes, its depth sensor's water, a reset line, and the records
-//!   tests and benches read.
+//!   amperes, its depth sensor's water, its IMU's attitude, a reset line,
+//!   and the records tests and benches read.
 //!
 //! The firmware is test data, not part of Neptunus: this module builds and
 //! runs it, it never changes it. Nothing here decides what the vehicle
 //! does; the firmware decides what the board does.
 
 mod avr;
+pub mod bno055;
 pub mod compile;
 pub mod ms5803;
 pub mod pins;
 pub mod runner;
 
 pub use avr::{AvrError, F_CPU_HZ};
+pub use bno055::Attitude;
 pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
 pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};

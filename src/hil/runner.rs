@@ -7,10 +7,11 @@
 //! assumed), the bridge (bytes from the host go onto the UART line at its
 //! baud rate, bytes the firmware prints go to the pty), the analog inputs
 //! (battery voltage, currents, board temperature, in volts and amperes
-//! converted to what the board's dividers put on its ADC pins), the depth
-//! sensor on its I2C bus (depth and water temperature, [`super::ms5803`]), the output
-//! measurement ([`super::pins`]), a hardware reset, and the figures and
-//! records a test or a bench reads ([`GenuineControl`]). It never decides
+//! converted to what the board's dividers put on its ADC pins), the sensors
+//! on its I2C bus (depth and water temperature, [`super::ms5803`]; the
+//! vehicle's attitude, [`super::bno055`]), the output measurement
+//! ([`super::pins`]), a hardware reset, and the figures and records a test
+//! or a bench reads ([`GenuineControl`]). It never decides
 //! anything the board does: that is the firmware's.
 
 use std::cell::RefCell;
@@ -26,6 +27,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use super::avr::{AvrError, Edge, F_CPU_HZ, Mcu};
+use super::bno055::{Attitude, Bno055};
 use super::compile::Firmware;
 use super::ms5803::{Ms5803, Prom, Water};
 use super::pins::{Pins, PinsReport, PulseChange, WATCHED, reg};
@@ -61,6 +63,9 @@ pub struct Wiring {
     /// The MS5803-14BA depth sensor on the I2C bus (the kit's depth add-on).
     /// Without it the firmware reads zeros and says so, as a basic kit does.
     pub depth_sensor: bool,
+    /// The BNO055 IMU on the I2C bus (the kit's IMU add-on). Without it the
+    /// firmware finds no IMU and prints a level attitude heading north.
+    pub imu: bool,
 }
 
 impl Default for Wiring {
@@ -68,6 +73,7 @@ impl Default for Wiring {
         Self {
             analog: Analog::default(),
             depth_sensor: true,
+            imu: true,
         }
     }
 }
@@ -138,6 +144,8 @@ pub struct GenuineSnapshot {
     pub analog: Analog,
     /// What the depth sensor is in.
     pub water: Water,
+    /// The vehicle's attitude the IMU senses.
+    pub attitude: Attitude,
     /// Simulated seconds per wall second over the last second: 1.0 when the
     /// board keeps real time, below when it cannot.
     pub realtime_ratio: f64,
@@ -158,6 +166,7 @@ pub struct GenuineSnapshot {
 enum Ctl {
     Analog(Analog),
     Water(Water),
+    Attitude(Attitude),
     Reset,
     Inject(Vec<u8>),
     Serial(Sender<SerialChunk>),
@@ -177,6 +186,7 @@ impl std::fmt::Debug for Ctl {
         f.write_str(match self {
             Ctl::Analog(_) => "Analog",
             Ctl::Water(_) => "Water",
+            Ctl::Attitude(_) => "Attitude",
             Ctl::Reset => "Reset",
             Ctl::Inject(_) => "Inject",
             Ctl::Serial(_) => "Serial",
@@ -204,6 +214,12 @@ impl GenuineControl {
     /// a board wired without one.
     pub fn set_water(&self, water: Water) {
         let _ = self.tx.send(Ctl::Water(water));
+    }
+    /// The vehicle's new attitude, in the IMU's fusion output from its next
+    /// read (the firmware reads it about 21 times a second); nothing changes
+    /// on a board wired without one.
+    pub fn set_attitude(&self, attitude: Attitude) {
+        let _ = self.tx.send(Ctl::Attitude(attitude));
     }
     /// Pulls the reset line: the firmware starts again from power-up.
     pub fn reset(&self) {
@@ -260,6 +276,7 @@ impl GenuineBoard {
             pins: PinsReport::default(),
             analog,
             water: Water::default(),
+            attitude: Attitude::default(),
             realtime_ratio: 0.0,
             speed_ratio: 0.0,
             slips: 0,
@@ -283,9 +300,17 @@ impl GenuineBoard {
                         &Water::default(),
                     )))
                 });
-                let loaded = Mcu::load(&elf, &WATCHED).and_then(|mut mcu| match &depth {
-                    Some(sensor) => mcu.attach_twi(sensor.clone()).map(|()| mcu),
-                    None => Ok(mcu),
+                let imu = rig
+                    .imu
+                    .then(|| Rc::new(RefCell::new(Bno055::new(&Attitude::default()))));
+                let loaded = Mcu::load(&elf, &WATCHED).and_then(|mut mcu| {
+                    if let Some(sensor) = &depth {
+                        mcu.attach_twi(sensor.clone())?;
+                    }
+                    if let Some(sensor) = &imu {
+                        mcu.attach_twi(sensor.clone())?;
+                    }
+                    Ok(mcu)
                 });
                 let mcu = match loaded {
                     Ok(mcu) => {
@@ -297,7 +322,8 @@ impl GenuineBoard {
                         return;
                     }
                 };
-                let mut runner = Runner::new(mcu, depth, pty.master, analog, shared);
+                let sensors = Sensors { depth, imu };
+                let mut runner = Runner::new(mcu, sensors, pty.master, analog, shared);
                 runner.run(&rx);
                 drop(pty.slave);
                 if let Some((link, target)) = link {
@@ -350,14 +376,21 @@ impl Drop for GenuineBoard {
     }
 }
 
+/// The devices on the I2C bus, each if wired; the runner keeps its own
+/// handle to change their surroundings between slices.
+struct Sensors {
+    depth: Option<Rc<RefCell<Ms5803>>>,
+    imu: Option<Rc<RefCell<Bno055>>>,
+}
+
 /// The simulator thread's state.
 struct Runner {
     mcu: Mcu,
     master: OwnedFd,
     analog: Analog,
-    /// The depth sensor, if one is wired.
-    depth: Option<Rc<RefCell<Ms5803>>>,
+    sensors: Sensors,
     water: Water,
+    attitude: Attitude,
     shared: Arc<Mutex<GenuineSnapshot>>,
     pins: Pins,
     /// Host bytes not yet on the UART line.
@@ -377,7 +410,7 @@ struct Runner {
 impl Runner {
     fn new(
         mut mcu: Mcu,
-        depth: Option<Rc<RefCell<Ms5803>>>,
+        sensors: Sensors,
         master: OwnedFd,
         analog: Analog,
         shared: Arc<Mutex<GenuineSnapshot>>,
@@ -395,8 +428,9 @@ impl Runner {
             mcu,
             master,
             analog,
-            depth,
+            sensors,
             water: Water::default(),
+            attitude: Attitude::default(),
             shared,
             pins: Pins::default(),
             from_host: Default::default(),
@@ -502,8 +536,14 @@ impl Runner {
             }
             Ctl::Water(w) => {
                 self.water = w;
-                if let Some(sensor) = &self.depth {
+                if let Some(sensor) = &self.sensors.depth {
                     sensor.borrow_mut().set_water(&w);
+                }
+            }
+            Ctl::Attitude(a) => {
+                self.attitude = a;
+                if let Some(sensor) = &self.sensors.imu {
+                    sensor.borrow_mut().set_attitude(&a);
                 }
             }
             Ctl::Reset => {
@@ -613,6 +653,7 @@ impl Runner {
         self.stats.pins = self.pins.report(cycle);
         self.stats.analog = self.analog;
         self.stats.water = self.water;
+        self.stats.attitude = self.attitude;
         if let Ok(mut s) = self.shared.lock() {
             *s = self.stats.clone();
         }

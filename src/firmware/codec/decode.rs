@@ -8,8 +8,8 @@ use super::MAX_LINE_BYTES;
 use super::types::{DecodeStats, Event, NavSample, RejectReason, StatusSample};
 use super::value::{
     ANGLE_DEG, BOARD_TEMP_C, BYTE, CURRENT_A, DEPTH_M, FLAG, FMEM_BYTES, FRACTION, FTHR_PCT,
-    HEADING_DEG, PRES_MBAR, TEMP_C, TIME_MS, VOUT_V, byte, crc_report, int, pulse, pulses, real,
-    whole,
+    HEADING_DEG, PRES_MBAR, TEMP_C, TIME_MS, VOUT_V, YAW_DEG, byte, crc_report, int, pulse, pulses,
+    real, whole,
 };
 
 /// Turns board bytes, in any chunking, into [`Event`]s.
@@ -223,7 +223,7 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
             b"deep" | b"deap" => nav.depth_m = Some(real(value, DEPTH_M)?),
             b"pitc" => nav.pitch_deg = Some(real(value, ANGLE_DEG)?),
             b"roll" => nav.roll_deg = Some(real(value, ANGLE_DEG)?),
-            b"yaw" => nav.yaw_deg = Some(real(value, ANGLE_DEG)?),
+            b"yaw" => nav.yaw_deg = Some(real(value, YAW_DEG)?),
             b"fthr" => nav.fthr_pct = Some(real(value, FTHR_PCT)?),
             b"vout" => status.vout_v = Some(real(value, VOUT_V)?),
             b"iout" => status.iout_a = Some(real(value, CURRENT_A)?),

@@ -15,7 +15,8 @@ pub struct NavSample {
     pub pitch_deg: Option<f64>,
     /// `roll`, -180..180.
     pub roll_deg: Option<f64>,
-    /// `yaw` (raw), -180..180.
+    /// `yaw` (raw), -180..360: the MPU9150 driver's −180..180, or the
+    /// BNO055 driver's heading (0..360).
     pub yaw_deg: Option<f64>,
     /// `fthr` forward thrust, -100..100 %.
     pub fthr_pct: Option<f64>,

@@ -13,6 +13,9 @@ use super::types::{Event, RejectReason};
 pub(super) const HEADING_DEG: (f64, f64) = (0.0, 360.0);
 pub(super) const DEPTH_M: (f64, f64) = (-10.0, 200.0);
 pub(super) const ANGLE_DEG: (f64, f64) = (-180.0, 180.0);
+/// `yaw` is whatever the IMU driver calls yaw: the MPU9150's fused angle
+/// about z (−180..180), or the BNO055's heading register (0..360).
+pub(super) const YAW_DEG: (f64, f64) = (-180.0, 360.0);
 pub(super) const FTHR_PCT: (f64, f64) = (-100.0, 100.0);
 pub(super) const VOUT_V: (f64, f64) = (0.0, 30.0);
 pub(super) const CURRENT_A: (f64, f64) = (0.0, 20.0);
@@ -32,7 +35,8 @@ pub fn physical_range(key: &str) -> Option<(f64, f64)> {
     Some(match key {
         "hdgd" => HEADING_DEG,
         "deep" | "deap" => DEPTH_M,
-        "pitc" | "roll" | "yaw" => ANGLE_DEG,
+        "pitc" | "roll" => ANGLE_DEG,
+        "yaw" => YAW_DEG,
         "fthr" => FTHR_PCT,
         "vout" => VOUT_V,
         "iout" | "BT1I" | "BT2I" => CURRENT_A,
