@@ -153,6 +153,11 @@ fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result
             out,
             "board:     simulated (board emulator on a pseudo-terminal)"
         )?,
+        config::BoardSource::Genuine { firmware, .. } => writeln!(
+            out,
+            "board:     the genuine firmware {} in simavr, driving the simulator",
+            firmware.display()
+        )?,
         config::BoardSource::Serial => writeln!(
             out,
             "board:     {} at {} baud, framing {}",

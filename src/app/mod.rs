@@ -54,6 +54,8 @@ pub enum AppError {
     Hmi(#[from] crate::hmi::HmiError),
     #[error("the browser side's thread: {0}")]
     Side(std::io::Error),
+    #[error("the genuine firmware in the loop (--hil): {0}")]
+    Hil(String),
     #[error("cannot create the data directory {path}: {source}")]
     DataDir {
         path: std::path::PathBuf,

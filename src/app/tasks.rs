@@ -27,8 +27,9 @@ pub(super) struct Tasks {
     pub(super) saved: mpsc::UnboundedReceiver<Result<(), String>>,
     pub(super) link_events: mpsc::Receiver<LinkEvent>,
     pub(super) inbound: mpsc::Receiver<Inbound>,
-    /// The board emulator's ground truth (`--sim`); None on a real board.
-    pub(super) truth: Option<watch::Receiver<BoardSnapshot>>,
+    /// The simulated vehicle's ground truth (`--sim`, `--hil`); None on a
+    /// real board.
+    pub(super) truth: Option<TruthFeed>,
     camera: crate::camera::Camera,
     /// H.264 over RTP to ground stations; its
     /// [`stream`](crate::camera::rtp::RtpVideo::stream) is what the
@@ -36,9 +37,46 @@ pub(super) struct Tasks {
     pub(super) rtp: crate::camera::rtp::RtpVideo,
     router: RouterHandle,
     event_log: EventLog,
-    board: Option<PtyBoard>,
+    board: Option<SimulatedBoard>,
     /// The browser side's thread (the HMI, the camera, the emulator).
     side: Side,
+}
+
+/// The simulated board behind the link's pseudo-terminal.
+enum SimulatedBoard {
+    /// `--sim`: the board emulator with the simulator inside.
+    Emulator(PtyBoard),
+    /// `--hil`: the genuine firmware in simavr, driving the simulator.
+    #[cfg(feature = "hil")]
+    Genuine(crate::hil::HilRov),
+}
+
+impl SimulatedBoard {
+    fn truth(&self) -> TruthFeed {
+        match self {
+            Self::Emulator(b) => TruthFeed::Emulator(b.control().subscribe()),
+            #[cfg(feature = "hil")]
+            Self::Genuine(r) => TruthFeed::Genuine(r.truth()),
+        }
+    }
+
+    async fn shutdown(self) {
+        match self {
+            Self::Emulator(b) => b.shutdown().await,
+            // Its threads stop and are joined when dropped.
+            #[cfg(feature = "hil")]
+            Self::Genuine(r) => {
+                let _ = tokio::task::spawn_blocking(move || drop(r)).await;
+            }
+        }
+    }
+}
+
+/// Where the simulated vehicle's truth comes from.
+pub(super) enum TruthFeed {
+    Emulator(watch::Receiver<BoardSnapshot>),
+    #[cfg_attr(not(feature = "hil"), allow(dead_code))]
+    Genuine(watch::Receiver<SimSnapshot>),
 }
 
 /// Starts everything; the vehicle task is returned ready to run.
@@ -53,7 +91,11 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             };
             tracing::info!(pty = %board.path().display(), "simulation: board emulator on a pseudo-terminal");
             settings.link.device = board.path().to_path_buf();
-            Some(board)
+            Some(SimulatedBoard::Emulator(board))
+        }
+        BoardSource::Genuine { firmware, emulator } => {
+            let (firmware, emulator) = (firmware.clone(), emulator.clone());
+            Some(genuine_board(&firmware, &emulator, &mut settings).await?)
         }
         BoardSource::Serial => {
             link::probe(&settings.link)?;
@@ -168,7 +210,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         Duration::from_secs(5),
     );
     // On the emulator, its ground truth is published too (marked as such).
-    let truth = board.as_ref().map(|b| b.control().subscribe());
+    let truth = board.as_ref().map(SimulatedBoard::truth);
     let watched = camera.watched();
     let tasks = Tasks {
         report,
@@ -188,18 +230,69 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     Ok((tasks, vt))
 }
 
-/// The emulator's next ground truth; never, without an emulator (or once it
-/// has gone).
-pub(super) async fn board_truth(truth: &mut Option<watch::Receiver<BoardSnapshot>>) -> SimSnapshot {
+/// The simulated vehicle's next ground truth; never, on a real board (or
+/// once the simulation has gone).
+pub(super) async fn board_truth(truth: &mut Option<TruthFeed>) -> SimSnapshot {
     loop {
-        let Some(rx) = truth.as_mut() else {
-            return std::future::pending().await;
+        let next = match truth.as_mut() {
+            None => return std::future::pending().await,
+            Some(TruthFeed::Emulator(rx)) => match rx.changed().await {
+                Ok(()) => Some(rx.borrow_and_update().sim),
+                Err(_) => None,
+            },
+            Some(TruthFeed::Genuine(rx)) => match rx.changed().await {
+                Ok(()) => Some(*rx.borrow_and_update()),
+                Err(_) => None,
+            },
         };
-        if rx.changed().await.is_ok() {
-            return rx.borrow_and_update().sim;
+        match next {
+            Some(s) => return s,
+            None => *truth = None,
         }
-        *truth = None;
     }
+}
+
+/// `--hil`: builds (or finds in the data directory's cache) the firmware,
+/// powers the genuine board in simavr with the simulator around it, and
+/// points the link at its pty with the firmware's framing.
+#[cfg(feature = "hil")]
+async fn genuine_board(
+    firmware: &std::path::Path,
+    emulator: &crate::firmware::emulator::EmulatorOptions,
+    settings: &mut Settings,
+) -> Result<SimulatedBoard, AppError> {
+    let cache = settings.data_dir.join("openrov-firmware");
+    let source = firmware.to_path_buf();
+    tracing::info!(firmware = %source.display(), "hardware in the loop: preparing the genuine firmware (built once, then cached)");
+    let built = tokio::task::spawn_blocking(move || crate::hil::prepare(&source, &cache))
+        .await
+        .map_err(|e| AppError::Hil(e.to_string()))?
+        .map_err(|e| AppError::Hil(e.to_string()))?;
+    settings.link.framing = built.framing;
+    let rov =
+        crate::hil::HilRov::spawn(built, emulator).map_err(|e| AppError::Hil(e.to_string()))?;
+    tracing::info!(
+        pty = %rov.board().path().display(),
+        elf = %rov.board().firmware().elf.display(),
+        framing = %settings.link.framing,
+        "hardware in the loop: the genuine firmware in simavr on a pseudo-terminal"
+    );
+    settings.link.device = rov.board().path().to_path_buf();
+    Ok(SimulatedBoard::Genuine(rov))
+}
+
+#[cfg(not(feature = "hil"))]
+async fn genuine_board(
+    _firmware: &std::path::Path,
+    _emulator: &crate::firmware::emulator::EmulatorOptions,
+    _settings: &mut Settings,
+) -> Result<SimulatedBoard, AppError> {
+    Err(AppError::Hil(
+        "this neptunus was built without the genuine-firmware simulator: build it with the `hil` feature \
+         (`cargo run --features hil -- --hil FIRMWARE`; it needs Debian's gcc-avr avr-libc arduino-core-avr \
+         libclang-dev libelf-dev libzstd-dev pkg-config)"
+            .into(),
+    ))
 }
 
 impl Tasks {

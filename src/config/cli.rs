@@ -31,6 +31,13 @@ pub struct RunArgs {
     /// internal pseudo-terminal (the real serial code path runs).
     #[arg(long, conflicts_with = "serial")]
     pub sim: bool,
+    /// Hardware in the loop: as --sim, but the board is the genuine OpenROV
+    /// firmware (FIRMWARE: a checkout of openrov-software-arduino, its
+    /// OpenROV folder, or a built .elf) in the simavr AVR simulator, reading
+    /// the simulator's sensors and driving its thrusters. Needs a build with
+    /// the `hil` feature.
+    #[arg(long, value_name = "FIRMWARE", conflicts_with_all = ["serial", "sim"])]
+    pub hil: Option<PathBuf>,
     /// Serial device of the OpenROV board [default: /dev/ttyO1].
     #[arg(long, value_name = "PATH")]
     pub serial: Option<PathBuf>,

@@ -39,6 +39,12 @@ pub enum BoardSource {
     Simulated(EmulatorOptions),
     /// A real board on a serial device.
     Serial,
+    /// The genuine firmware in simavr behind an internal pseudo-terminal,
+    /// driving the simulator of these options (`--hil`).
+    Genuine {
+        firmware: PathBuf,
+        emulator: EmulatorOptions,
+    },
 }
 
 /// Everything the vehicle needs, resolved.
@@ -83,8 +89,14 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
     let framing = args.framing.or(file.board.framing);
     link.framing = framing.unwrap_or_default();
     // --serial on the command line wins over `sim = true` in the file.
-    let sim = args.sim || (file.sim && args.serial.is_none());
-    let board = if sim {
+    let sim = args.hil.is_some() || args.sim || (file.sim && args.serial.is_none());
+    let board = if let Some(firmware) = &args.hil {
+        // The link's framing follows the firmware once it is built.
+        BoardSource::Genuine {
+            firmware: firmware.clone(),
+            emulator: file.emulator.clone(),
+        }
+    } else if sim {
         let mut emu = file.emulator.clone();
         match framing {
             // The link speaks what it was told; the emulated board follows

@@ -151,14 +151,21 @@ pub fn run(args: &RunArgs) -> Report {
             settings.data_dir.display()
         ),
     )];
-    if matches!(settings.board, BoardSource::Simulated(_)) {
+    if matches!(
+        settings.board,
+        BoardSource::Simulated(_) | BoardSource::Genuine { .. }
+    ) {
         checks.push(Check::pass(
             "serial",
             "simulation (sim = true): no serial device",
         ));
         checks.push(Check::pass(
             "board",
-            "simulation: the board emulator is built in",
+            if matches!(settings.board, BoardSource::Genuine { .. }) {
+                "simulation: the genuine firmware runs in simavr, built in (feature hil)"
+            } else {
+                "simulation: the board emulator is built in"
+            },
         ));
     } else {
         let device = board::device(link);

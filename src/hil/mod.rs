@@ -29,6 +29,7 @@ pub mod bno055;
 pub mod compile;
 pub mod ms5803;
 pub mod pins;
+pub mod rov;
 pub mod runner;
 
 pub use avr::{AvrError, F_CPU_HZ};
@@ -36,6 +37,7 @@ pub use bno055::Attitude;
 pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
 pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};
+pub use rov::{HilError, HilRov};
 pub use runner::{
     Analog, GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
     Wiring,

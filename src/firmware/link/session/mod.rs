@@ -389,6 +389,10 @@ impl Session {
             return;
         };
         let opened_at = conn.opened_at;
+        // Until the board's first telemetry line it may still be setting up
+        // (an IMU's self-test holds the 30.0.2 firmware ~2.5 s): the boot
+        // wait's allowance stays.
+        let settled = conn.handshaken && conn.board_talked;
         let handshaken = conn.handshaken;
         let lines_at_open = conn.lines_at_open;
         let silent_since = self
@@ -396,7 +400,7 @@ impl Session {
             .filter(|t| *t >= opened_at)
             .unwrap_or(opened_at);
         let allowed = self.cfg.stale_after
-            + if handshaken {
+            + if settled {
                 Duration::ZERO
             } else {
                 self.cfg.boot_wait

@@ -127,6 +127,39 @@ fn boot_line_handshakes_at_once_and_again_after_a_reboot() {
 }
 
 #[test]
+fn a_board_setting_up_its_imu_after_the_boot_wait_is_not_down() {
+    // The 30.0.2 firmware with a BNO055 prints its first telemetry line
+    // about 2.5 s after power-up; the handshake is forced at boot_wait.
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    assert_eq!(states(&mut s), [LinkState::Down, LinkState::Handshaking]);
+    let t = t0 + s.cfg.boot_wait;
+    assert_eq!(drain_writes(&mut s, t), HANDSHAKE);
+    let first_line = t0 + Duration::from_millis(2500);
+    assert!(first_line > t0 + s.cfg.boot_wait.max(s.cfg.stale_after));
+    let mut at = t;
+    while at < first_line {
+        s.poll_timers(at);
+        at += Duration::from_millis(100);
+    }
+    assert!(
+        !states(&mut s).contains(&LinkState::Down),
+        "reported down while the board was still setting up"
+    );
+    s.received(b"boot:1;\r\n", first_line);
+    s.received(NAV, first_line);
+    s.poll_timers(first_line);
+    drain_writes(&mut s, first_line);
+    s.received(NAV, first_line + Duration::from_millis(100));
+    s.poll_timers(first_line + Duration::from_millis(100));
+    assert_eq!(s.stats().state, LinkState::Up);
+    // Once it has talked, silence is judged at once.
+    let silent = first_line + Duration::from_millis(100) + s.cfg.stale_after;
+    s.poll_timers(silent + Duration::from_millis(10));
+    assert_eq!(s.stats().state, LinkState::Down);
+}
+
+#[test]
 fn never_more_unechoed_than_the_boards_receive_buffer() {
     let t0 = Instant::now();
     let mut s = opened(t0);
