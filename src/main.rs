@@ -115,6 +115,12 @@ fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::R
     let cache = config::resolve(run)?.data_dir.join("openrov-firmware");
     let firmware = prepare(&args.firmware, &cache)?;
     let framing = firmware.framing;
+    if args.build_only {
+        let mut out = std::io::stdout();
+        writeln!(out, "{}\t{framing}", firmware.elf.display())?;
+        out.flush()?;
+        return Ok(());
+    }
     let analog = Analog {
         battery_v: args.battery_v,
         ..Analog::default()

@@ -241,6 +241,11 @@ pub struct GenuineArgs {
     /// IMU and prints a level attitude heading north).
     #[arg(long)]
     pub no_imu: bool,
+    /// Build (or find in the cache) the firmware, print the built .elf's
+    /// path and its framing, and exit: `--hil` and `genuine-board` take the
+    /// .elf without building again.
+    #[arg(long)]
+    pub build_only: bool,
 }
 
 /// Options of `emulate-board`.

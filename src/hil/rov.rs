@@ -35,6 +35,8 @@ const LOOP_PERIOD: Duration = Duration::from_millis(5);
 /// Longest plant step: a board that ran ahead (a late loop) is caught up
 /// in steps no longer than this.
 const MAX_STEP_S: f64 = 0.01;
+/// How often the simulator's speed figures go to the log.
+const REPORT_PERIOD: Duration = Duration::from_secs(10);
 /// The ESCs' neutral: what a thruster sees while its pin does not pulse.
 const NEUTRAL_US: u16 = 1500;
 
@@ -133,9 +135,20 @@ fn run(
     stop: &AtomicBool,
 ) {
     let mut board_time_s: Option<f64> = None;
+    let mut next_report = std::time::Instant::now() + REPORT_PERIOD;
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(LOOP_PERIOD);
         let snap = control.snapshot();
+        if std::time::Instant::now() >= next_report {
+            next_report += REPORT_PERIOD;
+            tracing::info!(
+                board_time_s = format_args!("{:.1}", snap.sim_time_s),
+                realtime_ratio = format_args!("{:.2}", snap.realtime_ratio),
+                speed_ratio = format_args!("{:.1}", snap.speed_ratio),
+                slips = snap.slips,
+                "genuine board in simavr"
+            );
+        }
         if snap.error.is_some() {
             // The board stopped; the vehicle stays where it is.
             continue;

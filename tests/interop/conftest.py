@@ -29,6 +29,9 @@ BIN = Path(os.environ.get("NEPTUNUS_BIN", REPO / "target" / "debug" / "neptunus"
 STANDBY = mavutil.mavlink.MAV_STATE_STANDBY
 PREARM_CHECK = mavutil.mavlink.MAV_SYS_STATUS_PREARM_CHECK
 READY_TIMEOUT_S = 20.0
+# With the genuine firmware in the loop (`neptunus --hil`): the firmware's
+# built .elf (`neptunus genuine-board --build-only`), else the emulator.
+HIL_FIRMWARE = os.environ.get("NEPTUNUS_HIL_FIRMWARE") or None
 STOP_TIMEOUT_S = 10.0
 
 
@@ -71,7 +74,10 @@ class Vehicle:
         err_path = self.log_dir / f"neptunus-stderr-{self.starts}.txt"
         self.stderr_paths.append(err_path)
         # The browser HMI on a free loopback port: parallel tests never share 8080.
-        args = [str(BIN), "--sim", "--data-dir", str(self.data_dir), "--http", "127.0.0.1:0"]
+        # The board: the emulator (--sim), or the genuine firmware in simavr
+        # (--hil) when NEPTUNUS_HIL_FIRMWARE names its built .elf.
+        board = ["--hil", HIL_FIRMWARE] if HIL_FIRMWARE else ["--sim"]
+        args = [str(BIN), *board, "--data-dir", str(self.data_dir), "--http", "127.0.0.1:0"]
         for url in self.endpoints + [f"tcpin:127.0.0.1:{self.control_port}"]:
             args += ["--mavlink", url]
         env = dict(os.environ, NO_COLOR="1", RUST_LOG=os.environ.get("RUST_LOG", "info"))

@@ -7,7 +7,7 @@
 
 use std::time::Duration;
 
-use super::texts::Topic;
+use super::texts::{FailsafeKind, Topic};
 use super::{Mode, Now, Output, Vehicle};
 use crate::dialect::neptunus::{MavResult, MavSeverity};
 use crate::firmware::link::LinkState;
@@ -16,34 +16,6 @@ use crate::vehicle::params::{FailsafeAction, ParamStore};
 /// A battery voltage must stay beyond its threshold this long to raise or
 /// clear a battery failsafe (ArduPilot's BATT_LOW_TIMER default).
 pub(super) const BATTERY_DEBOUNCE: Duration = Duration::from_secs(10);
-
-/// Which failsafe: carried with each raise and clear text
-/// ([`Topic::FailsafeChange`]), so the browser HMI knows the reason by its
-/// kind and keeps the words only to show them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FailsafeKind {
-    /// The station in control went silent or left while armed.
-    Gcs,
-    /// No stick input in a mode the pilot drives.
-    PilotInput,
-    /// The board link is down.
-    BoardLink,
-    BatteryLow,
-    BatteryCritical,
-}
-
-impl FailsafeKind {
-    /// Short name for logs.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Gcs => "gcs",
-            Self::PilotInput => "pilot_input",
-            Self::BoardLink => "board_link",
-            Self::BatteryLow => "battery_low",
-            Self::BatteryCritical => "battery_critical",
-        }
-    }
-}
 
 /// One failsafe.
 pub(super) struct Rule {

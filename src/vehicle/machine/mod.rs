@@ -72,11 +72,10 @@ mod wake;
 mod wall_time;
 
 pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
-pub use failsafe::FailsafeKind;
 pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 pub use run_mode::RunMode;
-pub use texts::{Topic, ascii_text};
+pub use texts::{FailsafeKind, Topic, ascii_text};
 pub use wake::{BUSY_TICK, IDLE_TICK};
 pub use wall_time::ClockSync;
 

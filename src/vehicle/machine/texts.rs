@@ -11,7 +11,6 @@ use std::time::Duration;
 
 use mavlink_core::types::CharArray;
 
-use super::failsafe::FailsafeKind;
 use super::{Now, Output, Sender, To, Vehicle};
 use crate::dialect::neptunus::*;
 
@@ -80,6 +79,34 @@ pub enum Topic {
     BoardLink,
     /// Anything else (parameters, signing, payload, telemetry rates).
     General,
+}
+
+/// Which failsafe: carried with each raise and clear text
+/// ([`Topic::FailsafeChange`]), so the browser HMI knows the reason by its
+/// kind and keeps the words only to show them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FailsafeKind {
+    /// The station in control went silent or left while armed.
+    Gcs,
+    /// No stick input in a mode the pilot drives.
+    PilotInput,
+    /// The board link is down.
+    BoardLink,
+    BatteryLow,
+    BatteryCritical,
+}
+
+impl FailsafeKind {
+    /// Short name for logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Gcs => "gcs",
+            Self::PilotInput => "pilot_input",
+            Self::BoardLink => "board_link",
+            Self::BatteryLow => "battery_low",
+            Self::BatteryCritical => "battery_critical",
+        }
+    }
 }
 
 impl Topic {

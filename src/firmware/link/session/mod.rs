@@ -18,7 +18,8 @@
 //! that prints `boot` again has restarted, and the link handshakes again
 //! before it reports itself up; and after a gap in the pings longer than
 //! the board's dead-man timeout, a thrust command decided before the gap is
-//! dropped rather than written to a board that has just stopped.
+//! replaced by neutral: the board has just stopped, and the ping that
+//! follows restarts it on its last target.
 //!
 //! It must never read a clock, sleep, or touch the serial device or a
 //! channel: the I/O loop (`io.rs`) passes the time in with every call, writes
@@ -73,6 +74,13 @@ pub(super) enum Output {
     /// [`Session::event_dropped`].
     Event(LinkEvent),
 }
+
+/// `go()` with every thruster stopped.
+const NEUTRAL_GO: Command = Command::Go {
+    port_us: 1500,
+    vertical_us: 1500,
+    starboard_us: 1500,
+};
 
 /// Pending writes: control commands in order (a level replacing a pending
 /// one of its kind in place, the keep-alive ping ahead of the levels), plus
@@ -313,6 +321,10 @@ impl Session {
             // A ping now, so the freshly armed dead-man has a full period.
             conn.next_ping = now;
         }
+        // A gap in the pings longer than the board's dead-man timeout.
+        let gap = conn
+            .last_ping
+            .is_some_and(|t| now.duration_since(t) > self.cfg.dead_man_timeout);
         if conn.handshaken && now >= conn.next_ping && healthy {
             conn.next_ping = now + self.cfg.ping_period;
             if !self.outbox.control.contains(&Command::Ping(0)) {
@@ -326,15 +338,24 @@ impl Session {
                     .unwrap_or(self.outbox.control.len());
                 self.outbox.control.insert(at, Command::Ping(0));
                 self.stats.pings_written += 1;
+                if gap {
+                    // The board stopped, and this ping restarts it on its
+                    // last target (the firmware's `start`): neutral first,
+                    // so it restarts stopped and only the vehicle's next
+                    // decision drives it; a thrust decided before the gap
+                    // is not written.
+                    self.outbox.control.insert(at, NEUTRAL_GO);
+                    if self.outbox.thrust.take().is_some() {
+                        self.stats.thrust_coalesced += 1;
+                    }
+                }
             }
         }
         // The board's dead-man has (or may have) stopped it since the last
-        // ping: a thrust decided before then is not written now.
-        if conn
-            .last_ping
-            .is_some_and(|t| now.duration_since(t) > self.cfg.dead_man_timeout)
-            && self.outbox.thrust.take().is_some()
-        {
+        // ping; it still obeys `go()`, so no thrust but neutral is written
+        // until a ping is (the ping then goes behind a neutral, above).
+        if gap && self.outbox.thrust.is_some_and(|t| t != NEUTRAL_GO) {
+            self.outbox.thrust = None;
             self.stats.thrust_coalesced += 1;
         }
         // Echoes that never came: the board lost those frames (or is busy

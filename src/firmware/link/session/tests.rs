@@ -88,10 +88,12 @@ fn handshakes_after_boot_wait_and_pings_only_while_healthy() {
         s.next_wake(t + Duration::from_secs(3)) > t + Duration::from_secs(3),
         "an unhealthy vehicle keeps the link's loop awake"
     );
+    // Healthy again after longer than the board's dead-man: the ping that
+    // restarts the board goes behind a neutral.
     s.healthy(t + Duration::from_secs(3));
     assert_eq!(
         drain_writes(&mut s, t + Duration::from_secs(3)),
-        [Command::Ping(0)]
+        [go(NEUTRAL_US), Command::Ping(0)]
     );
     assert_eq!(s.stats().handshakes, 1);
     assert_eq!(s.stats().pings_written, 2);
@@ -194,18 +196,40 @@ fn never_more_unechoed_than_the_boards_receive_buffer() {
 }
 
 #[test]
-fn a_thrust_decided_before_a_gap_in_the_pings_is_dropped() {
+fn after_a_gap_in_the_pings_neutral_goes_ahead_of_the_ping() {
     let t0 = Instant::now();
     let mut s = opened(t0);
     s.received(b"boot:1;\r\n", t0);
     s.healthy(t0);
     assert!(drain_writes(&mut s, t0).contains(&Command::Ping(0)));
-    // The process stood still for three seconds with a thrust pending.
+    // The process stood still for three seconds with a thrust pending: the
+    // board's dead-man stopped it, and the next ping restarts it on its
+    // last target — which must be neutral by then.
     s.command(go(1700));
     let t = t0 + Duration::from_secs(3);
     s.healthy(t);
     let written = drain_writes(&mut s, t);
-    assert_eq!(written, [Command::Ping(0)], "no stale go() after the gap");
+    assert_eq!(
+        written,
+        [go(NEUTRAL_US), Command::Ping(0)],
+        "neutral before the ping, no stale go() after the gap"
+    );
+    // A neutral the vehicle decided after the gap (it disarmed) is written
+    // too: it is never dropped.
+    let t = t + Duration::from_secs(3);
+    s.command(go(NEUTRAL_US));
+    s.healthy(t);
+    let written = drain_writes(&mut s, t);
+    assert_eq!(
+        written.iter().filter(|c| **c == Command::Ping(0)).count(),
+        1
+    );
+    assert!(
+        written
+            .iter()
+            .all(|c| !c.is_thrust() || *c == go(NEUTRAL_US))
+    );
+    assert_eq!(written.first(), Some(&go(NEUTRAL_US)), "{written:?}");
     // After the ping, new thrust goes as usual.
     s.command(go(1600));
     assert_eq!(
