@@ -173,8 +173,9 @@ fn ready_watchdog_and_stopping_after_neutral() -> anyhow::Result<()> {
     )?;
     assert!(
         moving,
-        "the motors never left neutral: {:?}",
-        control.snapshot()
+        "the motors never left neutral: {:?}\n{}",
+        control.snapshot(),
+        vehicle.stderr_tail()
     );
     while executed.try_recv().is_ok() {}
     let term_at = Instant::now();

@@ -251,6 +251,41 @@ fn board_link_loss_disarms() {
 }
 
 #[test]
+fn a_board_dead_man_trip_disarms_only_what_was_armed_before_it() {
+    use neptunus::firmware::codec::Event;
+    let mut r = rig();
+    link_up(&mut r);
+    r.alive = vec![QGC];
+    // Armed for longer than the board's 2-s dead-man: its trip is this
+    // arming's, and disarms.
+    r.cmd(QGC, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
+    r.run(Duration::from_millis(2500));
+    assert!(r.v.armed());
+    let out = r.input(Input::Board(Event::InternalCommand("stop()".into())));
+    assert!(!r.v.armed());
+    assert!(
+        statustexts(&out)
+            .iter()
+            .any(|t| t.contains("Board dead-man tripped"))
+    );
+    r.input(Input::Board(Event::InternalCommand("start()".into())));
+    // A trip read just after arming happened before it (a vehicle that
+    // stood still finds the board's lines waiting): the arming stands.
+    r.cmd(QGC, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
+    assert!(r.v.armed());
+    r.run(Duration::from_millis(20));
+    let out = r.input(Input::Board(Event::InternalCommand("stop()".into())));
+    assert!(r.v.armed(), "{:?}", statustexts(&out));
+    assert!(
+        statustexts(&out)
+            .iter()
+            .any(|t| t.contains("had tripped before arming")),
+        "{:?}",
+        statustexts(&out)
+    );
+}
+
+#[test]
 fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason() {
     let mut r = rig();
     let out = r.cmd(QGC, MavCmd::MAV_CMD_DO_SET_MODE, &[1.0, 19.0]);

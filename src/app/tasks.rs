@@ -332,7 +332,8 @@ impl Tasks {
 }
 
 /// Waits until the link has written a thruster command after `before`
-/// (the neutral one: nothing else is sent after it), at most 200 ms.
+/// (the neutral one: nothing else is sent after it), at most 200 ms, then
+/// until the board has echoed it (it took it) or its echo timed out.
 async fn neutral_written(
     mut stats: watch::Receiver<crate::firmware::link::LinkStats>,
     before: u64,
@@ -343,6 +344,15 @@ async fn neutral_written(
         .is_err()
     {
         tracing::warn!("the neutral command was not written within 200 ms (board link down?)");
+        return;
+    }
+    // The figures that showed it written were published after the write:
+    // none in flight there means the board has taken it already.
+    let taken = stats.wait_for(|s| s.thrust_unechoed == 0);
+    let within =
+        crate::firmware::link::LinkConfig::new("").echo_timeout + Duration::from_millis(200);
+    if tokio::time::timeout(within, taken).await.is_err() {
+        tracing::warn!("the board did not echo the neutral command (busy or gone?)");
     }
 }
 

@@ -129,14 +129,19 @@ test('reset data clears every plot, a zoomed one too, and it follows the new dat
   assert.ok(zoomed.max - zoomed.min < (zoomed.x.at(-1) - zoomed.x[0]) * 0.5, `zoomed: ${zoomed.min}..${zoomed.max} of ${zoomed.x[0]}..${zoomed.x.at(-1)}`);
   const lastOld = await page.evaluate(() => window.neptunus.recorder.time.at(-1));
 
-  await page.click('[data-testid=reset-data]');
+  // What Reset guarantees: nothing recorded before it is kept. Clicked and
+  // read in one page task, so no sample can arrive in between; how many a
+  // busy machine adds afterwards is not Reset's doing.
+  const recorded = await page.evaluate(() => {
+    document.querySelector('[data-testid=reset-data]').click();
+    return window.neptunus.recorder.length;
+  });
+  assert.equal(recorded, 0, 'samples recorded before Reset are gone');
   for (const key of ['depth_m', 'voltage_v']) {
     const s = await plotState(page, key);
     assert.ok(s.x.every((t) => t > lastOld), `${key}: old samples still plotted after reset: ${s.x.slice(0, 3)}`);
     assert.equal(s.x.length, s.y.length);
-    assert.ok(s.x.length <= 3, `${key}: ${s.x.length} points right after reset`);
   }
-  assert.ok(Number(await page.textContent('[data-testid=samples]')) <= 3);
   // New data comes in, and the zoomed plot is no longer stuck on the old window.
   await until(() => page.evaluate(() => window.neptunus.recorder.length > 20), 10000, 'recording again');
   const fresh = await until(async () => {

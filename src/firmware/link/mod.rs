@@ -117,6 +117,11 @@ pub struct LinkStats {
     pub crc_failures_echoed: u64,
     pub commands_written: u64,
     pub thrust_written: u64,
+    /// Thruster commands the board echoed (it took them).
+    pub thrust_echoed: u64,
+    /// Thruster commands written and neither echoed yet nor given up on
+    /// (the echo timeout), when these figures were published.
+    pub thrust_unechoed: u64,
     /// Thruster commands superseded by a newer one before being written.
     pub thrust_coalesced: u64,
     /// Lights, laser and tilt levels superseded by a newer one of the same
@@ -146,6 +151,8 @@ impl Default for LinkStats {
             crc_failures_echoed: 0,
             commands_written: 0,
             thrust_written: 0,
+            thrust_echoed: 0,
+            thrust_unechoed: 0,
             thrust_coalesced: 0,
             settings_coalesced: 0,
             pings_written: 0,

@@ -17,6 +17,10 @@ use crate::dialect::neptunus::*;
 use crate::firmware::codec::{Event, NavSample, StatusSample};
 use crate::firmware::link::LinkState;
 
+/// The genuine firmware's dead-man timeout (`DeadManSwitch.cpp`: no ping
+/// for 2 s).
+const BOARD_DEAD_MAN: Duration = Duration::from_secs(2);
+
 /// A reading and when it arrived.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(super) struct Stamped<T> {
@@ -179,7 +183,7 @@ impl Vehicle {
             }
             Event::Laser(l) => self.payload.laser = l,
             Event::Boot => self.on_board_boot(out),
-            Event::InternalCommand(cmd) => self.on_internal_command(&cmd, out),
+            Event::InternalCommand(cmd) => self.on_internal_command(&cmd, now, out),
             _ => {}
         }
     }
@@ -278,8 +282,12 @@ impl Vehicle {
     /// A command the board queued for itself. Its dead-man switch queues
     /// `stop()` when two seconds pass without a ping, and `start()` at the
     /// next ping: after that it obeys `go()` again, so driving may resume
-    /// only through the arming rules.
-    fn on_internal_command(&mut self, cmd: &str, out: &mut Vec<Output>) {
+    /// only through the arming rules. A trip reported less than the
+    /// dead-man's timeout after arming began before the arming (the lines
+    /// a frozen vehicle finds waiting when it resumes): it disarms nothing,
+    /// and the link's neutral ahead of the next ping restarts the board
+    /// stopped.
+    fn on_internal_command(&mut self, cmd: &str, now: Now, out: &mut Vec<Output>) {
         let name = cmd.split('(').next().unwrap_or_default();
         match name {
             "stop" if !self.board.dead_man_tripped => {
@@ -290,7 +298,10 @@ impl Vehicle {
                     "the board's dead-man switch stopped the thrusters (no ping for 2 s)".into(),
                     out,
                 );
-                if self.armed {
+                let armed_since_before_the_trip = self
+                    .armed_at
+                    .is_some_and(|t| now.mono.saturating_sub(t) >= BOARD_DEAD_MAN);
+                if self.armed && armed_since_before_the_trip {
                     self.statustext(
                         Topic::Stop,
                         MavSeverity::MAV_SEVERITY_CRITICAL,
@@ -298,6 +309,13 @@ impl Vehicle {
                         out,
                     );
                     self.disarm("board dead-man tripped", None, out);
+                } else if self.armed {
+                    self.statustext(
+                        Topic::BoardLink,
+                        MavSeverity::MAV_SEVERITY_WARNING,
+                        "Board dead-man had tripped before arming: it restarts stopped",
+                        out,
+                    );
                 }
             }
             "start" if self.board.dead_man_tripped => {

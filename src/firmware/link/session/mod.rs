@@ -56,9 +56,21 @@ fn echo_matches(frame: &[u8], echo: &str) -> bool {
 /// Removes the oldest in-flight frame that `is_it` recognises, and every
 /// older one (frames the board lost: it echoes in order). An echo of
 /// nothing in flight (another writer's frame, a garbled one) changes nothing.
-fn acknowledge(in_flight: &mut VecDeque<(Vec<u8>, Instant)>, is_it: impl Fn(&[u8]) -> bool) {
-    if let Some(i) = in_flight.iter().position(|(f, _)| is_it(f)) {
-        in_flight.drain(..=i);
+/// A frame written and not yet echoed.
+#[derive(Debug)]
+struct InFlight {
+    frame: Vec<u8>,
+    at: Instant,
+    thrust: bool,
+}
+
+/// The echo of the frame `is_it` picks: it and the frames before it (echoes
+/// come in order) are the board's; returns how many of them were thrust
+/// commands.
+fn acknowledge(in_flight: &mut VecDeque<InFlight>, is_it: impl Fn(&[u8]) -> bool) -> u64 {
+    match in_flight.iter().position(|f| is_it(&f.frame)) {
+        Some(i) => in_flight.drain(..=i).filter(|f| f.thrust).count() as u64,
+        None => 0,
     }
 }
 
@@ -130,7 +142,7 @@ struct Connection {
     handshaken: bool,
     /// Frames written and not yet echoed by the board, oldest first: their
     /// bytes (to recognise the echo) and when they were written.
-    in_flight: VecDeque<(Vec<u8>, Instant)>,
+    in_flight: VecDeque<InFlight>,
     /// When the last `ping` was written.
     last_ping: Option<Instant>,
     /// When the board will have taken everything written so far (a virtual
@@ -277,11 +289,13 @@ impl Session {
                 }
                 Event::RawCmd(hex) if self.cfg.framing == Framing::Crc8 => {
                     if let Some(frame) = raw_frame(hex) {
-                        acknowledge(&mut conn.in_flight, |f| *f == frame);
+                        self.stats.thrust_echoed +=
+                            acknowledge(&mut conn.in_flight, |f| *f == frame);
                     }
                 }
                 Event::CmdEcho(text) if self.cfg.framing == Framing::Plain => {
-                    acknowledge(&mut conn.in_flight, |f| echo_matches(f, text));
+                    self.stats.thrust_echoed +=
+                        acknowledge(&mut conn.in_flight, |f| echo_matches(f, text));
                 }
                 Event::CrcFail { calc, got } => {
                     self.stats.crc_failures_echoed += 1;
@@ -363,12 +377,12 @@ impl Session {
         while conn
             .in_flight
             .front()
-            .is_some_and(|(_, at)| now.duration_since(*at) > self.cfg.echo_timeout)
+            .is_some_and(|f| now.duration_since(f.at) > self.cfg.echo_timeout)
         {
             conn.in_flight.pop_front();
             self.stats.echoes_missed += 1;
         }
-        let in_flight: usize = conn.in_flight.iter().map(|(f, _)| f.len()).sum();
+        let in_flight: usize = conn.in_flight.iter().map(|f| f.frame.len()).sum();
         if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
             && conn.handshaken
             && let Some(cmd) = self.outbox.peek()
@@ -380,7 +394,11 @@ impl Session {
                 return None;
             }
             self.outbox.pop();
-            conn.in_flight.push_back((frame.clone(), now));
+            conn.in_flight.push_back(InFlight {
+                frame: frame.clone(),
+                at: now,
+                thrust: cmd.is_thrust(),
+            });
             if cmd == Command::Ping(0) {
                 conn.last_ping = Some(now);
             }
@@ -471,8 +489,8 @@ impl Session {
                     .unwrap_or(now),
             );
             // Waiting for an echo: its timeout is the latest the budget frees.
-            if let Some((_, at)) = conn.in_flight.front() {
-                wake = wake.min(*at + self.cfg.echo_timeout);
+            if let Some(f) = conn.in_flight.front() {
+                wake = wake.min(f.at + self.cfg.echo_timeout);
             }
         }
         // While the vehicle is not healthy no ping is due (a due-but-withheld
@@ -499,6 +517,9 @@ impl Session {
     }
 
     fn publish(&mut self) {
+        self.stats.thrust_unechoed = self.conn.as_ref().map_or(0, |c| {
+            c.in_flight.iter().filter(|f| f.thrust).count() as u64
+        });
         self.outputs.push_back(Output::Stats(self.stats.clone()));
     }
 
