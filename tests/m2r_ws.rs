@@ -877,3 +877,48 @@ async fn the_filter_keeps_only_what_it_names() {
     let bad = Cockpit::connect(rig.http, "/v1/ws/mavlink?filter=(", 255, 240, &[]).await;
     assert_eq!(bad.err().map(|e| e.0), Some(400));
 }
+
+/// The vehicle is two components, the autopilot (1) and the camera (100),
+/// each with its own 1-Hz HEARTBEAT: a client hears both, and the REST view
+/// keeps each under its component.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn heartbeats_come_from_the_autopilot_and_the_camera() {
+    let rig = Rig::start("", false);
+    let mut c = rig.cockpit().await;
+    let mut per_component = std::collections::BTreeMap::<u64, usize>::new();
+    let end = Instant::now() + Duration::from_secs(8);
+    while let Some(f) = c
+        .next_frame(end.saturating_duration_since(Instant::now()))
+        .await
+    {
+        if f["message"]["type"] != "HEARTBEAT" {
+            continue;
+        }
+        let comp = f["header"]["component_id"].as_u64().unwrap();
+        let kind = f["message"]["mavtype"]["type"].as_str().unwrap();
+        match comp {
+            1 => assert_eq!(kind, "MAV_TYPE_SUBMARINE"),
+            100 => assert_eq!(kind, "MAV_TYPE_CAMERA"),
+            _ => panic!("a HEARTBEAT from component {comp}: {f}"),
+        }
+        assert_eq!(f["header"]["system_id"], 1);
+        *per_component.entry(comp).or_default() += 1;
+    }
+    eprintln!("HEARTBEATs in 8 s per component: {per_component:?}");
+    for comp in [1, 100] {
+        let n = per_component.get(&comp).copied().unwrap_or(0);
+        assert!(
+            n >= 4,
+            "{n} HEARTBEATs from component {comp} in 8 s: {per_component:?}"
+        );
+    }
+    for (comp, kind) in [(1, "MAV_TYPE_SUBMARINE"), (100, "MAV_TYPE_CAMERA")] {
+        let hb = get_json(
+            rig.http,
+            &format!("/mavlink2rest/v1/mavlink/vehicles/1/components/{comp}/messages/HEARTBEAT"),
+        )
+        .await;
+        assert_eq!(hb["message"]["mavtype"]["type"], kind, "component {comp}");
+        assert!(hb["status"]["time"]["counter"].as_u64().unwrap() >= 4);
+    }
+}

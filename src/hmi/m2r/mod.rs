@@ -42,7 +42,7 @@ use tokio::sync::broadcast;
 
 use super::{Deliveries, Shared, guard};
 use crate::dialect::neptunus::MavMessage;
-use crate::vehicle::machine::{COMPONENT_ID, Input, Sender};
+use crate::vehicle::machine::{Input, Sender};
 use frame::{Header, NOT_CONVERTED};
 use tree::Tree;
 
@@ -205,7 +205,7 @@ pub(crate) async fn fan_out(
             };
             let header = Header {
                 system_id: vehicle_sysid,
-                component_id: COMPONENT_ID,
+                component_id: d.compid,
                 sequence: seq,
             };
             seq = seq.wrapping_add(1);
@@ -214,7 +214,7 @@ pub(crate) async fn fan_out(
             if d.peer.is_none() {
                 hub.record(
                     vehicle_sysid,
-                    COMPONENT_ID,
+                    d.compid,
                     name,
                     Arc::from(msg_json),
                     SystemTime::now(),
