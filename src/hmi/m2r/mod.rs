@@ -23,6 +23,7 @@
 pub mod frame;
 mod mailbox;
 mod station;
+mod stream;
 pub mod tree;
 
 use std::collections::HashMap;
@@ -71,7 +72,8 @@ fn is_api_path(path: &str) -> bool {
 pub(crate) struct Out {
     /// `Some`: for one client only (an answer to it).
     pub peer: Option<u64>,
-    pub name: &'static str,
+    /// What a newer message replaces in a slow client's mailbox.
+    pub stream: stream::StreamKey,
     pub json: Arc<str>,
 }
 
@@ -223,7 +225,7 @@ pub(crate) async fn fan_out(
             if hub.out.receiver_count() > 0 {
                 let _ = hub.out.send(Arc::new(Out {
                     peer: d.peer,
-                    name,
+                    stream: stream::StreamKey::of(vehicle_sysid, d.compid, &d.msg),
                     json,
                 }));
             }
