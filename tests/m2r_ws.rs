@@ -877,3 +877,236 @@ async fn the_filter_keeps_only_what_it_names() {
     let bad = Cockpit::connect(rig.http, "/v1/ws/mavlink?filter=(", 255, 240, &[]).await;
     assert_eq!(bad.err().map(|e| e.0), Some(400));
 }
+
+/// A client that reads nothing until the test says so, on a socket whose
+/// kernel buffers fill within seconds, as on a slow link: 4 KiB of receive
+/// buffer and 536-byte segments (on loopback the vehicle's send buffer
+/// grows with the segment size: to megabytes with 64-KiB segments, to a few
+/// hundred KiB with these).
+async fn stalling_client(addr: SocketAddr, path: &str) -> Cockpit {
+    let sock = tokio::net::TcpSocket::new_v4().unwrap();
+    sock.set_recv_buffer_size(4096).unwrap();
+    nix::sys::socket::setsockopt(&sock, nix::sys::socket::sockopt::TcpMaxSeg, &536).unwrap();
+    let stream = sock.connect(addr).await.unwrap();
+    let req = format!("ws://{addr}{path}").into_client_request().unwrap();
+    let (ws, _) =
+        tokio_tungstenite::client_async(req, tokio_tungstenite::MaybeTlsStream::Plain(stream))
+            .await
+            .unwrap();
+    Cockpit {
+        ws,
+        sysid: 255,
+        compid: 240,
+        replies: VecDeque::new(),
+        last_beat: None,
+    }
+}
+
+/// The names of the NAMED_VALUE_FLOATs the vehicle sends, in one burst.
+const NAMED_VALUES: [&str; 5] = ["CamTilt", "InputHold", "Laser", "Lights1", "PilotGain"];
+
+fn named_value(f: &Value) -> Option<String> {
+    (f["message"]["type"] == "NAMED_VALUE_FLOAT").then(|| chars_to_string(&f["message"]["name"]))
+}
+
+/// The vehicle sends its five NAMED_VALUE_FLOATs (Cockpit's Lights, Pilot
+/// Gain, Cam Tilt… widgets) together, twice a second: a client that asks
+/// for them alone gets every name every time, not only the last of each
+/// burst.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_named_value_filter_gets_all_five_names() {
+    let rig = Rig::start("", false);
+    let mut c = Cockpit::connect(
+        rig.http,
+        "/v1/ws/mavlink?filter=NAMED_VALUE_FLOAT",
+        255,
+        240,
+        &[],
+    )
+    .await
+    .unwrap();
+    let mut counts = std::collections::BTreeMap::<String, usize>::new();
+    let mut frames = 0;
+    let end = Instant::now() + GENEROUS;
+    // Ten bursts' worth of each name.
+    while counts.len() < NAMED_VALUES.len() || counts.values().any(|n| *n < 10) {
+        assert!(
+            Instant::now() < end,
+            "not every named value within {GENEROUS:?}: {counts:?}"
+        );
+        let Some(f) = c.next_frame(Duration::from_millis(200)).await else {
+            continue;
+        };
+        frames += 1;
+        let name = named_value(&f).unwrap_or_else(|| panic!("{f} passed the filter"));
+        *counts.entry(name).or_default() += 1;
+    }
+    eprintln!("NAMED_VALUE_FLOAT per name in {frames} frames: {counts:?}");
+    assert_eq!(
+        counts.keys().map(String::as_str).collect::<Vec<_>>(),
+        NAMED_VALUES
+    );
+    let (lo, hi) = (
+        counts.values().min().copied().unwrap_or(0),
+        counts.values().max().copied().unwrap_or(0),
+    );
+    assert!(hi - lo <= 1, "a name fell behind the others: {counts:?}");
+}
+
+/// The vehicle is two components, the autopilot (1) and the camera (100),
+/// each with its own 1-Hz HEARTBEAT: a client hears both, and the REST view
+/// keeps each under its component.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn heartbeats_come_from_the_autopilot_and_the_camera() {
+    let rig = Rig::start("", false);
+    let mut c = rig.cockpit().await;
+    let mut per_component = std::collections::BTreeMap::<u64, usize>::new();
+    let end = Instant::now() + Duration::from_secs(8);
+    while let Some(f) = c
+        .next_frame(end.saturating_duration_since(Instant::now()))
+        .await
+    {
+        if f["message"]["type"] != "HEARTBEAT" {
+            continue;
+        }
+        let comp = f["header"]["component_id"].as_u64().unwrap();
+        let kind = f["message"]["mavtype"]["type"].as_str().unwrap();
+        match comp {
+            1 => assert_eq!(kind, "MAV_TYPE_SUBMARINE"),
+            100 => assert_eq!(kind, "MAV_TYPE_CAMERA"),
+            _ => panic!("a HEARTBEAT from component {comp}: {f}"),
+        }
+        assert_eq!(f["header"]["system_id"], 1);
+        *per_component.entry(comp).or_default() += 1;
+    }
+    eprintln!("HEARTBEATs in 8 s per component: {per_component:?}");
+    for comp in [1, 100] {
+        let n = per_component.get(&comp).copied().unwrap_or(0);
+        assert!(
+            n >= 4,
+            "{n} HEARTBEATs from component {comp} in 8 s: {per_component:?}"
+        );
+    }
+    for (comp, kind) in [(1, "MAV_TYPE_SUBMARINE"), (100, "MAV_TYPE_CAMERA")] {
+        let hb = get_json(
+            rig.http,
+            &format!("/mavlink2rest/v1/mavlink/vehicles/1/components/{comp}/messages/HEARTBEAT"),
+        )
+        .await;
+        assert_eq!(hb["message"]["mavtype"]["type"], kind, "component {comp}");
+        assert!(hb["status"]["time"]["counter"].as_u64().unwrap() >= 4);
+    }
+}
+
+/// Messages asked at 50 Hz (the vehicle's ceiling) for the pause test:
+/// ATTITUDE, AHRS2, VFR_HUD, NEPTUNUS_ESTIMATE, GLOBAL_POSITION_INT,
+/// SERVO_OUTPUT_RAW, SYS_STATUS and the named values.
+const BUSY_RATES: [u32; 8] = [30, 178, 74, 44102, 33, 36, 1, 251];
+
+/// Bytes sent to every client while the slow one pauses: several times
+/// what the kernel holds for it.
+const PAUSE_BYTES: usize = 3 << 19;
+
+/// A client that stops reading while the vehicle sends more than the
+/// kernel can buffer for it (1.5 MiB, messages at 50 Hz) gets, once it reads
+/// again, each stream's newest message — every named value stamped around
+/// the moment it resumed, both components' HEARTBEATs — and not the
+/// backlog: what the kernel held, then a gap, then the present.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_pauses_gets_each_streams_newest_and_no_backlog() {
+    let rig = Rig::start("", false);
+    let mut fast = rig.cockpit().await;
+    for id in BUSY_RATES {
+        let r = fast
+            .command(
+                "MAV_CMD_SET_MESSAGE_INTERVAL",
+                [id as f32, 20_000.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            )
+            .await;
+        assert_eq!(r, "MAV_RESULT_ACCEPTED", "message {id} at 50 Hz");
+    }
+    let boot_ms = |f: &Value| f["message"]["time_boot_ms"].as_u64().unwrap();
+    let t_start = boot_ms(&fast.wait("ATTITUDE", |_| true).await);
+    let mut slow = stalling_client(rig.http, "/mavlink2rest/ws/mavlink").await;
+    // The pause: until every client was sent more than the kernel can hold
+    // for the slow one, counted by what the fast one reads.
+    let need = PAUSE_BYTES;
+    let (mut bytes, mut sent, mut t_resume) = (0usize, 0usize, t_start);
+    let end = Instant::now() + Duration::from_secs(120);
+    while bytes < need {
+        assert!(
+            Instant::now() < end,
+            "only {bytes} of {need} bytes sent in 120 s"
+        );
+        let Some(Ok(Message::Text(t))) =
+            tokio::time::timeout(Duration::from_millis(200), fast.ws.next())
+                .await
+                .ok()
+                .flatten()
+        else {
+            continue;
+        };
+        bytes += t.len();
+        if let Ok(f) = serde_json::from_str::<Value>(t.as_str())
+            && f["message"]["type"] == "ATTITUDE"
+        {
+            t_resume = boot_ms(&f);
+            sent += 1;
+        }
+    }
+    // The slow client reads again, until a second of the vehicle's time
+    // after the pause.
+    let mut stamps = Vec::new();
+    let (mut frames, mut names, mut beats) = (
+        0usize,
+        std::collections::BTreeSet::new(),
+        std::collections::BTreeSet::new(),
+    );
+    let end = Instant::now() + GENEROUS;
+    loop {
+        assert!(Instant::now() < end, "the slow client never caught up");
+        let Some(f) = slow.next_frame(Duration::from_millis(200)).await else {
+            continue;
+        };
+        frames += 1;
+        // Named values from around the moment it read again: the newest.
+        if let Some(name) = named_value(&f)
+            && boot_ms(&f) + 1000 >= t_resume
+        {
+            names.insert(name);
+        }
+        if f["message"]["type"] == "HEARTBEAT" {
+            beats.insert(f["header"]["component_id"].as_u64().unwrap());
+        }
+        if f["message"]["type"] == "ATTITUDE" {
+            let t = boot_ms(&f);
+            stamps.push(t);
+            if t >= t_resume + 1000 {
+                break;
+            }
+        }
+    }
+    let during = stamps.iter().filter(|t| **t <= t_resume).count();
+    let gap_ms = stamps
+        .windows(2)
+        .map(|w| w[1].saturating_sub(w[0]))
+        .max()
+        .unwrap_or(0);
+    eprintln!(
+        "paused {} ms of the vehicle's time ({bytes} bytes to each client): of {sent} ATTITUDE \
+         sent, {during} reached the paused client, then a {gap_ms} ms gap; {frames} frames \
+         until 1 s after; named values {names:?}, HEARTBEAT components {beats:?}",
+        t_resume - t_start
+    );
+    assert!(during < sent, "the whole backlog arrived");
+    assert!(
+        gap_ms >= 2000,
+        "no gap in the paused client's ATTITUDE: the backlog was kept ({during} of {sent})"
+    );
+    assert_eq!(
+        names.iter().map(String::as_str).collect::<Vec<_>>(),
+        NAMED_VALUES,
+        "each named value's newest"
+    );
+    assert_eq!(beats.into_iter().collect::<Vec<_>>(), [1, 100]);
+}

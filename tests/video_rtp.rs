@@ -5,7 +5,9 @@
 //! socket sending GCS HEARTBEATs) from one loopback address to another; a
 //! killed ffmpeg restarted; no destination, no ffmpeg child; a camera
 //! that gives H.264 itself passed through (`-c:v copy`) to two receivers,
-//! one joining late.
+//! one joining late; `auto` never drawn to a station that may not control
+//! (an unsigned stranger with the pilot's id while signing is on, a
+//! stranger's id on UDP while the pilot is on TCP).
 //!
 //! Real processes and real time: every wait is for a condition with a
 //! generous deadline. Missing tools fail the test with the install command
@@ -18,11 +20,13 @@ use std::io::Read;
 use std::net::UdpSocket;
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use common::{Vehicle, free_udp_port};
+use common::{Vehicle, free_udp_port, gcs_heartbeat};
+use mavlink_core::MessageData as _;
 use neptunus::dialect::neptunus::*;
-use neptunus::mavlink::frame::encode_v2;
+use neptunus::mavlink::frame::{FrameStats, decode_datagram, encode_v2};
+use neptunus::mavlink::signing::{Signer, SigningKey, timestamp_from_unix_us};
 
 const GENEROUS: Duration = Duration::from_secs(20);
 
@@ -298,28 +302,72 @@ fn a_camera_giving_h264_is_passed_through_to_every_receiver_and_a_late_one_decod
     );
 }
 
+/// A bare UDP ground station: system id 255 (SYSID_MYGCS) unless told,
+/// its frames signed when it has a key.
 struct Station {
     sock: UdpSocket,
     seq: u8,
+    sysid: u8,
+    signer: Option<Signer>,
 }
 
 impl Station {
     fn at(ip: &str, vehicle_port: u16) -> Station {
         let sock = UdpSocket::bind((ip, 0)).unwrap();
         sock.connect(("127.0.0.1", vehicle_port)).unwrap();
-        Station { sock, seq: 0 }
+        Station {
+            sock,
+            seq: 0,
+            sysid: 255,
+            signer: None,
+        }
+    }
+
+    fn with_sysid(mut self, sysid: u8) -> Station {
+        self.sysid = sysid;
+        self
+    }
+
+    fn signing(mut self, passphrase: &str) -> Station {
+        self.signer = Some(Signer::new(
+            SigningKey::from_passphrase(passphrase),
+            0,
+            None,
+        ));
+        self
+    }
+
+    fn send(&mut self, msg: &MavMessage) {
+        let mut bytes = encode_v2(self.sysid, 190, self.seq, msg);
+        self.seq = self.seq.wrapping_add(1);
+        if let Some(signer) = self.signer.as_mut() {
+            let now_us = SystemTime::now()
+                .duration_since(UNIX_EPOCH)
+                .unwrap()
+                .as_micros() as u64;
+            signer.sign(&mut bytes, timestamp_from_unix_us(now_us));
+        }
+        let _ = self.sock.send(&bytes);
     }
 
     fn heartbeat(&mut self) {
-        let hb = MavMessage::HEARTBEAT(HEARTBEAT_DATA {
-            mavtype: MavType::MAV_TYPE_GCS,
-            autopilot: MavAutopilot::MAV_AUTOPILOT_INVALID,
-            system_status: MavState::MAV_STATE_ACTIVE,
-            mavlink_version: 3,
-            ..Default::default()
-        });
-        let _ = self.sock.send(&encode_v2(255, 190, self.seq, &hb));
-        self.seq = self.seq.wrapping_add(1);
+        self.send(&gcs_heartbeat());
+    }
+
+    /// The camera component's messages in what the vehicle sent us since
+    /// the last call.
+    fn camera_messages(&self) -> Vec<MavMessage> {
+        self.sock.set_nonblocking(true).unwrap();
+        let (mut buf, mut frames) = ([0u8; 4096], Vec::new());
+        while let Ok(n) = self.sock.recv(&mut buf) {
+            decode_datagram(&buf[..n], &mut FrameStats::default(), &mut frames);
+        }
+        self.sock.set_nonblocking(false).unwrap();
+        frames
+            .into_iter()
+            .filter(|f| f.sysid == 1 && f.compid == 100)
+            .map(|f| f.msg)
+            .collect()
     }
 }
 
@@ -426,4 +474,320 @@ fn auto_follows_the_ground_station_restarts_a_killed_ffmpeg_and_stops_without_on
     // What was queued before it stopped, then silence.
     let _ = rtp_packets(&rx2, Duration::from_millis(500));
     assert_eq!(rtp_packets(&rx2, Duration::from_secs(1)), 0);
+}
+
+const PASSPHRASE: &str = "video follows the pilot";
+
+/// The vehicle's data directory gets a signing key, as the operator sets it.
+fn set_passphrase(data: &Path) {
+    let ok = Command::new(bin())
+        .args(["signing", "set-passphrase", PASSPHRASE, "--data-dir"])
+        .arg(data)
+        .stdout(Stdio::null())
+        .status()
+        .unwrap()
+        .success();
+    assert!(ok, "neptunus signing set-passphrase failed");
+}
+
+/// RTP packets received at each of `rxs` over `window`, calling `beat`
+/// about every 100 ms meanwhile.
+fn count_while<const N: usize>(
+    rxs: [&UdpSocket; N],
+    window: Duration,
+    mut beat: impl FnMut(),
+) -> [usize; N] {
+    let mut counts = [0; N];
+    let end = Instant::now() + window;
+    while Instant::now() < end {
+        beat();
+        for (rx, n) in rxs.iter().zip(&mut counts) {
+            *n += rtp_packets(rx, Duration::from_millis(50));
+        }
+    }
+    counts
+}
+
+fn synthetic_camera_config(dir: &Path, video_port: u16) -> String {
+    let cfg = dir.join("neptunus.toml");
+    std::fs::write(
+        &cfg,
+        format!("[camera]\nsource = \"synthetic\"\n[camera.h264]\nauto_port = {video_port}\n"),
+    )
+    .unwrap();
+    cfg.to_str().unwrap().to_owned()
+}
+
+/// MAV_CMD_REQUEST_MESSAGE for message `id`.
+fn request_message(id: u32, component: u8) -> MavMessage {
+    MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+        param1: id as f32,
+        command: MavCmd::MAV_CMD_REQUEST_MESSAGE,
+        target_system: 1,
+        target_component: component,
+        ..Default::default()
+    })
+}
+
+/// A security probe with signing on: a stranger on another address sends
+/// unsigned GCS HEARTBEATs carrying the pilot's system id, ten a second.
+/// The video stays with the pilot, whose frames are signed: the stranger
+/// gets no RTP packet, and VIDEO_STREAM_INFORMATION names the pilot's
+/// address.
+#[test]
+fn with_signing_on_an_unsigned_stranger_with_the_pilots_id_does_not_draw_the_video() {
+    need("ffmpeg", &["-version"], "apt install ffmpeg");
+    let dir = tempfile::tempdir().unwrap();
+    set_passphrase(&dir.path().join("data"));
+    let mav = free_udp_port().unwrap();
+    let video = free_udp_port().unwrap();
+    let rx_pilot = UdpSocket::bind(("127.0.0.1", video)).unwrap();
+    let rx_stranger = UdpSocket::bind(("127.0.0.2", video)).unwrap();
+    let cfg = synthetic_camera_config(dir.path(), video);
+    let mav_url = format!("udpin:127.0.0.1:{mav}");
+    let args = [
+        "--sim",
+        "--http",
+        "off",
+        "--mavlink",
+        &mav_url,
+        "--config",
+        &cfg,
+    ];
+    let v = Vehicle::spawn(bin(), &args, dir.path(), "").unwrap();
+
+    // The pilot, signed, on 127.0.0.1: its video flows.
+    let mut pilot = Station::at("127.0.0.1", mav).signing(PASSPHRASE);
+    let mut got = 0;
+    let end = Instant::now() + GENEROUS;
+    while got < 20 && Instant::now() < end {
+        got += beat_and_count(&mut pilot, &rx_pilot, Duration::from_millis(500));
+    }
+    assert!(got >= 20, "no RTP for the pilot\n{}", v.stderr_tail());
+
+    // The attack: 8 s of the stranger's unsigned HEARTBEATs as 255 from
+    // 127.0.0.2, beside the pilot's signed ones.
+    let mut stranger = Station::at("127.0.0.2", mav);
+    let mut beat = 0u32;
+    let [to_pilot, to_stranger] =
+        count_while([&rx_pilot, &rx_stranger], Duration::from_secs(8), || {
+            stranger.heartbeat();
+            if beat.is_multiple_of(5) {
+                pilot.heartbeat();
+            }
+            beat += 1;
+        });
+    eprintln!(
+        "8 s of an unsigned stranger's HEARTBEATs ({beat}): {to_pilot} RTP packets to the pilot, \
+         {to_stranger} to the stranger"
+    );
+    assert_eq!(to_stranger, 0, "the stranger drew the video");
+    assert!(
+        to_pilot >= 20,
+        "the pilot lost the video: {to_pilot} packets in 8 s\n{}",
+        v.stderr_tail()
+    );
+
+    // What the camera component tells the pilot: the stream goes to it.
+    let want = format!("udp://127.0.0.1:{video}");
+    let mut uri = None;
+    let end = Instant::now() + GENEROUS;
+    while uri.is_none() {
+        assert!(
+            Instant::now() < end,
+            "no VIDEO_STREAM_INFORMATION with a uri\n{}",
+            v.stderr_tail()
+        );
+        pilot.send(&request_message(VIDEO_STREAM_INFORMATION_DATA::ID, 100));
+        stranger.heartbeat();
+        assert_eq!(rtp_packets(&rx_stranger, Duration::from_millis(300)), 0);
+        uri = pilot.camera_messages().into_iter().find_map(|m| match m {
+            MavMessage::VIDEO_STREAM_INFORMATION(i) => {
+                let b: &[u8] = i.uri.as_ref();
+                let u = String::from_utf8_lossy(b).trim_end_matches('\0').to_owned();
+                (!u.is_empty()).then_some(u)
+            }
+            _ => None,
+        });
+    }
+    assert_eq!(uri.as_deref(), Some(want.as_str()));
+}
+
+/// A ground station on TCP, signing off.
+struct TcpPilot {
+    stream: std::net::TcpStream,
+    decoder: neptunus::mavlink::FrameDecoder,
+    seq: u8,
+}
+
+impl TcpPilot {
+    fn connect(port: u16, v: &Vehicle) -> TcpPilot {
+        let end = Instant::now() + GENEROUS;
+        let stream = loop {
+            match std::net::TcpStream::connect(("127.0.0.1", port)) {
+                Ok(s) => break s,
+                Err(e) => {
+                    assert!(
+                        Instant::now() < end,
+                        "cannot connect to tcpin:{port}: {e}\n{}",
+                        v.stderr_tail()
+                    );
+                    std::thread::sleep(Duration::from_millis(50));
+                }
+            }
+        };
+        stream
+            .set_read_timeout(Some(Duration::from_millis(20)))
+            .unwrap();
+        TcpPilot {
+            stream,
+            decoder: neptunus::mavlink::FrameDecoder::new(),
+            seq: 0,
+        }
+    }
+
+    fn send(&mut self, msg: &MavMessage) {
+        use std::io::Write as _;
+        let bytes = encode_v2(255, 190, self.seq, msg);
+        self.seq = self.seq.wrapping_add(1);
+        self.stream.write_all(&bytes).unwrap();
+    }
+
+    /// The autopilot's messages read now (waits up to 20 ms).
+    fn recv(&mut self) -> Vec<MavMessage> {
+        let mut buf = [0u8; 8192];
+        let mut frames = Vec::new();
+        if let Ok(n) = self.stream.read(&mut buf) {
+            self.decoder.push(&buf[..n], &mut frames);
+        }
+        frames
+            .into_iter()
+            .filter(|f| f.sysid == 1 && f.compid == 1)
+            .map(|f| f.msg)
+            .collect()
+    }
+
+    /// Arms (and so takes control), asking again while pre-arm checks fail.
+    fn arm(&mut self, v: &Vehicle) {
+        let arm = MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
+            param1: 1.0,
+            command: MavCmd::MAV_CMD_COMPONENT_ARM_DISARM,
+            target_system: 1,
+            target_component: 1,
+            ..Default::default()
+        });
+        let end = Instant::now() + GENEROUS;
+        let mut next = Instant::now();
+        loop {
+            assert!(
+                Instant::now() < end,
+                "arming over TCP refused\n{}",
+                v.stderr_tail()
+            );
+            if Instant::now() >= next {
+                next = Instant::now() + Duration::from_secs(1);
+                self.send(&gcs_heartbeat());
+                self.send(&arm);
+            }
+            let accepted = self.recv().iter().any(|m| {
+                matches!(m, MavMessage::COMMAND_ACK(a)
+                    if a.command == MavCmd::MAV_CMD_COMPONENT_ARM_DISARM
+                        && a.result == MavResult::MAV_RESULT_ACCEPTED)
+            });
+            if accepted {
+                return;
+            }
+        }
+    }
+}
+
+/// Signing off, the pilot in control over TCP: a stranger whose system id
+/// is not an allowed one sends GCS HEARTBEATs on UDP. It gets no video
+/// (no encoder even runs); an allowed station that joins on UDP does.
+#[test]
+fn with_the_pilot_on_tcp_a_stranger_on_udp_does_not_get_the_video() {
+    need("ffmpeg", &["-version"], "apt install ffmpeg");
+    let dir = tempfile::tempdir().unwrap();
+    let mav = free_udp_port().unwrap();
+    let tcp = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let video = free_udp_port().unwrap();
+    let rx_stranger = UdpSocket::bind(("127.0.0.2", video)).unwrap();
+    let rx_allowed = UdpSocket::bind(("127.0.0.3", video)).unwrap();
+    let cfg = synthetic_camera_config(dir.path(), video);
+    let (udp_url, tcp_url) = (
+        format!("udpin:127.0.0.1:{mav}"),
+        format!("tcpin:127.0.0.1:{tcp}"),
+    );
+    let args = [
+        "--sim",
+        "--http",
+        "off",
+        "--mavlink",
+        &udp_url,
+        "--mavlink",
+        &tcp_url,
+        "--config",
+        &cfg,
+    ];
+    let v = Vehicle::spawn(bin(), &args, dir.path(), "").unwrap();
+    let mut pilot = TcpPilot::connect(tcp, &v);
+    pilot.arm(&v);
+
+    // The pilot keeps control (HEARTBEAT, neutral sticks); the stranger,
+    // system id 66, beats on UDP from 127.0.0.2.
+    let mut stranger = Station::at("127.0.0.2", mav).with_sysid(66);
+    let mut beat = 0u32;
+    let pilot_life = |pilot: &mut TcpPilot, beat: u32| {
+        if beat.is_multiple_of(10) {
+            pilot.send(&gcs_heartbeat());
+        }
+        pilot.send(&common::manual_control(0));
+        let _ = pilot.recv();
+    };
+    let [to_stranger] = count_while([&rx_stranger], Duration::from_secs(8), || {
+        stranger.heartbeat();
+        pilot_life(&mut pilot, beat);
+        beat += 1;
+    });
+    eprintln!(
+        "8 s of a stranger's HEARTBEATs on UDP ({beat}), the pilot on TCP: {to_stranger} RTP packets \
+         to the stranger, ffmpeg children {:?}",
+        ffmpeg_children(v.pid())
+    );
+    assert_eq!(to_stranger, 0, "the stranger got the video");
+    assert!(
+        ffmpeg_children(v.pid()).is_empty(),
+        "an encoder runs for a station that may not control"
+    );
+
+    // A station that may control (NEPT_GCS_ALLOW1, 245) joins on UDP: the
+    // video goes to it, and still not to the stranger.
+    let mut allowed = Station::at("127.0.0.3", mav).with_sysid(245);
+    let (mut to_allowed, mut to_stranger) = (0, 0);
+    let end = Instant::now() + GENEROUS;
+    while to_allowed < 20 && Instant::now() < end {
+        let [a, s] = count_while(
+            [&rx_allowed, &rx_stranger],
+            Duration::from_millis(500),
+            || {
+                allowed.heartbeat();
+                stranger.heartbeat();
+                pilot_life(&mut pilot, beat);
+                beat += 1;
+            },
+        );
+        to_allowed += a;
+        to_stranger += s;
+    }
+    eprintln!("an allowed station on UDP: {to_allowed} RTP packets; the stranger {to_stranger}");
+    assert!(
+        to_allowed >= 20,
+        "no video for the allowed station\n{}",
+        v.stderr_tail()
+    );
+    assert_eq!(to_stranger, 0, "the stranger got the video");
 }

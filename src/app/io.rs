@@ -70,21 +70,23 @@ impl Io {
         self
     }
 
-    /// A message to the HMI sessions it is for, and on the wire to the
-    /// endpoints it is for.
+    /// A message from component `compid` to the in-process stations it is
+    /// for (the browser sessions hear the autopilot alone, mavlink2rest
+    /// every component), and on the wire to the endpoints it is for.
     fn send_message(
         &mut self,
         to: To,
+        compid: u8,
         msg: &MavMessage,
         topic: Option<Topic>,
         sysid: u8,
         now: Now,
     ) {
         for (outlet, batch) in self.hmi.iter().zip(&mut self.delivered) {
-            batch.extend(outlet.delivery(to, msg, topic));
+            batch.extend(outlet.delivery(to, compid, msg, topic));
         }
         if !self.local_only(to) {
-            self.send_frame(to, now, |seq| encode_v2(sysid, COMPONENT_ID, seq, msg));
+            self.send_frame(to, now, |seq| encode_v2(sysid, compid, seq, msg));
         }
     }
 
@@ -92,16 +94,15 @@ impl Io {
         let sysid = vehicle.sysid();
         for out in outputs.drain(..) {
             match out {
-                Output::Send { to, msg } => self.send_message(to, &msg, None, sysid, now),
-                Output::Text { to, topic, msg } => {
-                    self.send_message(to, &msg, Some(topic), sysid, now)
+                Output::Send { to, msg } => {
+                    self.send_message(to, COMPONENT_ID, &msg, None, sysid, now)
                 }
-                // Another component of ours (the camera): the browser HMI
-                // talks to the autopilot alone, so on the wire only.
+                Output::Text { to, topic, msg } => {
+                    self.send_message(to, COMPONENT_ID, &msg, Some(topic), sysid, now)
+                }
+                // Another component of ours (the camera).
                 Output::SendAs { to, compid, msg } => {
-                    if !self.local_only(to) {
-                        self.send_frame(to, now, |seq| encode_v2(sysid, compid, seq, &msg));
-                    }
+                    self.send_message(to, compid, &msg, None, sysid, now)
                 }
                 Output::AckUnknown {
                     to,

@@ -38,8 +38,9 @@ pub(super) struct VehicleTask {
     last_tick: Duration,
     /// Per MAVLink endpoint: its stations are trusted (configuration).
     trusted: Vec<bool>,
-    /// Where `auto` RTP video goes: ground stations heard on UDP.
-    stations: GroundStations,
+    /// Where `auto` RTP video goes: ground stations that may control,
+    /// heard on UDP.
+    stations: GroundStations<Sender>,
     video_to: watch::Sender<Option<IpAddr>>,
 }
 
@@ -119,7 +120,10 @@ impl VehicleTask {
         {
             self.last_scene = Some(now.mono);
             self.scene.send_replace(scene(&self.vehicle, now));
-            let to = self.stations.target(self.vehicle.owner(), now.mono);
+            let vehicle = &self.vehicle;
+            let to = self
+                .stations
+                .target(vehicle.owner(), now.mono, |s| vehicle.may_control(*s));
             self.video_to
                 .send_if_modified(|old| std::mem::replace(old, to) != to);
         }
@@ -151,23 +155,33 @@ impl VehicleTask {
             ..Sender::new(endpoint, peer, frame.sysid, frame.compid)
         };
         // A ground station's address on UDP: where `auto` video may go.
-        if let (Some(addr), MavMessage::HEARTBEAT(h)) = (udp_from, &frame.msg)
-            && h.mavtype == MavType::MAV_TYPE_GCS
-            && frame.undecodable.is_none()
-        {
-            self.stations.heard(frame.sysid, addr, now.mono);
-        }
+        let gcs_beat_from = match (udp_from, &frame.msg) {
+            (Some(addr), MavMessage::HEARTBEAT(h))
+                if h.mavtype == MavType::MAV_TYPE_GCS && frame.undecodable.is_none() =>
+            {
+                Some(addr)
+            }
+            _ => None,
+        };
         let Some(input) = input_of(frame, from) else {
             return;
         };
         self.vehicle.handle(input, now, &mut self.outputs);
+        // The core's verdict, after the frame: a station that may control
+        // (allowed, signed when signing is on), never one that only watches.
+        let may_control = self.vehicle.may_control(from);
+        // Video follows only a station that may control, from the address
+        // its admitted frames come from (an unsigned frame with its id, from
+        // elsewhere, moves nothing while signing is on).
+        if let Some(addr) = gcs_beat_from
+            && may_control
+        {
+            self.stations.heard(from.sysid, from, addr, now.mono);
+        }
         // The router keeps a slot (and the tlog) for peers that carry a
         // station that may control. Sticky for the peer's life: frames
         // spoofed from its address must not get it evicted.
-        if !standing.may_control()
-            && self.vehicle.may_control(from)
-            && standing.set_may_control(true)
-        {
+        if !standing.may_control() && may_control && standing.set_may_control(true) {
             tracing::debug!(
                 endpoint,
                 peer,

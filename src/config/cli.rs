@@ -79,7 +79,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "off|self-signed|files")]
     pub tls: Option<TlsModeName>,
     /// H.264 video over RTP, repeatable: udp://HOST:PORT, `auto` (port 5600
-    /// of the ground station in control, else the first heard on UDP) or
+    /// of the ground station in control, else of the first heard on UDP
+    /// that may control; with signing on, only signed frames count) or
     /// `off` [default: auto].
     #[arg(long = "video-rtp", value_name = "udp://HOST:PORT|auto|off")]
     pub video_rtp: Vec<crate::camera::rtp::RtpDest>,

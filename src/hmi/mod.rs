@@ -51,7 +51,7 @@ use tokio::net::TcpListener;
 use tokio::sync::{broadcast, mpsc, watch};
 
 use crate::dialect::neptunus::MavMessage;
-use crate::vehicle::machine::{Input, Sender, To, Topic};
+use crate::vehicle::machine::{COMPONENT_ID, Input, Sender, To, Topic};
 
 /// MAVLink component id of every HMI session (MAV_COMP_ID_MISSIONPLANNER, a GCS).
 pub const SESSION_COMPID: u8 = 190;
@@ -148,6 +148,9 @@ impl Default for HmiSettings {
 pub struct Delivery {
     /// `None`: for every session; `Some(peer)`: for one session (or the server).
     pub peer: Option<u64>,
+    /// The vehicle's component that sent it: the autopilot
+    /// ([`COMPONENT_ID`]) but for an outlet that hears every component.
+    pub compid: u8,
     pub msg: MavMessage,
     /// For a STATUSTEXT: what it is about, as the core chose it.
     pub topic: Option<Topic>,
@@ -177,14 +180,28 @@ pub(crate) fn queued(
 #[derive(Debug, Clone)]
 pub struct Outlet {
     endpoint: usize,
+    /// Whether it hears the vehicle's other components (the camera) as well
+    /// as its autopilot: mavlink2rest does, as on the wire; the browser
+    /// sessions talk to the autopilot alone.
+    every_component: bool,
     hub: broadcast::Sender<Deliveries>,
 }
 
 impl Outlet {
+    /// An outlet that hears the autopilot alone.
     pub fn new(endpoint: usize) -> Self {
         Self {
             endpoint,
+            every_component: false,
             hub: broadcast::channel(HUB_CAPACITY).0,
+        }
+    }
+
+    /// An outlet that hears every component of the vehicle.
+    pub fn every_component(endpoint: usize) -> Self {
+        Self {
+            every_component: true,
+            ..Self::new(endpoint)
         }
     }
 
@@ -192,9 +209,19 @@ impl Outlet {
         self.endpoint
     }
 
-    /// `msg` as the sessions it is addressed to get it (no encoding:
-    /// sessions read the message itself); None when it is for none of them.
-    pub fn delivery(&self, to: To, msg: &MavMessage, topic: Option<Topic>) -> Option<Delivery> {
+    /// `msg` from component `compid` as the sessions it is addressed to
+    /// get it (no encoding: sessions read the message itself); None when
+    /// it is for none of them.
+    pub fn delivery(
+        &self,
+        to: To,
+        compid: u8,
+        msg: &MavMessage,
+        topic: Option<Topic>,
+    ) -> Option<Delivery> {
+        if compid != COMPONENT_ID && !self.every_component {
+            return None;
+        }
         let peer = match to {
             To::All => None,
             To::Endpoint(e) if e == self.endpoint => None,
@@ -203,6 +230,7 @@ impl Outlet {
         };
         Some(Delivery {
             peer,
+            compid,
             msg: msg.clone(),
             topic,
         })
@@ -477,7 +505,7 @@ impl Hmi {
         extra_routes: Option<axum::Router>,
     ) -> Result<Self, HmiError> {
         let outlet = Outlet::new(endpoint);
-        let m2r_outlet = Outlet::new(endpoint + 1);
+        let m2r_outlet = Outlet::every_component(endpoint + 1);
         let off = Self {
             inputs: None,
             outlet: outlet.clone(),

@@ -3,8 +3,9 @@
 //! child, sent to each destination (`--video-rtp`, `[camera] rtp`).
 //!
 //! `auto` follows the address the app publishes in a `watch` (the ground
-//! station in control, else the first heard on a UDP endpoint: see
-//! [`GroundStations`]). The encoder runs only while there is a destination:
+//! station in control if it is heard on a UDP endpoint, else the first
+//! heard there of those that may control — never one that may only watch:
+//! see [`GroundStations`]). The encoder runs only while there is a destination:
 //! with none, no child runs and the camera is not asked for frames. The
 //! stream's current shape is published as [`RtpStream`] for the MAVLink
 //! camera component.

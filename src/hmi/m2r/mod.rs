@@ -23,6 +23,7 @@
 pub mod frame;
 mod mailbox;
 mod station;
+mod stream;
 pub mod tree;
 
 use std::collections::HashMap;
@@ -42,7 +43,7 @@ use tokio::sync::broadcast;
 
 use super::{Deliveries, Shared, guard};
 use crate::dialect::neptunus::MavMessage;
-use crate::vehicle::machine::{COMPONENT_ID, Input, Sender};
+use crate::vehicle::machine::{Input, Sender};
 use frame::{Header, NOT_CONVERTED};
 use tree::Tree;
 
@@ -71,7 +72,8 @@ fn is_api_path(path: &str) -> bool {
 pub(crate) struct Out {
     /// `Some`: for one client only (an answer to it).
     pub peer: Option<u64>,
-    pub name: &'static str,
+    /// What a newer message replaces in a slow client's mailbox.
+    pub stream: stream::StreamKey,
     pub json: Arc<str>,
 }
 
@@ -205,7 +207,7 @@ pub(crate) async fn fan_out(
             };
             let header = Header {
                 system_id: vehicle_sysid,
-                component_id: COMPONENT_ID,
+                component_id: d.compid,
                 sequence: seq,
             };
             seq = seq.wrapping_add(1);
@@ -214,7 +216,7 @@ pub(crate) async fn fan_out(
             if d.peer.is_none() {
                 hub.record(
                     vehicle_sysid,
-                    COMPONENT_ID,
+                    d.compid,
                     name,
                     Arc::from(msg_json),
                     SystemTime::now(),
@@ -223,7 +225,7 @@ pub(crate) async fn fan_out(
             if hub.out.receiver_count() > 0 {
                 let _ = hub.out.send(Arc::new(Out {
                     peer: d.peer,
-                    name,
+                    stream: stream::StreamKey::of(vehicle_sysid, d.compid, &d.msg),
                     json,
                 }));
             }

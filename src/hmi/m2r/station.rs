@@ -11,8 +11,8 @@
 //! the MAVLink 2 frame) or [`NOT_CONVERTED`], as mavlink2rest does.
 //!
 //! The vehicle's messages reach the client through a [`Mailbox`]: a client
-//! that never reads holds one message per type and never slows the vehicle
-//! or other clients.
+//! that never reads holds one message per stream (type, component and
+//! instance) and never slows the vehicle or other clients.
 
 use std::collections::BTreeSet;
 use std::net::IpAddr;
@@ -183,11 +183,12 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, hub: Arc<Hub>, s
                     if o.peer.is_some_and(|p| p != id) {
                         continue;
                     }
-                    let ok = *wanted.entry(o.name).or_insert_with(|| {
-                        start.filter.as_ref().is_none_or(|re| re.is_match(o.name))
+                    let name = o.stream.name;
+                    let ok = *wanted.entry(name).or_insert_with(|| {
+                        start.filter.as_ref().is_none_or(|re| re.is_match(name))
                     });
                     if ok {
-                        mailbox.push(o.name, Arc::clone(&o.json));
+                        mailbox.push(o.stream, Arc::clone(&o.json));
                     }
                 }
                 Err(RecvError::Lagged(n)) => {

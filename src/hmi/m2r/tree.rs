@@ -198,6 +198,33 @@ mod tests {
         assert_eq!(v["vehicles"]["1"]["id"], 1);
     }
 
+    /// The camera's HEARTBEAT and the autopilot's are two entries, as
+    /// mavlink2rest keeps them (`…/components/100/messages/HEARTBEAT`).
+    #[test]
+    fn components_keep_their_own_messages() {
+        let mut tree = Tree::default();
+        let t0 = SystemTime::UNIX_EPOCH + Duration::from_secs(100);
+        let sub = "{\"type\":\"HEARTBEAT\",\"mavtype\":{\"type\":\"MAV_TYPE_SUBMARINE\"}}";
+        let cam = "{\"type\":\"HEARTBEAT\",\"mavtype\":{\"type\":\"MAV_TYPE_CAMERA\"}}";
+        for i in 0..3 {
+            let t = t0 + Duration::from_secs(i);
+            tree.update(1, 1, "HEARTBEAT", Arc::from(sub), t);
+            tree.update(1, 100, "HEARTBEAT", Arc::from(cam), t);
+        }
+        let v = tree.to_value();
+        for (comp, kind) in [(1, "MAV_TYPE_SUBMARINE"), (100, "MAV_TYPE_CAMERA")] {
+            let e = v
+                .pointer(&format!("/vehicles/1/components/{comp}/messages/HEARTBEAT"))
+                .expect("each component's HEARTBEAT");
+            assert_eq!(e["message"]["mavtype"]["type"], kind);
+            assert_eq!(e["status"]["time"]["counter"], 3);
+            assert_eq!(
+                v["vehicles"]["1"]["components"][comp.to_string()]["id"],
+                comp
+            );
+        }
+    }
+
     #[test]
     fn components_are_capped() {
         let mut tree = Tree::default();

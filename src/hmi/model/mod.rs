@@ -460,6 +460,7 @@ mod tests {
         m.on_delivery(
             &Delivery {
                 peer: None,
+                compid: crate::vehicle::machine::COMPONENT_ID,
                 msg: MavMessage::STATUSTEXT(STATUSTEXT_DATA {
                     severity: MavSeverity::MAV_SEVERITY_CRITICAL,
                     text: words.into(),
