@@ -127,6 +127,22 @@ rm -f target/browser-junit.xml
     --test-reporter=junit --test-reporter-destination=../../target/browser-junit.xml \
     ./*.test.js) || status=1
 
+echo "== interoperability tests with the genuine firmware in the loop (neptunus --hil)"
+# The same clients against `--hil`: QGroundControl's connect sequence,
+# pymavlink's everyday calls and depth hold, with the 30.0.2 firmware in
+# simavr reading the simulator's sensors and driving its thrusters.
+rm -f target/interop-hil-junit.xml
+if cargo build --locked --features hil \
+    && hil_elf=$(target/debug/neptunus genuine-board --build-only --data-dir target/hil-data "$firmware_dir/30.0.2" | cut -f1) \
+    && [ -f "$hil_elf" ]; then
+    NEPTUNUS_HIL_FIRMWARE="$hil_elf" NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest \
+        tests/interop/test_qgc_connect.py tests/interop/test_pymavlink.py tests/interop/test_depth_hold.py \
+        -q -p no:cacheprovider --timeout 300 --junitxml target/interop-hil-junit.xml || status=1
+else
+    echo "the genuine firmware could not be built for the --hil tests" >&2
+    status=1
+fi
+
 echo "== Debian package (built for this machine and checked: tests/package.sh)"
 pk_pass=0
 pk_fail=0
@@ -149,6 +165,8 @@ print(len(cases) - f - k, f, k)
 PY
 }
 read -r py_pass py_fail py_skip < <(junit_counts target/interop-junit.xml)
+read -r hil_pass hil_fail hil_skip < <(junit_counts target/interop-hil-junit.xml)
+py_pass=$((py_pass + hil_pass)); py_fail=$((py_fail + hil_fail)); py_skip=$((py_skip + hil_skip))
 read -r br_pass br_fail br_skip < <(junit_counts target/browser-junit.xml)
 awk -v pp="$((py_pass + br_pass + pk_pass))" -v pf="$((py_fail + br_fail + pk_fail))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
