@@ -53,9 +53,6 @@ fn echo_matches(frame: &[u8], echo: &str) -> bool {
     canon(frame) == canon(echo.as_bytes())
 }
 
-/// Removes the oldest in-flight frame that `is_it` recognises, and every
-/// older one (frames the board lost: it echoes in order). An echo of
-/// nothing in flight (another writer's frame, a garbled one) changes nothing.
 /// A frame written and not yet echoed.
 #[derive(Debug)]
 struct InFlight {
@@ -64,9 +61,10 @@ struct InFlight {
     thrust: bool,
 }
 
-/// The echo of the frame `is_it` picks: it and the frames before it (echoes
-/// come in order) are the board's; returns how many of them were thrust
-/// commands.
+/// Removes the oldest in-flight frame that `is_it` recognises, and every
+/// older one (frames the board lost: it echoes in order); returns how many
+/// of them were thrust commands. An echo of nothing in flight (another
+/// writer's frame, a garbled one) changes nothing.
 fn acknowledge(in_flight: &mut VecDeque<InFlight>, is_it: impl Fn(&[u8]) -> bool) -> u64 {
     match in_flight.iter().position(|f| is_it(&f.frame)) {
         Some(i) => in_flight.drain(..=i).filter(|f| f.thrust).count() as u64,
