@@ -162,3 +162,59 @@ fn asked_faster_than_the_lines_the_rate_is_kept_by_repeats() {
         "ATTITUDE at 20 Hz with 10-Hz lines: {n} in 4 s"
     );
 }
+
+/// An in-process endpoint (the browser sessions', mavlink2rest's) with
+/// nobody listening gets no telemetry streams and costs the vehicle no
+/// wake-up; when someone comes, every stream message goes out in the next
+/// pass and then at the endpoint's rates. A wire station is not affected.
+#[test]
+fn an_endpoint_nobody_listens_on_gets_no_streams_until_someone_comes() {
+    let mut r =
+        CoreRig::new(Vehicle::new(Identity::Ardupilot, ParamStore::defaults(), 2)).started();
+    let alone = {
+        let mut one = rig();
+        run_on_demand(&mut one, Duration::from_secs(10)).1
+    };
+    r.input(Input::Listeners {
+        endpoint: 1,
+        listened: false,
+    });
+    let (out, ticks) = run_on_demand(&mut r, Duration::from_secs(10));
+    let n = |out: &[Output], id, ep| count_sent(out, id, To::Endpoint(ep));
+    for id in [ATTITUDE_DATA::ID, SYS_STATUS_DATA::ID, HEARTBEAT_DATA::ID] {
+        assert_eq!(n(&out, id, 1), 0, "message {id} built for nobody");
+    }
+    assert!(
+        (98..=101).contains(&n(&out, ATTITUDE_DATA::ID, 0)),
+        "the wire station's ATTITUDE {}",
+        n(&out, ATTITUDE_DATA::ID, 0)
+    );
+    assert!(
+        ticks <= alone + 2,
+        "{ticks} ticks with a quiet second endpoint, {alone} with one endpoint"
+    );
+
+    r.input(Input::Listeners {
+        endpoint: 1,
+        listened: true,
+    });
+    assert!(
+        r.v.next_tick() <= r.t,
+        "someone came: the core must wake at once"
+    );
+    let first = r.input(Input::Tick);
+    for id in [
+        ATTITUDE_DATA::ID,
+        SYS_STATUS_DATA::ID,
+        HEARTBEAT_DATA::ID,
+        VFR_HUD_DATA::ID,
+    ] {
+        assert_eq!(n(&first, id, 1), 1, "message {id} not in the first pass");
+    }
+    let (out, _) = run_on_demand(&mut r, Duration::from_secs(10));
+    assert!(
+        (98..=101).contains(&n(&out, ATTITUDE_DATA::ID, 1)),
+        "ATTITUDE at its rate again: {}",
+        n(&out, ATTITUDE_DATA::ID, 1)
+    );
+}
