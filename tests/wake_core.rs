@@ -3,7 +3,8 @@
 //!
 //! - a disarmed vehicle with nothing moving asks for a tick only when a
 //!   telemetry message (or the camera's heartbeat) is due, and at least
-//!   every `IDLE_TICK`; armed, every `BUSY_TICK`, as before;
+//!   every `IDLE_TICK` (with a navigation line when one comes first);
+//!   armed, every `BUSY_TICK`, as before;
 //! - ATTITUDE and the other line-made messages go out in the very outputs
 //!   of the line that made them, at their rate, and are repeated between
 //!   lines only when asked for faster than the lines come.
@@ -60,13 +61,19 @@ fn run_on_demand(r: &mut CoreRig, d: Duration) -> (Vec<Output>, usize) {
 fn an_idle_vehicle_wakes_only_for_what_is_due() {
     let mut r = rig();
     let (out, ticks) = run_on_demand(&mut r, Duration::from_secs(10));
-    // ArduSub's default streams on one endpoint: the clocked ones (1–5 Hz)
-    // share few instants, the line-made ones need no tick at all.
+    eprintln!("{ticks} ticks in 10 s for an idle vehicle");
+    // ArduSub's default streams on one endpoint: the line-made ones need no
+    // tick at all; the clocked ones (1–5 Hz) and the idle tick's timers go
+    // with a line when one comes before they are due, so the board's lines
+    // wake the vehicle and little else does.
     assert!(
-        ticks <= 10 * 20,
-        "{ticks} ticks in 10 s for an idle vehicle (was 1000 at 100 Hz)"
+        ticks <= 10 * 5,
+        "{ticks} ticks in 10 s for an idle vehicle besides its 100 lines (was 1000 at 100 Hz)"
     );
-    assert!(ticks >= 10 * 10, "at least every IDLE_TICK: {ticks}");
+    // The timers still run at least every IDLE_TICK: the board's dead-man
+    // is fed as often.
+    let fed = out.iter().filter(|o| matches!(o, Output::Healthy)).count();
+    assert!(fed >= 10 * 10 - 2, "the dead-man fed {fed} times in 10 s");
     // Nothing lost: the default rates still hold.
     let n = |id| count_sent(&out, id, To::Endpoint(0));
     assert!(

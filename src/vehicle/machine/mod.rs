@@ -539,8 +539,12 @@ impl Vehicle {
                 // In SIMULATOR run mode the board's navigation and power
                 // telemetry is not the vehicle's (the simulator's is).
                 let simulated = self.run_mode == RunMode::Simulator;
-                if !(simulated && matches!(ev, Event::Nav(_) | Event::Status(_))) {
+                let nav = matches!(ev, Event::Nav(_));
+                if !(simulated && (nav || matches!(ev, Event::Status(_)))) {
                     self.on_board(ev, now, out);
+                }
+                if nav {
+                    self.tick_with_line(now, out);
                 }
             }
             Input::SimBoard(ev) => {
