@@ -1163,9 +1163,19 @@ async fn rest_api_and_assets() {
     let rig = HmiRig::start("");
     let mut c = rig.connect().await;
     c.ready().await;
-    let (status, head, body) = rig.get("/api/status").await;
-    assert_eq!(status, 200, "{head}");
-    let v: Value = serde_json::from_str(&body).unwrap();
+    // The REST status follows the vehicle a few times a second, so it may
+    // be a moment behind what the session just saw: read until it shows
+    // the board's heading.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(20);
+    let v = loop {
+        let (status, head, body) = rig.get("/api/status").await;
+        assert_eq!(status, 200, "{head}");
+        let v: Value = serde_json::from_str(&body).unwrap();
+        if v["telemetry"]["heading_deg"].is_number() || tokio::time::Instant::now() > deadline {
+            break v;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
     assert_eq!(v["vehicle_sysid"], 1);
     assert_eq!(v["sessions_max"], 10);
     // A session that only watches holds no id.

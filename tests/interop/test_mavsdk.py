@@ -49,7 +49,15 @@ async def session(port: int):
         assert await drone.has_autopilot()
         assert await drone.get_system_id() == 1
         assert 1 in await drone.component_ids()
-        assert await drone.autopilot_type() == Autopilot.ARDUPILOT
+        # MAVSDK knows the autopilot's kind from its HEARTBEAT, which comes
+        # once a second: the system may be found from another message first.
+        kind = await drone.autopilot_type()
+        for _ in range(50):
+            if kind == Autopilot.ARDUPILOT:
+                break
+            await asyncio.sleep(0.1)
+            kind = await drone.autopilot_type()
+        assert kind == Autopilot.ARDUPILOT
         assert await drone.vehicle_type() == Vehicle.SUBMARINE
 
         telemetry = TelemetryAsync(drone)
