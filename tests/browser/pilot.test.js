@@ -127,6 +127,10 @@ test('W drives again after Enter or Escape in a setpoint field; held keys light 
 test('a run-mode round trip keeps the setpoints and the vehicle at depth; the radios show the vehicle\'s run mode', () => withVehicle(async (v) => {
   const { page, context } = await openPage(browser, v.url);
   await takeControlAndArm(page);
+  // Depth hold needs a depth estimate, which the board's first depth
+  // readings make a moment after the link is up (earlier, the vehicle
+  // refuses the mode and says why).
+  await until(async () => (await telemetry(page)).health?.depth === true, 20000, 'a depth reading');
   await page.check('input[name=mode][value="2"]');
   await until(async () => (await telemetry(page)).mode === 2, 10000, 'depth + heading hold');
   await page.fill('#ap-depth', '1.5');
