@@ -177,6 +177,15 @@ pub struct HmiContext {
     /// Connection limits and TLS ([`server::Transport::default`]: the
     /// default limits, plain HTTP).
     pub transport: server::Transport,
+    /// A port beside the HMI's with routes of its own (the WebRTC
+    /// signalling, where Cockpit looks for it), under the same guard.
+    pub beside: Option<Beside>,
+}
+
+/// A listener beside the HMI's and what it serves.
+pub struct Beside {
+    pub listener: TcpListener,
+    pub routes: axum::Router,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -349,7 +358,38 @@ pub async fn serve(
     let app = guard::layer(app, Arc::clone(&shared));
     // Around everything merged, fallback included: every response has them.
     let app = app.layer(axum::middleware::from_fn(headers::security_headers));
-    let result = server::run(listener, app, ctx.transport, shutdown).await;
+    // One shutdown for both listeners.
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stopped = move || {
+        let mut rx = stop_rx.clone();
+        async move {
+            let _ = rx.wait_for(|s| *s).await;
+        }
+    };
+    let beside = ctx.beside.map(|b| {
+        let page_port = listener.local_addr().map_or(0, |a| a.port());
+        let app = guard::layer_beside(b.routes, Arc::clone(&shared), page_port)
+            .layer(axum::middleware::from_fn(headers::security_headers));
+        tokio::spawn(server::run(
+            b.listener,
+            app,
+            ctx.transport.clone(),
+            stopped(),
+        ))
+    });
+    let main = server::run(listener, app, ctx.transport, stopped());
+    tokio::pin!(main);
+    let result = tokio::select! {
+        r = &mut main => r,
+        () = shutdown => {
+            let _ = stop_tx.send(true);
+            main.await
+        }
+    };
+    let _ = stop_tx.send(true);
+    if let Some(b) = beside {
+        let _ = b.await;
+    }
     watcher.abort();
     sweeper.abort();
     fan_out.abort();
@@ -370,6 +410,8 @@ fn warn_plaintext(password_set: bool, local: SocketAddr) {
 /// The app's handle on a running HMI: the inputs its sessions produce.
 pub struct Hmi {
     inputs: Option<mpsc::Receiver<Input>>,
+    /// Where the port beside listens, when it does.
+    beside: Option<SocketAddr>,
     outlet: Outlet,
     m2r_outlet: Outlet,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
@@ -382,7 +424,9 @@ impl Hmi {
     /// `--http off`). The bound address is logged
     /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
     /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
-    /// certificate or key file is an error naming it.
+    /// certificate or key file is an error naming it. `beside`: routes for
+    /// a port of their own (the WebRTC signalling) under the same guard and
+    /// TLS; a port that cannot be bound is logged and left out.
     pub async fn start(
         settings: &HmiSettings,
         endpoint: usize,
@@ -390,11 +434,13 @@ impl Hmi {
         z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
         data_dir: PathBuf,
         extra_routes: Option<axum::Router>,
+        beside: Option<(SocketAddr, axum::Router)>,
     ) -> Result<Self, HmiError> {
         let outlet = Outlet::new(endpoint);
         let m2r_outlet = Outlet::every_component(endpoint + 1);
         let off = Self {
             inputs: None,
+            beside: None,
             outlet: outlet.clone(),
             m2r_outlet: m2r_outlet.clone(),
             stop: None,
@@ -463,6 +509,25 @@ impl Hmi {
         }
         tracing::info!(addr = %local, "browser HMI listening on {url}");
         log_access_policy(settings, password.is_some(), signing);
+        let beside = match beside {
+            None => None,
+            Some((addr, routes)) => match TcpListener::bind(addr).await {
+                Ok(listener) => {
+                    let at = listener.local_addr().unwrap_or(addr);
+                    let scheme = if tls.is_some() { "wss" } else { "ws" };
+                    tracing::info!(addr = %at, "WebRTC signalling (mavlink-camera-manager's protocol) on {scheme}://{at}/");
+                    Some(Beside { listener, routes })
+                }
+                Err(e) => {
+                    tracing::warn!(
+                        "cannot listen for WebRTC signalling on {addr}: {e} — viewers can still use /webrtc on the HMI's port; \
+                         free the port (is mavlink-camera-manager running?) or set camera.webrtc.signalling (--webrtc-signalling)"
+                    );
+                    None
+                }
+            },
+        };
+        let beside_addr = beside.as_ref().and_then(|b| b.listener.local_addr().ok());
         let (tx, rx) = mpsc::channel(1024);
         let ctx = HmiContext {
             outlet: outlet.clone(),
@@ -484,6 +549,7 @@ impl Hmi {
                 limits: settings.limits,
                 tls: tls.map(|t| t.config),
             },
+            beside,
         };
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {
@@ -496,6 +562,7 @@ impl Hmi {
         });
         Ok(Self {
             inputs: Some(rx),
+            beside: beside_addr,
             outlet,
             m2r_outlet,
             stop: Some(stop_tx),
@@ -512,6 +579,11 @@ impl Hmi {
             },
             None => std::future::pending().await,
         }
+    }
+
+    /// Where the port beside the HMI's listens (the WebRTC signalling).
+    pub fn beside_addr(&self) -> Option<SocketAddr> {
+        self.beside
     }
 
     /// The vehicle task's side of the hub.
