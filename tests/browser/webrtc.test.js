@@ -1,0 +1,180 @@
+// WebRTC video from the user's side: Debian's Chromium, on a page of its
+// own origin that speaks mavlink-camera-manager's signalling protocol the
+// way Cockpit does (mcm-viewer.html), against `neptunus --sim`. The page is
+// served from another origin than the HMI, as Cockpit is, and that origin is
+// listed in [hmi] allowed_origins. Waits poll a condition with a deadline.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFileSync, readdirSync } from 'node:fs';
+import { createServer, request } from 'node:http';
+import { join } from 'node:path';
+import { launchBrowser, startVehicle, until } from './harness.js';
+
+const VIEWER = readFileSync(join(import.meta.dirname, 'mcm-viewer.html'));
+const FPS = 30;
+
+let browser;
+let server;
+let origin;
+before(async () => {
+  browser = await launchBrowser();
+  server = createServer((_req, res) => {
+    res.writeHead(200, { 'content-type': 'text/html' });
+    res.end(VIEWER);
+  });
+  await new Promise((ok) => server.listen(0, '127.0.0.1', ok));
+  origin = `http://127.0.0.1:${server.address().port}`;
+});
+after(async () => {
+  await browser?.close();
+  server?.close();
+});
+
+/** The vehicle with the synthetic camera at 30 fps, no RTP to ground
+ * stations, the signalling's own port on a free loopback port, and the
+ * viewer page's origin allowed. */
+async function vehicle(extra = []) {
+  return startVehicle(['--video-rtp', 'off', '--webrtc-signalling', '127.0.0.1:0', ...extra], {
+    toml: `[camera]\nsource = "synthetic"\nfps = ${FPS}\n`,
+    hmiToml: `allowed_origins = ["${origin}"]`,
+  });
+}
+
+async function withVehicle(body, extra) {
+  const v = await vehicle(extra);
+  try {
+    await body(v);
+  } catch (e) {
+    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
+    throw e;
+  } finally {
+    await v.stop();
+  }
+}
+
+const json = async (url) => (await fetch(url)).json();
+
+/** A viewer page on `ws`; returns the page. */
+async function openViewer(ws) {
+  const context = await browser.newContext();
+  const page = await context.newPage();
+  await page.goto(`${origin}/?ws=${encodeURIComponent(ws)}`);
+  return page;
+}
+
+const viewerState = (page) => page.evaluate(() => ({ ...window.viewer, offer: undefined }));
+
+/** The processes whose parent is `pid` and whose name is `name`. */
+function children(pid, name) {
+  const out = [];
+  for (const d of readdirSync('/proc')) {
+    if (!/^\d+$/.test(d)) continue;
+    try {
+      const stat = readFileSync(`/proc/${d}/stat`, 'utf8');
+      const comm = stat.slice(stat.indexOf('(') + 1, stat.lastIndexOf(')'));
+      const ppid = Number(stat.slice(stat.lastIndexOf(')') + 2).split(' ')[1]);
+      if (ppid === pid && comm === name) out.push(Number(d));
+    } catch { /* the process ended meanwhile */ }
+  }
+  return out;
+}
+
+test('a viewer speaking mavlink-camera-manager\'s protocol on its own port decodes the camera\'s H.264, with --video-rtp off', () => withVehicle(async (v) => {
+  const info = await json(`${v.url}api/webrtc`);
+  assert.ok(info.signalling_port > 0, JSON.stringify(info));
+  assert.equal(info.streams.length, 1);
+  const stream = info.streams[0];
+  assert.deepEqual([stream.encode, stream.width, stream.height, stream.interval], ['H264', 640, 480, `1/${FPS}`]);
+  const page = await openViewer(`ws://127.0.0.1:${info.signalling_port}/`);
+  const first = await until(async () => {
+    const s = await viewerState(page);
+    return s.frames > 0 && s;
+  }, 20000, 'a first decoded frame');
+  const offer = await page.evaluate(() => window.viewer.offer);
+  assert.match(offer, /profile-level-id=42e01f/);
+  assert.match(offer, /packetization-mode=1/);
+  console.log(`time to first frame: ${first.firstFrameMs} ms from opening the page (${first.log.join(', ')})`);
+  // Ten seconds of decoding against the camera's own frames in the same window.
+  const cam0 = (await json(`${v.url}camera/status`)).frames_total;
+  const dec0 = (await viewerState(page)).frames;
+  const t0 = Date.now();
+  await until(() => Date.now() - t0 >= 10000, 12000, 'ten seconds');
+  const cam1 = (await json(`${v.url}camera/status`)).frames_total;
+  const s = await viewerState(page);
+  const decoded = s.frames - dec0;
+  const made = cam1 - cam0;
+  console.log(`10 s: the camera made ${made} frames, Chromium decoded ${decoded} (${(100 * decoded / made).toFixed(0)} %)`);
+  assert.ok(decoded >= 0.8 * made, `decoded ${decoded} of ${made} frames`);
+  // A debug build on a busy machine draws fewer than 30 a second; the
+  // camera must still be running.
+  assert.ok(made >= 30, `the camera made only ${made} frames in 10 s`);
+  assert.equal(s.width, 640);
+  assert.equal(s.height, 480);
+  assert.equal(await page.evaluate(() => document.getElementById('v').videoWidth), 640);
+  assert.deepEqual(s.errors, []);
+  assert.equal(s.ended, null);
+}));
+
+test('two viewers, one on the HMI\'s /webrtc, cost one encode; the encoder stops when they leave', () => withVehicle(async (v) => {
+  const info = await json(`${v.url}api/webrtc`);
+  const hmi = new URL(v.url);
+  const a = await openViewer(`ws://127.0.0.1:${info.signalling_port}/`);
+  const b = await openViewer(`ws://${hmi.host}${info.path}`);
+  for (const [name, page] of [['the viewer on the own port', a], ['the viewer on /webrtc', b]]) {
+    await until(async () => (await viewerState(page)).frames > 2 * FPS, 30000, `two seconds of frames in ${name}`);
+  }
+  const encoders = children(v.pid, 'ffmpeg');
+  assert.equal(encoders.length, 1, `ffmpeg children of neptunus: ${encoders}`);
+  // Both keep decoding from the one encode.
+  const before = [(await viewerState(a)).frames, (await viewerState(b)).frames];
+  await until(async () => (await viewerState(a)).frames > before[0] + FPS && (await viewerState(b)).frames > before[1] + FPS,
+    10000, 'a second more of frames in both');
+  assert.equal(children(v.pid, 'ffmpeg').length, 1);
+  await a.context().close();
+  await b.context().close();
+  await until(() => children(v.pid, 'ffmpeg').length === 0, 15000, 'the encoder to stop after the last viewer left');
+  await until(async () => (await json(`${v.url}camera/status`)).state === 'idle', 15000, 'the camera to go idle');
+}));
+
+test('the signalling refuses a foreign page and answers bad messages with the reason', () => withVehicle(async (v) => {
+  const info = await json(`${v.url}api/webrtc`);
+  // A WebSocket upgrade from a page whose origin is not allowed: 403.
+  const status = await new Promise((ok, fail) => {
+    const req = request({
+      host: '127.0.0.1', port: info.signalling_port, path: '/',
+      headers: {
+        Connection: 'Upgrade', Upgrade: 'websocket', Origin: 'http://evil.example.com',
+        'Sec-WebSocket-Version': '13', 'Sec-WebSocket-Key': 'dGhlIHNhbXBsZSBub25jZQ==',
+      },
+    });
+    req.on('response', (res) => { res.resume(); ok(res.statusCode); });
+    req.on('upgrade', () => ok(101));
+    req.on('error', fail);
+    req.end();
+  });
+  assert.equal(status, 403);
+  // From the allowed origin: garbage is answered with an error, and the
+  // connection still works afterwards.
+  const page = await openViewer(`ws://127.0.0.1:${info.signalling_port}/`);
+  const replies = await page.evaluate((url) => new Promise((ok) => {
+    const ws = new WebSocket(url);
+    const got = [];
+    ws.onmessage = (e) => {
+      got.push(JSON.parse(e.data));
+      if (got.length === 4) ok(got);
+    };
+    ws.onopen = () => {
+      ws.send('not json');
+      ws.send(JSON.stringify({ type: 'question', content: { type: 'startSession', content: { consumer_id: 'x', producer_id: 'no-such-stream' } } }));
+      ws.send(JSON.stringify({ type: 'negotiation', content: { type: 'iceNegotiation', content: { consumer_id: 'x', producer_id: 'y', session_id: 'z', ice: { candidate: 'candidate:1 1 udp 1 1.2.3.4 5 typ host' } } } }));
+      ws.send(JSON.stringify({ type: 'question', content: { type: 'peerId' } }));
+    };
+  }), `ws://127.0.0.1:${info.signalling_port}/`);
+  assert.equal(replies[0].type, 'error');
+  assert.match(replies[0].content, /not a signalling message/);
+  assert.match(replies[1].content, /no stream with id "no-such-stream"/);
+  assert.match(replies[2].content, /no session "z" of this connection/);
+  assert.equal(replies[3].type, 'answer');
+  assert.equal(replies[3].content.type, 'peerId');
+  await until(() => /WebRTC signalling: a message from .* refused/.test(v.stderr()), 5000, 'the refusal in the log');
+}));
