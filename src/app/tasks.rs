@@ -183,13 +183,15 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let hmi = {
         let hmi_settings = settings.hmi.clone();
         let (sysid, data_dir) = (vehicle.sysid(), settings.data_dir.clone());
-        let mut routes = camera.routes();
-        let mut beside = None;
+        let mut video = crate::hmi::VideoRoutes {
+            routes: camera.routes(),
+            webrtc: webrtc.is_some(),
+            signalling: None,
+        };
         if let Some(w) = &webrtc {
-            routes = routes.merge(w.routes());
-            if let SignallingAddr::At(addr) = settings.camera.webrtc.signalling {
-                beside = Some((addr, w.signalling_routes()));
-            }
+            video.routes = video.routes.merge(w.routes());
+            let at = SignallingAddr::resolve(settings.camera.webrtc.signalling, settings.hmi.http);
+            video.signalling = at.map(|addr| (addr, w.signalling_routes()));
         }
         side.handle()
             .spawn(async move {
@@ -199,8 +201,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
                     sysid,
                     z_centered,
                     data_dir,
-                    Some(routes),
-                    beside,
+                    Some(video),
                 )
                 .await
             })

@@ -90,8 +90,8 @@ pub struct RunArgs {
     #[arg(long, value_name = "on|off")]
     pub webrtc: Option<OnOff>,
     /// The WebRTC signalling WebSocket (mavlink-camera-manager's protocol)
-    /// on a port of its own, or `off` [default: 0.0.0.0:6021, where
-    /// Cockpit looks]; it is also on the HMI's port at /webrtc.
+    /// on a port of its own, or `off` [default: port 6021, where Cockpit
+    /// looks, on the HMI's address]; it is also on the HMI's port at /webrtc.
     #[arg(long, value_name = "ADDR|off")]
     pub webrtc_signalling: Option<crate::camera::webrtc::SignallingAddr>,
     /// ICE server for WebRTC viewers away from the tether, repeatable:

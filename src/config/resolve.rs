@@ -168,7 +168,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
                 camera.webrtc.enabled = on == super::cli::OnOff::On;
             }
             if let Some(addr) = args.webrtc_signalling {
-                camera.webrtc.signalling = addr;
+                camera.webrtc.signalling = Some(addr);
             }
             if !args.ice_server.is_empty() {
                 camera.webrtc.ice_servers = args.ice_server.clone();

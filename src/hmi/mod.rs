@@ -177,9 +177,22 @@ pub struct HmiContext {
     /// Connection limits and TLS ([`server::Transport::default`]: the
     /// default limits, plain HTTP).
     pub transport: server::Transport,
+    /// WebRTC runs: `/webrtc` and `/api/webrtc` are among `extra_routes`.
+    pub webrtc: bool,
     /// A port beside the HMI's with routes of its own (the WebRTC
     /// signalling, where Cockpit looks for it), under the same guard.
     pub beside: Option<Beside>,
+}
+
+/// What the HMI serves of the camera: its routes (`/video.mjpg` …, and
+/// WebRTC's when it runs) and the WebRTC signalling's own port.
+pub struct VideoRoutes {
+    pub routes: axum::Router,
+    /// `/webrtc` and `/api/webrtc` are among `routes`.
+    pub webrtc: bool,
+    /// The signalling's own address and its routes; a port that cannot be
+    /// bound is logged and left out.
+    pub signalling: Option<(SocketAddr, axum::Router)>,
 }
 
 /// A listener beside the HMI's and what it serves.
@@ -213,6 +226,8 @@ pub(crate) struct Shared {
     pub data_dir: PathBuf,
     /// Camera routes are merged: `/video.mjpg` exists.
     pub video: bool,
+    /// WebRTC's routes are merged: `/api/webrtc` exists.
+    pub webrtc: bool,
     pub free_sysids: Mutex<BTreeSet<u8>>,
     pub sysid_range: (u8, u8),
     pub next_session: AtomicU64,
@@ -333,6 +348,7 @@ pub async fn serve(
         camera_rotation_deg: ctx.camera_rotation_deg,
         data_dir: ctx.data_dir,
         video: ctx.extra_routes.is_some(),
+        webrtc: ctx.webrtc,
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
         next_session: AtomicU64::new(2),
@@ -424,18 +440,21 @@ impl Hmi {
     /// `--http off`). The bound address is logged
     /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
     /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
-    /// certificate or key file is an error naming it. `beside`: routes for
-    /// a port of their own (the WebRTC signalling) under the same guard and
-    /// TLS; a port that cannot be bound is logged and left out.
+    /// certificate or key file is an error naming it. `video`: the camera's
+    /// routes, and the WebRTC signalling's own port under the same guard
+    /// and TLS.
     pub async fn start(
         settings: &HmiSettings,
         endpoint: usize,
         vehicle_sysid: u8,
         z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
         data_dir: PathBuf,
-        extra_routes: Option<axum::Router>,
-        beside: Option<(SocketAddr, axum::Router)>,
+        video: Option<VideoRoutes>,
     ) -> Result<Self, HmiError> {
+        let (extra_routes, webrtc, beside) = match video {
+            Some(v) => (Some(v.routes), v.webrtc, v.signalling),
+            None => (None, false, None),
+        };
         let outlet = Outlet::new(endpoint);
         let m2r_outlet = Outlet::every_component(endpoint + 1);
         let off = Self {
@@ -545,6 +564,7 @@ impl Hmi {
             camera_rotation_deg: settings.camera_rotation_deg,
             data_dir,
             extra_routes,
+            webrtc,
             transport: server::Transport {
                 limits: settings.limits,
                 tls: tls.map(|t| t.config),

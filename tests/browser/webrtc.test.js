@@ -8,7 +8,7 @@ import assert from 'node:assert/strict';
 import { readFileSync, readdirSync } from 'node:fs';
 import { createServer, request } from 'node:http';
 import { join } from 'node:path';
-import { launchBrowser, startVehicle, until } from './harness.js';
+import { launchBrowser, openPage, startVehicle, until } from './harness.js';
 
 const VIEWER = readFileSync(join(import.meta.dirname, 'mcm-viewer.html'));
 const FPS = 30;
@@ -178,3 +178,76 @@ test('the signalling refuses a foreign page and answers bad messages with the re
   assert.equal(replies[3].content.type, 'peerId');
   await until(() => /WebRTC signalling: a message from .* refused/.test(v.stderr()), 5000, 'the refusal in the log');
 }));
+
+test('the HMI page plays WebRTC; when the picture stops it shows VIDEO LOST, then goes on over MJPEG', () => withVehicle(async (v) => {
+  const { page, context, problems } = await openPage(browser, v.url);
+  const video = () => page.evaluate(() => ({
+    transport: window.neptunus.video.transport, frames: window.neptunus.video.frames,
+    lost: !document.getElementById('video-lost').hidden,
+  }));
+  await until(async () => { const s = await video(); return s.transport === 'webrtc' && s.frames > 20; }, 20000, 'frames over WebRTC');
+  // Nobody reads /video.mjpg any more: the page's picture is the WebRTC one.
+  await until(async () => (await json(`${v.url}camera/status`)).viewers === 0, 5000, 'the MJPEG stream closed');
+  // The encoder stops giving pictures: the page says so, then gives WebRTC
+  // up and reads MJPEG, and the picture is back.
+  const [encoder] = children(v.pid, 'ffmpeg');
+  assert.ok(encoder, 'the encoder runs');
+  process.kill(encoder, 'SIGSTOP');
+  try {
+    await until(async () => (await video()).lost, 10000, 'VIDEO LOST while the WebRTC picture is frozen');
+    await until(async () => (await video()).transport === 'mjpeg', 15000, 'the page to fall back to MJPEG');
+    await until(async () => !(await video()).lost, 10000, 'the picture back over MJPEG');
+  } finally {
+    // Gone already, once the WebRTC session ended and nobody else wanted it.
+    try { process.kill(encoder, 'SIGCONT'); } catch { /* ended */ }
+  }
+  assert.deepEqual(problems, []);
+  await context.close();
+}));
+
+test('the HMI page falls back to MJPEG by itself when the network blocks WebRTC', () => withVehicle(async (v) => {
+  // A network where the vehicle's addresses cannot be reached over UDP: the
+  // page never learns one (every candidate is taken out of the signalling),
+  // so ICE can only fail.
+  const context = await browser.newContext();
+  await context.routeWebSocket(/\/webrtc$/, (ws) => {
+    const server = ws.connectToServer();
+    ws.onMessage((m) => server.send(m));
+    server.onMessage((m) => {
+      const msg = JSON.parse(m);
+      const c = msg.content || {};
+      if (c.type === 'iceNegotiation') return;
+      if (c.type === 'mediaNegotiation') {
+        c.content.sdp.sdp = c.content.sdp.sdp.split('\r\n').filter((l) => !l.startsWith('a=candidate')).join('\r\n');
+      }
+      ws.send(JSON.stringify(msg));
+    });
+  });
+  const page = await context.newPage();
+  const problems = [];
+  page.on('console', (m) => { if (m.type() === 'error') problems.push(m.text()); });
+  await page.goto(v.url);
+  const t0 = Date.now();
+  // MJPEG shows the picture while WebRTC tries, and goes on once it gave up.
+  await until(() => page.evaluate(() => window.neptunus.video.transport === 'mjpeg' && window.neptunus.video.frames > 0),
+    10000, 'a picture over MJPEG');
+  const first = Date.now() - t0;
+  const why = await until(() => page.evaluate(() => window.neptunus.video.webrtcFailed), 15000, 'WebRTC given up');
+  const frames = await page.evaluate(() => window.neptunus.video.frames);
+  await until(() => page.evaluate((n) => window.neptunus.video.transport === 'mjpeg' && window.neptunus.video.frames > n + 5, frames),
+    10000, 'frames over MJPEG after WebRTC was given up');
+  console.log(`first MJPEG picture ${first} ms after opening the page; WebRTC given up after ${Date.now() - t0} ms: ${why}`);
+  assert.deepEqual(problems, []);
+  await context.close();
+}));
+
+test('with --webrtc off the page plays MJPEG at once and nothing listens for signalling', () => withVehicle(async (v) => {
+  const info = await json(`${v.url}api/video`);
+  assert.equal(info.webrtc, null);
+  const { page, context, problems } = await openPage(browser, v.url);
+  await until(() => page.evaluate(() => window.neptunus.video.transport === 'mjpeg' && window.neptunus.video.frames > 3), 15000, 'frames over MJPEG');
+  assert.equal(await page.evaluate(() => window.neptunus.video.webrtcFailed), null, 'WebRTC was never tried');
+  assert.doesNotMatch(v.stderr(), /WebRTC signalling \(mavlink-camera-manager/);
+  assert.deepEqual(problems, []);
+  await context.close();
+}, ['--webrtc', 'off']));

@@ -23,9 +23,19 @@ pub enum SignallingAddr {
     At(SocketAddr),
 }
 
-impl Default for SignallingAddr {
-    fn default() -> Self {
-        SignallingAddr::At(SocketAddr::from(([0, 0, 0, 0], MCM_SIGNALLING_PORT)))
+impl SignallingAddr {
+    /// Where the signalling listens: the configured address, else port
+    /// 6021 on the HMI's address (a HMI kept on loopback keeps the
+    /// signalling there too); `None`: nowhere.
+    pub fn resolve(
+        configured: Option<SignallingAddr>,
+        hmi: Option<SocketAddr>,
+    ) -> Option<SocketAddr> {
+        match configured {
+            Some(SignallingAddr::Off) => None,
+            Some(SignallingAddr::At(a)) => Some(a),
+            None => hmi.map(|h| SocketAddr::new(h.ip(), MCM_SIGNALLING_PORT)),
+        }
     }
 }
 
@@ -154,8 +164,10 @@ pub struct WebRtcConfig {
     /// WebSocket on the HMI's port at `/webrtc` and on `signalling`.
     pub enabled: bool,
     /// The signalling WebSocket on a port of its own, where Cockpit looks
-    /// (`--webrtc-signalling`, default `0.0.0.0:6021`), or `off`.
-    pub signalling: SignallingAddr,
+    /// (`--webrtc-signalling`), or `off`; unset: port 6021 on the HMI's
+    /// address.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub signalling: Option<SignallingAddr>,
     /// ICE servers for viewers away from the tether (`--ice-server`): the
     /// vehicle asks the STUN ones for its public address, and the page
     /// hands them all to its browser. None on a tether.
@@ -171,7 +183,7 @@ impl Default for WebRtcConfig {
     fn default() -> Self {
         WebRtcConfig {
             enabled: true,
-            signalling: SignallingAddr::default(),
+            signalling: None,
             ice_servers: Vec::new(),
             udp_port: 0,
             max_viewers: DEFAULT_MAX_VIEWERS,
@@ -209,11 +221,17 @@ mod tests {
     #[test]
     fn signalling_addresses_parse_and_bad_ones_are_named() {
         assert_eq!("off".parse(), Ok(SignallingAddr::Off));
+        let hmi = "0.0.0.0:8080".parse().ok();
         assert_eq!(
-            SignallingAddr::default().to_string(),
-            "0.0.0.0:6021",
-            "Cockpit's default"
+            SignallingAddr::resolve(None, hmi),
+            "0.0.0.0:6021".parse().ok(),
+            "Cockpit's default, on the HMI's address"
         );
+        assert_eq!(
+            SignallingAddr::resolve(Some(SignallingAddr::Off), hmi),
+            None
+        );
+        assert_eq!(SignallingAddr::resolve(None, None), None);
         let a: SignallingAddr = "127.0.0.1:0".parse().expect("address");
         assert_eq!(a.to_string(), "127.0.0.1:0");
         for bad in ["", "6021", "localhost:6021", "on"] {
