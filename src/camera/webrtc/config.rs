@@ -95,7 +95,7 @@ pub struct IceServer {
     pub credential: Option<String>,
 }
 
-/// An ICE server URL that is not `stun:`, `turn:` or `turns:` HOST[:PORT].
+/// An ICE server URL that is not `stun:`, `turn:` or `turns:` `HOST[:PORT]`.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
     "ICE server {0:?} is not valid — use stun:HOST[:PORT] or turn:HOST[:PORT] (e.g. stun:stun.l.google.com:19302)"

@@ -80,7 +80,15 @@ impl Hub {
                     None => break,
                 },
                 r = self.rtp.recv_from(&mut buf) => {
-                    let Ok((n, from)) = r else { continue };
+                    let (n, from) = match r {
+                        Ok(got) => got,
+                        Err(e) => {
+                            // Not expected on a bound UDP socket; never spin on it.
+                            tracing::debug!("WebRTC: loopback read failed: {e}");
+                            tokio::time::sleep(Duration::from_millis(10)).await;
+                            continue;
+                        }
+                    };
                     // Only the encoder on this machine may feed the viewers.
                     if !from.ip().is_loopback() {
                         continue;
