@@ -136,6 +136,31 @@ test('two viewers, one on the HMI\'s /webrtc, cost one encode; the encoder stops
   await until(async () => (await json(`${v.url}camera/status`)).state === 'idle', 15000, 'the camera to go idle');
 }));
 
+test('a viewer beyond camera.webrtc.max_viewers is told why its session ended', async () => {
+  const v = await startVehicle(['--video-rtp', 'off', '--webrtc-signalling', '127.0.0.1:0'], {
+    toml: `[camera]\nsource = "synthetic"\nfps = ${FPS}\n[camera.webrtc]\nmax_viewers = 1\n`,
+    hmiToml: `allowed_origins = ["${origin}"]`,
+  });
+  try {
+    const info = await json(`${v.url}api/webrtc`);
+    const ws = `ws://127.0.0.1:${info.signalling_port}/`;
+    const a = await openViewer(ws);
+    await until(async () => (await viewerState(a)).frames > 0, 20000, 'the first viewer\'s picture');
+    const b = await openViewer(ws);
+    const ended = await until(async () => (await viewerState(b)).ended, 10000, 'the second viewer\'s session ended');
+    assert.match(ended, /at most 1 WebRTC viewers at once \(camera.webrtc.max_viewers\)/);
+    assert.equal((await viewerState(b)).frames, 0);
+    // The first one goes on.
+    const n = (await viewerState(a)).frames;
+    await until(async () => (await viewerState(a)).frames > n + 5, 10000, 'the first viewer still decoding');
+  } catch (e) {
+    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
+    throw e;
+  } finally {
+    await v.stop();
+  }
+});
+
 test('the signalling refuses a foreign page and answers bad messages with the reason', () => withVehicle(async (v) => {
   const info = await json(`${v.url}api/webrtc`);
   // A WebSocket upgrade from a page whose origin is not allowed: 403.

@@ -160,7 +160,7 @@ impl Hub {
                 };
                 if viewers.len() >= self.max_viewers {
                     let _ = events.send(refuse(format!(
-                        "{} viewers are watching already (camera.webrtc.max_viewers): close one",
+                        "the vehicle serves at most {} WebRTC viewers at once (camera.webrtc.max_viewers), all watching now: close one",
                         self.max_viewers
                     )));
                     return;
