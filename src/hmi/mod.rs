@@ -29,6 +29,7 @@
 
 pub mod assets;
 pub mod auth;
+mod beside;
 pub mod guard;
 pub mod headers;
 pub mod m2r;
@@ -40,6 +41,7 @@ pub mod server;
 pub mod session;
 pub mod tls;
 
+pub use beside::{Beside, VideoRoutes};
 pub(crate) use outlet::queued;
 pub use outlet::{Deliveries, Delivery, Outlet};
 
@@ -182,23 +184,6 @@ pub struct HmiContext {
     /// A port beside the HMI's with routes of its own (the WebRTC
     /// signalling, where Cockpit looks for it), under the same guard.
     pub beside: Option<Beside>,
-}
-
-/// What the HMI serves of the camera: its routes (`/video.mjpg` …, and
-/// WebRTC's when it runs) and the WebRTC signalling's own port.
-pub struct VideoRoutes {
-    pub routes: axum::Router,
-    /// `/webrtc` and `/api/webrtc` are among `routes`.
-    pub webrtc: bool,
-    /// The signalling's own address and its routes; a port that cannot be
-    /// bound is logged and left out.
-    pub signalling: Option<(SocketAddr, axum::Router)>,
-}
-
-/// A listener beside the HMI's and what it serves.
-pub struct Beside {
-    pub listener: TcpListener,
-    pub routes: axum::Router,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -384,14 +369,7 @@ pub async fn serve(
     };
     let beside = ctx.beside.map(|b| {
         let page_port = listener.local_addr().map_or(0, |a| a.port());
-        let app = guard::layer_beside(b.routes, Arc::clone(&shared), page_port)
-            .layer(axum::middleware::from_fn(headers::security_headers));
-        tokio::spawn(server::run(
-            b.listener,
-            app,
-            ctx.transport.clone(),
-            stopped(),
-        ))
+        b.spawn(&shared, page_port, ctx.transport.clone(), stopped())
     });
     let main = server::run(listener, app, ctx.transport, stopped());
     tokio::pin!(main);
@@ -529,22 +507,8 @@ impl Hmi {
         tracing::info!(addr = %local, "browser HMI listening on {url}");
         log_access_policy(settings, password.is_some(), signing);
         let beside = match beside {
+            Some((addr, routes)) => Beside::bind(addr, routes, tls.is_some()).await,
             None => None,
-            Some((addr, routes)) => match TcpListener::bind(addr).await {
-                Ok(listener) => {
-                    let at = listener.local_addr().unwrap_or(addr);
-                    let scheme = if tls.is_some() { "wss" } else { "ws" };
-                    tracing::info!(addr = %at, "WebRTC signalling (mavlink-camera-manager's protocol) on {scheme}://{at}/");
-                    Some(Beside { listener, routes })
-                }
-                Err(e) => {
-                    tracing::warn!(
-                        "cannot listen for WebRTC signalling on {addr}: {e} — viewers can still use /webrtc on the HMI's port; \
-                         free the port (is mavlink-camera-manager running?) or set camera.webrtc.signalling (--webrtc-signalling)"
-                    );
-                    None
-                }
-            },
         };
         let beside_addr = beside.as_ref().and_then(|b| b.listener.local_addr().ok());
         let (tx, rx) = mpsc::channel(1024);
