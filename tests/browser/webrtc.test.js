@@ -163,21 +163,23 @@ test('a viewer beyond camera.webrtc.max_viewers is told why its session ended', 
 
 test('the signalling refuses a foreign page and answers bad messages with the reason', () => withVehicle(async (v) => {
   const info = await json(`${v.url}api/webrtc`);
-  // A WebSocket upgrade from a page whose origin is not allowed: 403.
-  const status = await new Promise((ok, fail) => {
+  // A WebSocket upgrade from a page whose origin is not allowed: 403; from
+  // the HMI's own page (its origin is on the HMI's port): admitted.
+  const upgrade = (origin) => new Promise((ok, fail) => {
     const req = request({
       host: '127.0.0.1', port: info.signalling_port, path: '/',
       headers: {
-        Connection: 'Upgrade', Upgrade: 'websocket', Origin: 'http://evil.example.com',
+        Connection: 'Upgrade', Upgrade: 'websocket', Origin: origin,
         'Sec-WebSocket-Version': '13', 'Sec-WebSocket-Key': 'dGhlIHNhbXBsZSBub25jZQ==',
       },
     });
     req.on('response', (res) => { res.resume(); ok(res.statusCode); });
-    req.on('upgrade', () => ok(101));
+    req.on('upgrade', (_res, socket) => { socket.destroy(); ok(101); });
     req.on('error', fail);
     req.end();
   });
-  assert.equal(status, 403);
+  assert.equal(await upgrade('http://evil.example.com'), 403);
+  assert.equal(await upgrade(new URL(v.url).origin), 101);
   // From the allowed origin: garbage is answered with an error, and the
   // connection still works afterwards.
   const page = await openViewer(`ws://127.0.0.1:${info.signalling_port}/`);
