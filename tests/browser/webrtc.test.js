@@ -7,6 +7,7 @@ import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFileSync, readdirSync } from 'node:fs';
 import { createServer, request } from 'node:http';
+import { createSocket } from 'node:dgram';
 import { join } from 'node:path';
 import { launchBrowser, openPage, startVehicle, until } from './harness.js';
 
@@ -158,6 +159,47 @@ test('a viewer beyond camera.webrtc.max_viewers is told why its session ended', 
     throw e;
   } finally {
     await v.stop();
+  }
+});
+
+/** A STUN server on loopback that tells every asker it is 203.0.113.7
+ * (a documentation address) on the port it asked from. */
+async function stunServer() {
+  const sock = createSocket('udp4');
+  sock.on('message', (m, from) => {
+    if (m.length < 20 || m.readUInt16BE(0) !== 0x0001) return;
+    const res = Buffer.alloc(32);
+    res.writeUInt16BE(0x0101, 0);
+    res.writeUInt16BE(12, 2);
+    m.copy(res, 4, 4, 20); // magic cookie and transaction id
+    res.writeUInt16BE(0x0020, 20); // XOR-MAPPED-ADDRESS
+    res.writeUInt16BE(8, 22);
+    res.writeUInt16BE(0x0001, 24);
+    res.writeUInt16BE(from.port ^ 0x2112, 26);
+    res.writeUInt32BE((((203 << 24) | (0 << 16) | (113 << 8) | 7) ^ 0x2112a442) >>> 0, 28);
+    sock.send(res, from.port, from.address);
+  });
+  await new Promise((ok) => sock.bind(0, '127.0.0.1', ok));
+  return sock;
+}
+
+test('with a STUN server configured, the offer carries the public address it told', async () => {
+  const stun = await stunServer();
+  const v = await vehicle(['--ice-server', `stun:127.0.0.1:${stun.address().port}`]);
+  try {
+    await until(() => /public address from STUN/.test(v.stderr()), 15000, 'the STUN answer in the log');
+    const info = await json(`${v.url}api/webrtc`);
+    assert.deepEqual(info.ice_servers, [{ urls: `stun:127.0.0.1:${stun.address().port}` }]);
+    const page = await openViewer(`ws://127.0.0.1:${info.signalling_port}/`);
+    await until(async () => (await viewerState(page)).frames > 0, 20000, 'a picture (over a host candidate)');
+    const offer = await page.evaluate(() => window.viewer.offer);
+    assert.match(offer, /a=candidate:\S+ 1 udp \d+ 203\.0\.113\.7 \d+ typ srflx raddr/);
+  } catch (e) {
+    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
+    throw e;
+  } finally {
+    await v.stop();
+    stun.close();
   }
 });
 
