@@ -1110,3 +1110,62 @@ async fn a_client_that_pauses_gets_each_streams_newest_and_no_backlog() {
     );
     assert_eq!(beats.into_iter().collect::<Vec<_>>(), [1, 100]);
 }
+
+/// ATTITUDE's `time_boot_ms` in the REST view, read as a script would.
+async fn rest_attitude_ms(addr: SocketAddr) -> i64 {
+    let v = get_json(
+        addr,
+        "/mavlink2rest/mavlink/vehicles/1/components/1/messages/ATTITUDE",
+    )
+    .await;
+    v["message"]["time_boot_ms"].as_i64().unwrap()
+}
+
+/// With no browser and no WebSocket client the vehicle builds no telemetry
+/// for the in-process endpoints, yet a REST read — the first, one after a
+/// client left, one after a long quiet — answers with live data, for
+/// mavlink2rest's view and for `/api/status` alike.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn rest_reads_are_live_when_nobody_else_listens() {
+    let rig = Rig::start("", false);
+    // The board's attitude is there (the vehicle says nothing it has not read).
+    let end = Instant::now() + GENEROUS;
+    loop {
+        let status = get_json(rig.http, "/api/status").await;
+        if status["telemetry"]["health"]["attitude"] == json!(true) {
+            let ages = &status["telemetry"]["ages_ms"];
+            assert!(
+                ages["attitude"].as_u64().unwrap() <= 2000,
+                "the status read is not live: {ages}"
+            );
+            break;
+        }
+        assert!(Instant::now() < end, "no attitude from the board: {status}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    // mavlink2rest's endpoint was quiet all along.
+    let first = rest_attitude_ms(rig.http).await;
+    let t0 = Instant::now();
+
+    // A client comes and goes.
+    let mut c = rig.cockpit().await;
+    assert!(c.next_frame(GENEROUS).await.is_some());
+    drop(c);
+
+    // Past the time a REST read keeps the telemetry coming (10 s), so the
+    // next read finds the endpoints quiet. Time has to pass here: that is
+    // what is tested.
+    tokio::time::sleep(Duration::from_secs(12)).await;
+    let now_ms = first + t0.elapsed().as_millis() as i64;
+    let later = rest_attitude_ms(rig.http).await;
+    assert!(
+        (now_ms - later).abs() < 5000,
+        "after a quiet while ATTITUDE says {later} ms, the vehicle has been up about {now_ms} ms"
+    );
+    let status = get_json(rig.http, "/api/status").await;
+    let ages = &status["telemetry"]["ages_ms"];
+    assert!(
+        ages["attitude"].as_u64().unwrap() <= 2000,
+        "the status read after a quiet while is not live: {ages}"
+    );
+}

@@ -16,8 +16,10 @@ use crate::mavlink::endpoint::{Outbound, Route, RouterHandle};
 use crate::mavlink::frame::{encode_command_ack_raw, encode_v2};
 use crate::vehicle::machine::{COMPONENT_ID, NEUTRAL_GO, Now, Output, RunMode, To, Topic, Vehicle};
 
-/// The link hears that the vehicle is healthy at most this often.
-const HEALTHY_PERIOD: Duration = Duration::from_millis(100);
+/// The link hears that the vehicle is healthy at most this often. Below the
+/// idle tick (100 ms, which the board's lines pace with some jitter), so an
+/// idle vehicle's every tick reaches the link.
+const HEALTHY_PERIOD: Duration = Duration::from_millis(50);
 
 pub(super) struct Io {
     /// The HMI sessions' and the mavlink2rest API's hubs.

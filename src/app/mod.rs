@@ -69,6 +69,13 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
     let mut shutdown = std::pin::pin!(shutdown);
     // The RTP sender says what it sends; the camera component advertises it.
     let mut video_stream = t.rtp.stream();
+    // Who listens on the in-process endpoints: their streams are built
+    // only while someone does (each starts with its present count).
+    let [mut hmi_heard, mut m2r_heard] = vehicle.io.hmi.each_ref().map(|o| {
+        let mut rx = o.listeners();
+        rx.mark_changed();
+        (o.endpoint(), rx)
+    });
     let mut notify = notify::Notify::from_env();
     let stall = notify::StallHook::from_env();
     notify.ready();
@@ -88,6 +95,8 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             },
             truth = tasks::board_truth(&mut t.truth) => vehicle.board_truth(&truth),
             _ = t.report.tick() => vehicle.report(),
+            Ok(()) = hmi_heard.1.changed() => vehicle.listeners(hmi_heard.0, &mut hmi_heard.1),
+            Ok(()) = m2r_heard.1.changed() => vehicle.listeners(m2r_heard.0, &mut m2r_heard.1),
             Ok(()) = video_stream.changed() => {
                 let stream = video_stream.borrow_and_update().clone().map(video_stream_info);
                 vehicle.handle(Input::VideoStream(stream));

@@ -82,6 +82,13 @@ impl VehicleTask {
         self.vehicle.handle(input, now, &mut self.outputs);
     }
 
+    /// The listeners on an in-process endpoint changed: the core builds its
+    /// streams only while there are some.
+    pub(super) fn listeners(&mut self, endpoint: usize, count: &mut watch::Receiver<usize>) {
+        let listened = *count.borrow_and_update() > 0;
+        self.handle(Input::Listeners { endpoint, listened });
+    }
+
     /// When the next tick is due: when the core needs one
     /// ([`Vehicle::next_tick`]), every [`BUSY_TICK`] while the built-in
     /// simulator runs, and every [`SCENE_PERIOD`] while someone watches the

@@ -307,7 +307,7 @@ pub async fn serve(
     let hostname = auth::machine_hostname();
     // Peer ids: sessions and mavlink2rest clients count from 2; 1 is REST POSTs.
     let m2r_hub = Arc::new(m2r::Hub::new(
-        ctx.m2r_outlet.endpoint(),
+        ctx.m2r_outlet.clone(),
         1,
         m2r::frame::Reserved {
             vehicle_sysid: ctx.vehicle_sysid,

@@ -1,10 +1,21 @@
 //! What the vehicle hands the in-process HMI endpoints in one pass of its
 //! loop: each message as the sessions (or mavlink2rest) get it, gathered
-//! into one batch so the browser side's thread wakes once for all of it.
+//! into one batch so the browser side's thread wakes once for all of it —
+//! and who listens there, so the vehicle builds the endpoint's telemetry
+//! streams only while someone does.
+//!
+//! Listeners are counted, not inferred from the hub's receivers (the REST
+//! views always hold one): a browser session and a mavlink2rest WebSocket
+//! client each hold a [`Listening`] for their lifetime; a REST read
+//! ([`Outlet::read`]) keeps the endpoint listened for [`READ_LINGER`] and,
+//! when nobody listened before it, waits for the view to follow the vehicle
+//! again before it answers.
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, watch};
+use tokio::time::Instant;
 
 use super::HUB_CAPACITY;
 use crate::dialect::neptunus::MavMessage;
@@ -52,6 +63,35 @@ pub struct Outlet {
     /// sessions talk to the autopilot alone.
     every_component: bool,
     hub: broadcast::Sender<Deliveries>,
+    listeners: Arc<Listeners>,
+}
+
+/// How long a REST read keeps the endpoint's streams built: a script
+/// polling every few seconds reads live data without waiting each time.
+pub const READ_LINGER: Duration = Duration::from_secs(10);
+
+/// How long a REST read that woke a quiet endpoint waits for the view to
+/// follow the vehicle (one pass of the vehicle's loop; it answers with what
+/// it has after this).
+pub const WAKE_WAIT: Duration = Duration::from_secs(1);
+
+#[derive(Debug)]
+struct Listeners {
+    count: watch::Sender<usize>,
+    /// Until when REST reads keep the endpoint listened (`Some` while the
+    /// lingering listener lives).
+    reading_until: Mutex<Option<Instant>>,
+}
+
+/// One listener on an outlet's endpoint, counted while it lives.
+#[derive(Debug)]
+#[must_use = "the endpoint counts as listened only while this lives"]
+pub struct Listening(Arc<Listeners>);
+
+impl Drop for Listening {
+    fn drop(&mut self) {
+        self.0.count.send_modify(|n| *n = n.saturating_sub(1));
+    }
 }
 
 impl Outlet {
@@ -61,6 +101,10 @@ impl Outlet {
             endpoint,
             every_component: false,
             hub: broadcast::channel(HUB_CAPACITY).0,
+            listeners: Arc::new(Listeners {
+                count: watch::Sender::new(0),
+                reading_until: Mutex::new(None),
+            }),
         }
     }
 
@@ -124,4 +168,63 @@ impl Outlet {
     pub fn subscribe(&self) -> broadcast::Receiver<Deliveries> {
         self.hub.subscribe()
     }
+
+    /// Counts one listener on the endpoint while the guard lives.
+    pub fn listen(&self) -> Listening {
+        self.listeners.count.send_modify(|n| *n += 1);
+        Listening(Arc::clone(&self.listeners))
+    }
+
+    /// How many listen now, as the vehicle task follows it.
+    pub fn listeners(&self) -> watch::Receiver<usize> {
+        self.listeners.count.subscribe()
+    }
+
+    /// A REST read of a view the endpoint's messages keep (`view`): keeps the
+    /// endpoint listened for [`READ_LINGER`]; when nobody listened before,
+    /// waits (at most [`WAKE_WAIT`]) until `view` changed, so the answer is
+    /// live rather than what was there when the last listener left.
+    pub async fn read<T>(&self, view: &mut watch::Receiver<T>) {
+        let was_quiet = *self.listeners.count.borrow() == 0;
+        view.borrow_and_update();
+        self.linger();
+        if was_quiet {
+            let _ = tokio::time::timeout(WAKE_WAIT, view.changed()).await;
+        }
+    }
+
+    /// One listener that lives until [`READ_LINGER`] after the last read.
+    fn linger(&self) {
+        let until = Instant::now() + READ_LINGER;
+        {
+            let mut g = lock(&self.listeners.reading_until);
+            let lives = g.is_some();
+            *g = Some(until);
+            if lives {
+                return;
+            }
+        }
+        let guard = self.listen();
+        tokio::spawn(async move {
+            loop {
+                let until = {
+                    let mut g = lock(&guard.0.reading_until);
+                    match *g {
+                        Some(t) if t > Instant::now() => t,
+                        _ => {
+                            *g = None;
+                            return;
+                        }
+                    }
+                };
+                tokio::time::sleep_until(until).await;
+            }
+        });
+    }
+}
+
+/// The lock, also after a panic elsewhere while it was held (it guards a
+/// plain deadline).
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }

@@ -178,6 +178,15 @@ fn early(interval: Duration) -> Duration {
     EARLY.min(interval / 4)
 }
 
+/// How far ahead of its time a clocked message may go with a navigation
+/// line: the board's line period (10 Hz), at most half the message's own
+/// interval.
+pub const LINE_GATHER: Duration = Duration::from_millis(100);
+
+fn gather(interval: Duration) -> Duration {
+    LINE_GATHER.min(interval / 2)
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Slot {
     interval: Duration,
@@ -304,10 +313,18 @@ impl Schedule {
     }
 
     /// A navigation line arrived at `now`: the fed messages whose interval
-    /// has (nearly) passed are due at once; the others wait for it.
+    /// has (nearly) passed are due at once; the others wait for it. A
+    /// clocked message due before the next line is expected goes with
+    /// this one: the vehicle is awake for the line anyway, and an idle
+    /// vehicle then wakes for little but the lines. Its grid is kept, so its
+    /// rate stays exact; it leaves at most [`LINE_GATHER`] early.
     pub fn line_arrived(&mut self, now: Duration, out: &mut Vec<u32>) {
         for (id, slot) in &mut self.slots {
             if !slot.fed {
+                if now + gather(slot.interval) >= slot.next_due {
+                    out.push(*id);
+                    slot.sent(now);
+                }
                 continue;
             }
             if now + early(slot.interval) >= slot.next_due {

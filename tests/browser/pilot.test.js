@@ -276,6 +276,9 @@ test('a vehicle that hangs with its socket open: the HUD turns stale (data older
   const { page, context } = await openPage(browser, v.url);
   await until(async () => !(await page.getAttribute('[data-testid=state]', 'class')).includes('stale')
     && !(await page.getAttribute('[data-testid=battery]', 'class')).includes('stale'), 10000, 'live HUD');
+  // A picture must be showing before it can be lost (on a busy machine the
+  // first frame can come after the HUD is live).
+  await until(() => page.evaluate(() => window.neptunus.video.frames > 0), 15000, 'a video frame');
   const stale = () => page.evaluate(() => ({
     state: document.querySelector('[data-testid=state]').classList.contains('stale'),
     battery: document.querySelector('[data-testid=battery]').classList.contains('stale'),

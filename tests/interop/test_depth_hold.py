@@ -57,6 +57,7 @@ def hold_until(conn, boot: float, depth_m: float, what: str) -> float:
     inside_since = None
     last_send = 0.0
     depth = float("nan")
+    seen = []  # (time, depth) for the failure's message
     while not dl.expired():
         now = time.monotonic()
         if now - last_send >= 0.25:
@@ -67,13 +68,17 @@ def hold_until(conn, boot: float, depth_m: float, what: str) -> float:
         if m is None:
             continue
         depth = -m.relative_alt / 1000.0
+        seen.append((now, depth))
         if abs(depth - depth_m) <= TOLERANCE_M:
             inside_since = inside_since or now
             if now - inside_since >= 3.0:
                 return depth
         else:
             inside_since = None
-    raise AssertionError(f"{what}: depth {depth:.2f} m never held within {TOLERANCE_M} m of {depth_m} m for 3 s in {HOLD_DEADLINE_S} s")
+    end = time.monotonic()
+    last = [d for t, d in seen if end - t <= 10.0]
+    span = f"; last 10 s: {min(last):.2f}..{max(last):.2f} m over {len(last)} reports" if last else "; no reports in the last 10 s"
+    raise AssertionError(f"{what}{span}: depth {depth:.2f} m never held within {TOLERANCE_M} m of {depth_m} m for 3 s in {HOLD_DEADLINE_S} s")
 
 
 def test_set_position_target_global_int_moves_the_held_depth(pymav):

@@ -39,7 +39,7 @@ use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use mavlink_core::Message as _;
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, watch};
 
 use super::{Deliveries, Shared, guard};
 use crate::dialect::neptunus::MavMessage;
@@ -80,6 +80,12 @@ pub(crate) struct Out {
 /// The API's shared state: the REST view, the clients' feed, who is connected.
 pub(crate) struct Hub {
     pub endpoint: usize,
+    /// The endpoint's outlet: who listens (WebSocket clients for their
+    /// lifetime, REST reads for a while after each).
+    outlet: super::Outlet,
+    /// Counts the vehicle's passes the REST view has taken in, so a read
+    /// that woke the endpoint can wait for the view to follow.
+    passes: watch::Sender<u64>,
     /// Sender ids no client may claim.
     pub reserved: frame::Reserved,
     tree: Mutex<Tree>,
@@ -103,9 +109,11 @@ impl Drop for StationSlot {
 }
 
 impl Hub {
-    pub fn new(endpoint: usize, post_peer: u64, reserved: frame::Reserved) -> Self {
+    pub fn new(outlet: super::Outlet, post_peer: u64, reserved: frame::Reserved) -> Self {
         Self {
-            endpoint,
+            endpoint: outlet.endpoint(),
+            outlet,
+            passes: watch::Sender::new(0),
             reserved,
             tree: Mutex::new(Tree::default()),
             out: broadcast::channel(OUT_CAPACITY).0,
@@ -117,8 +125,14 @@ impl Hub {
         }
     }
 
-    fn subscribe(&self) -> broadcast::Receiver<Arc<Out>> {
-        self.out.subscribe()
+    /// A client's feed; it counts as a listener while the [`Listening`](super::outlet::Listening) lives.
+    fn subscribe(&self) -> (broadcast::Receiver<Arc<Out>>, super::outlet::Listening) {
+        (self.out.subscribe(), self.outlet.listen())
+    }
+
+    /// Before a REST read of the view: see [`Outlet::read`](super::Outlet::read).
+    async fn read(&self) {
+        self.outlet.read(&mut self.passes.subscribe()).await;
     }
 
     fn take_slot(self: &Arc<Self>) -> Option<StationSlot> {
@@ -230,6 +244,7 @@ pub(crate) async fn fan_out(
                 }));
             }
         }
+        hub.passes.send_modify(|n| *n = n.wrapping_add(1));
         // Everything already queued first. Then, with no client connected,
         // only the REST view follows the vehicle: five times a second is
         // enough, and this task wakes five times a second rather than at
@@ -313,6 +328,7 @@ fn json_response(status: StatusCode, body: String) -> Response {
 }
 
 async fn view_all(State(shared): State<Arc<Shared>>) -> Response {
+    shared.m2r.read().await;
     let v = shared
         .m2r
         .tree
@@ -324,6 +340,7 @@ async fn view_all(State(shared): State<Arc<Shared>>) -> Response {
 
 /// A JSON pointer into the view: `vehicles/1/components/1/messages/ATTITUDE[/message/roll]`.
 async fn view_path(State(shared): State<Arc<Shared>>, Path(path): Path<String>) -> Response {
+    shared.m2r.read().await;
     let v = shared
         .m2r
         .tree

@@ -162,7 +162,7 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, hub: Arc<Hub>, s
             }
         })
     };
-    let mut out = hub.subscribe();
+    let (mut out, _listening) = hub.subscribe();
     let mut wanted = std::collections::HashMap::<&'static str, bool>::new();
     loop {
         tokio::select! {

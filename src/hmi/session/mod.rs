@@ -118,6 +118,8 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
     tracing::info!(session = id, sysid = ?s.sysid(), client = ?s.ip, pilot = s.may_pilot(), logged_in = s.logged_in, "HMI session connected");
     let (mut tx, mut rx) = socket.split();
     let mut hub = shared.outlet.subscribe();
+    // The endpoint's telemetry is built while a session (even a watcher's) is open.
+    let _listening = shared.outlet.listen();
     let welcome = s.welcome();
     let end = 'session: {
         if send(&mut tx, &welcome).await.is_err() {

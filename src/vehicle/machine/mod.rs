@@ -195,6 +195,16 @@ pub enum Input {
     },
     /// The video stream the camera component advertises (None: none runs).
     VideoStream(Option<VideoStreamInfo>),
+    /// Whether anyone listens on an in-process endpoint (the browser
+    /// sessions', mavlink2rest's) now. While nobody does, the telemetry
+    /// streams of that endpoint are not built (other messages still go);
+    /// when someone comes, every stream message whose time passed meanwhile
+    /// goes out in the next pass, and then at the endpoint's rates.
+    /// Endpoints start listened.
+    Listeners {
+        endpoint: usize,
+        listened: bool,
+    },
 }
 
 /// Events of a browser HMI session that matter for safety.
@@ -529,8 +539,12 @@ impl Vehicle {
                 // In SIMULATOR run mode the board's navigation and power
                 // telemetry is not the vehicle's (the simulator's is).
                 let simulated = self.run_mode == RunMode::Simulator;
-                if !(simulated && matches!(ev, Event::Nav(_) | Event::Status(_))) {
+                let nav = matches!(ev, Event::Nav(_));
+                if !(simulated && (nav || matches!(ev, Event::Status(_)))) {
                     self.on_board(ev, now, out);
+                }
+                if nav {
+                    self.tick_with_line(now, out);
                 }
             }
             Input::SimBoard(ev) => {
@@ -567,6 +581,9 @@ impl Vehicle {
                 }
             }
             Input::VideoStream(stream) => self.set_video_stream(stream),
+            Input::Listeners { endpoint, listened } => {
+                self.streams.set_listened(endpoint, listened)
+            }
         }
     }
 

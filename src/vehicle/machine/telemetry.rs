@@ -18,6 +18,11 @@ use crate::vehicle::telemetry::{self as schedule, Schedule};
 #[derive(Debug)]
 pub(super) struct Streams {
     schedules: Vec<Schedule>,
+    /// Per schedule: nobody listens there now (an in-process endpoint with
+    /// no browser session, mavlink2rest client or recent REST reader), so
+    /// its streams are not built. Its schedule stands still meanwhile, so
+    /// when someone comes every stream message is due at once.
+    quiet: Vec<bool>,
     /// (to whom, parameter index) still to send.
     pub param_queue: Vec<(To, usize)>,
 }
@@ -26,6 +31,7 @@ impl Streams {
     pub fn new(endpoints: usize) -> Self {
         Self {
             schedules: vec![Schedule::default(); endpoints.max(1)],
+            quiet: vec![false; endpoints.max(1)],
             param_queue: Vec::new(),
         }
     }
@@ -37,12 +43,21 @@ impl Streams {
         }
     }
 
-    /// When a message is next due on any endpoint without new input.
+    /// When a message is next due on any endpoint someone listens on,
+    /// without new input.
     pub fn next_deadline(&self) -> Option<Duration> {
         self.schedules
             .iter()
-            .filter_map(Schedule::next_deadline)
+            .zip(&self.quiet)
+            .filter(|(_, quiet)| !**quiet)
+            .filter_map(|(s, _)| s.next_deadline())
             .min()
+    }
+
+    /// Whether anyone listens on `endpoint` (see [`Input::Listeners`](super::Input::Listeners)).
+    pub fn set_listened(&mut self, endpoint: usize, listened: bool) {
+        let last = self.quiet.len() - 1;
+        self.quiet[endpoint.min(last)] = !listened;
     }
 
     /// The schedule of an endpoint (endpoint ids beyond the table share the last one).
@@ -73,6 +88,9 @@ impl Vehicle {
     ) {
         let mut due = Vec::new();
         for ep in 0..self.streams.schedules.len() {
+            if self.streams.quiet[ep] {
+                continue;
+            }
             due.clear();
             pick(&mut self.streams.schedules[ep], now.mono, &mut due);
             for id in &due {

@@ -9,10 +9,17 @@
 //! disarmed vehicle (authority and request timeouts, failsafe warnings,
 //! parameter saving, the board's dead-man feed), which a tenth of a second
 //! does not change. Inputs are handled when they arrive, never on a tick.
+//!
+//! The board's navigation lines wake the vehicle ten times a second anyway:
+//! an idle tick due before the next line is run with the line that came
+//! ([`Vehicle::tick_with_line`]), and a clocked telemetry message due before
+//! the next line goes with it (`Schedule::line_arrived`), so while the board
+//! talks an idle vehicle wakes for little but its lines.
 
 use std::time::Duration;
 
-use super::Vehicle;
+use super::{Now, Output, Vehicle};
+use crate::vehicle::telemetry::LINE_GATHER;
 
 /// The tick period while something moves or may move.
 pub const BUSY_TICK: Duration = Duration::from_millis(10);
@@ -35,6 +42,22 @@ impl Vehicle {
             .into_iter()
             .flatten()
             .fold(last + IDLE_TICK, Duration::min)
+    }
+
+    /// A navigation line was handled at `now`: the idle tick runs with it
+    /// when it would be due before the next line (never while the fine
+    /// tick runs: its timing is its own).
+    pub(super) fn tick_with_line(&mut self, now: Now, out: &mut Vec<Output>) {
+        if self.ticks_busy() {
+            return;
+        }
+        if self
+            .clock
+            .last_tick
+            .is_some_and(|t| now.mono + LINE_GATHER >= t + IDLE_TICK)
+        {
+            self.tick(now, out);
+        }
     }
 
     /// Whether something moves or may move, and needs the fine tick.

@@ -72,8 +72,12 @@ fn acknowledge(in_flight: &mut VecDeque<InFlight>, is_it: impl Fn(&[u8]) -> bool
     }
 }
 
-/// How often the figures are published while the device is open.
+/// How often the figures are published while the device is open (at most;
+/// when the session runs anyway), and while it is closed.
 const STATS_PERIOD: Duration = Duration::from_millis(100);
+
+/// The longest sleep while the link is down and nothing else is due.
+const WATCHDOG_IDLE: Duration = Duration::from_secs(1);
 
 /// What the session asks the I/O loop to deliver, in the order it decided.
 #[derive(Debug, Clone, PartialEq)]
@@ -426,22 +430,13 @@ impl Session {
             return;
         };
         let opened_at = conn.opened_at;
-        // Until the board's first telemetry line it may still be setting up
-        // (an IMU's self-test holds the 30.0.2 firmware ~2.5 s): the boot
-        // wait's allowance stays.
-        let settled = conn.handshaken && conn.board_talked;
         let handshaken = conn.handshaken;
         let lines_at_open = conn.lines_at_open;
         let silent_since = self
             .last_line
             .filter(|t| *t >= opened_at)
             .unwrap_or(opened_at);
-        let allowed = self.cfg.stale_after
-            + if settled {
-                Duration::ZERO
-            } else {
-                self.cfg.boot_wait
-            };
+        let allowed = self.allowance(conn);
         if now.duration_since(silent_since) > allowed {
             if self.stats.state != LinkState::Down {
                 self.report(
@@ -470,13 +465,16 @@ impl Session {
         }
     }
 
-    /// When the session next has something to do without new input (a
-    /// sleep of at most 100 ms, so the watchdog runs).
+    /// When the session next has something to do without new input: the
+    /// telemetry watchdog's deadline, the handshake, a frame the line has
+    /// room for, an echo's timeout, the next ping. The figures do not wake
+    /// it: they are published when it runs anyway (a talking board's lines
+    /// wake it ten times a second; a silent one, the watchdog).
     pub(super) fn next_wake(&self, now: Instant) -> Instant {
         let Some(conn) = self.conn.as_ref() else {
             return now + STATS_PERIOD;
         };
-        let mut wake = conn.next_stats.min(now + STATS_PERIOD);
+        let mut wake = self.watchdog_due(conn).unwrap_or(now + WATCHDOG_IDLE);
         if let Some(t) = conn.handshake_due {
             wake = wake.min(t);
         }
@@ -497,6 +495,34 @@ impl Session {
             wake = wake.min(conn.next_ping);
         }
         wake
+    }
+
+    /// When the telemetry watchdog next has something to decide: the board's
+    /// silence outlasting its allowance (None once the link is down — the
+    /// board's next line is what changes that).
+    fn watchdog_due(&self, conn: &Connection) -> Option<Instant> {
+        if self.stats.state == LinkState::Down {
+            return None;
+        }
+        let silent_since = self
+            .last_line
+            .filter(|t| *t >= conn.opened_at)
+            .unwrap_or(conn.opened_at);
+        // Just past the allowance: the check is "longer than allowed".
+        Some(silent_since + self.allowance(conn) + Duration::from_millis(1))
+    }
+
+    /// How long the board may be silent: until its first telemetry line it
+    /// may still be setting up (an IMU's self-test holds the 30.0.2
+    /// firmware ~2.5 s), so the boot wait's allowance stays.
+    fn allowance(&self, conn: &Connection) -> Duration {
+        let settled = conn.handshaken && conn.board_talked;
+        self.cfg.stale_after
+            + if settled {
+                Duration::ZERO
+            } else {
+                self.cfg.boot_wait
+            }
     }
 
     /// The vehicle task said it is alive within the healthy window.
