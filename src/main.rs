@@ -186,6 +186,21 @@ fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result
         s.camera.source.as_str(),
         s.camera.rotation_deg
     )?;
+    let w = &s.camera.webrtc;
+    let signalling = neptunus::camera::webrtc::SignallingAddr::resolve(w.signalling, s.hmi.http);
+    match (w.enabled && s.hmi.http.is_some(), signalling) {
+        (false, _) => writeln!(out, "webrtc:    off")?,
+        (true, Some(a)) => writeln!(
+            out,
+            "webrtc:    signalling on ws://{a}/ and the HMI's /webrtc, {} ICE servers",
+            w.ice_servers.len()
+        )?,
+        (true, None) => writeln!(
+            out,
+            "webrtc:    signalling on the HMI's /webrtc, {} ICE servers",
+            w.ice_servers.len()
+        )?,
+    }
     Ok(())
 }
 

@@ -393,3 +393,76 @@ fn the_emulated_firmware_sets_the_framing_unless_told() {
         .to_string();
     assert!(err.contains("30.0.2") && err.contains("2014-12"), "{err}");
 }
+
+#[test]
+fn webrtc_keys_and_flags_resolve_and_bad_ones_name_the_key() {
+    use neptunus::camera::webrtc::SignallingAddr;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("n.toml");
+    std::fs::write(
+        &path,
+        "[camera]\nsource = \"synthetic\"\n[camera.webrtc]\nsignalling = \"off\"\nudp_port = 50000\nmax_viewers = 2\nice_servers = [{ url = \"turn:turn.example.org\", username = \"rov\", credential = \"s\" }]\n",
+    )
+    .unwrap();
+    let file = |extra: &[&str]| {
+        let mut args = vec!["neptunus", "--sim", "--config", path.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        resolve(&Cli::parse_from(args).run).unwrap().camera.webrtc
+    };
+    let w = file(&[]);
+    assert!(w.enabled, "on unless turned off");
+    assert_eq!(w.signalling, Some(SignallingAddr::Off));
+    assert_eq!((w.udp_port, w.max_viewers), (50000, 2));
+    assert_eq!(w.ice_servers[0].username.as_deref(), Some("rov"));
+    // Flags over the file; --video-rtp off leaves WebRTC alone.
+    let w = file(&[
+        "--webrtc-signalling",
+        "127.0.0.1:0",
+        "--ice-server",
+        "stun:stun.example.org:3478",
+        "--video-rtp",
+        "off",
+    ]);
+    assert!(w.enabled);
+    assert_eq!(
+        w.signalling,
+        Some(SignallingAddr::At("127.0.0.1:0".parse().unwrap()))
+    );
+    assert_eq!(w.ice_servers.len(), 1);
+    assert!(w.ice_servers[0].is_stun());
+    assert!(!file(&["--webrtc", "off"]).enabled);
+    // Unset: port 6021 on the HMI's address.
+    let s =
+        resolve(&Cli::parse_from(["neptunus", "--sim", "--http", "127.0.0.1:8081"]).run).unwrap();
+    assert_eq!(s.camera.webrtc.signalling, None);
+    assert_eq!(
+        SignallingAddr::resolve(s.camera.webrtc.signalling, s.hmi.http),
+        Some("127.0.0.1:6021".parse().unwrap())
+    );
+    for (text, needle) in [
+        (
+            "[camera.webrtc]\nmax_viewers = 0\n",
+            "camera.webrtc.max_viewers",
+        ),
+        (
+            "[camera.webrtc]\nice_servers = [{ url = \"http://x\" }]\n",
+            "stun:HOST",
+        ),
+        ("[camera.webrtc]\nsignalling = \"6021\"\n", "HOST:PORT"),
+        ("[camera.webrtc]\nstun = []\n", "stun"),
+    ] {
+        std::fs::write(&path, text).unwrap();
+        let cli = Cli::parse_from(["neptunus", "--sim", "--config", path.to_str().unwrap()]);
+        let err = resolve(&cli.run).map(|_| ()).unwrap_err().to_string();
+        assert!(err.contains(needle), "{text:?} → {err}");
+    }
+    for bad in [
+        ["--webrtc", "maybe"],
+        ["--webrtc-signalling", "here"],
+        ["--ice-server", "ftp://x"],
+    ] {
+        let mut args = vec!["neptunus"];
+        args.extend_from_slice(&bad);
+        assert!(Cli::try_parse_from(args).is_err(), "{bad:?}");
+    }
+}

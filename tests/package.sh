@@ -96,8 +96,8 @@ awk -v s="$score" 'BEGIN { exit !(s <= 2.0) }' || fail "exposure $score is above
 
 echo "== package: the packaged configuration"
 "$bin" --config "$conf" --check || fail "the packaged configuration does not parse"
-# Its commented examples ([camera.ffmpeg], [camera.h264]) parse once uncommented.
-sed 's/^# \(\[camera\.\|input_args\|passthrough\)/\1/' "$conf" >"$work/examples.toml"
+# Its commented examples ([camera.ffmpeg], [camera.h264], [camera.webrtc]) parse once uncommented.
+sed 's/^# \(\[camera\.\|input_args\|passthrough\|enabled\|ice_servers\)/\1/' "$conf" >"$work/examples.toml"
 cmp -s "$conf" "$work/examples.toml" && fail "no commented example found in the packaged configuration"
 "$bin" --config "$work/examples.toml" --check >/dev/null || fail "a commented example in the packaged configuration does not parse"
 

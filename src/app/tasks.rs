@@ -11,6 +11,7 @@ use super::side::Side;
 use super::signing::LinkSigning;
 use super::vehicle_task::VehicleTask;
 use super::{AppError, storage};
+use crate::camera::webrtc::SignallingAddr;
 use crate::config::{BoardSource, Settings};
 use crate::eventlog::{EventLog, EventLogConfig};
 use crate::firmware::emulator::{BoardSnapshot, PtyBoard, SimSnapshot};
@@ -35,6 +36,8 @@ pub(super) struct Tasks {
     /// [`stream`](crate::camera::rtp::RtpVideo::stream) is what the
     /// MAVLink camera component announces.
     pub(super) rtp: crate::camera::rtp::RtpVideo,
+    /// The WebRTC viewers (Cockpit, the page), fed by the same encode.
+    webrtc: Option<crate::camera::webrtc::WebRtc>,
     router: RouterHandle,
     event_log: EventLog,
     board: Option<SimulatedBoard>,
@@ -169,16 +172,27 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
     // It runs only while a browser watches or RTP video has a destination.
     let (video_to, station_rx) = watch::channel(None);
-    let (camera, rtp) = {
+    let (camera, rtp, webrtc) = {
         let _side = side.handle().enter();
         let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
-        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx);
-        (camera, rtp)
+        let webrtc = start_webrtc(&settings);
+        let feed = webrtc.as_ref().map(crate::camera::webrtc::WebRtc::feed);
+        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx, feed);
+        (camera, rtp, webrtc)
     };
     let hmi = {
         let hmi_settings = settings.hmi.clone();
-        let (sysid, data_dir, routes) =
-            (vehicle.sysid(), settings.data_dir.clone(), camera.routes());
+        let (sysid, data_dir) = (vehicle.sysid(), settings.data_dir.clone());
+        let mut video = crate::hmi::VideoRoutes {
+            routes: camera.routes(),
+            webrtc: webrtc.is_some(),
+            signalling: None,
+        };
+        if let Some(w) = &webrtc {
+            video.routes = video.routes.merge(w.routes());
+            let at = SignallingAddr::resolve(settings.camera.webrtc.signalling, settings.hmi.http);
+            video.signalling = at.map(|addr| (addr, w.signalling_routes()));
+        }
         side.handle()
             .spawn(async move {
                 crate::hmi::Hmi::start(
@@ -187,13 +201,16 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
                     sysid,
                     z_centered,
                     data_dir,
-                    Some(routes),
+                    Some(video),
                 )
                 .await
             })
             .await
             .map_err(|e| AppError::Side(std::io::Error::other(e.to_string())))??
     };
+    if let Some(w) = &webrtc {
+        w.set_signalling_addr(hmi.beside_addr());
+    }
     let (saved_tx, saved) = mpsc::unbounded_channel();
     let io = Io::new(
         [hmi.outlet(), hmi.m2r_outlet()],
@@ -221,6 +238,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         truth,
         camera,
         rtp,
+        webrtc,
         router,
         event_log,
         board,
@@ -318,6 +336,9 @@ impl Tasks {
         neutral_written(written, before).await;
         notify.stopping();
         self.hmi.shutdown().await;
+        if let Some(w) = self.webrtc {
+            w.shutdown().await;
+        }
         self.rtp.shutdown().await;
         self.camera.shutdown().await;
         self.router.shutdown().await;
@@ -356,13 +377,39 @@ async fn neutral_written(
     }
 }
 
+/// The WebRTC viewers' side, when the camera gives a picture, WebRTC is
+/// on and the HMI (which serves the signalling) runs.
+fn start_webrtc(settings: &Settings) -> Option<crate::camera::webrtc::WebRtc> {
+    use crate::camera::webrtc;
+    let cfg = &settings.camera;
+    if !cfg.webrtc.enabled {
+        tracing::info!("WebRTC video off (--webrtc off)");
+        return None;
+    }
+    let stream = webrtc::stream_of(cfg, webrtc::new_stream_id())?;
+    if settings.hmi.http.is_none() {
+        tracing::info!(
+            "WebRTC video off: its signalling is served with the browser HMI (--http off)"
+        );
+        return None;
+    }
+    match webrtc::WebRtc::start(&cfg.webrtc, Some(stream)) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            tracing::error!("WebRTC video off: cannot bind its loopback port: {e}");
+            None
+        }
+    }
+}
+
 /// The MAVLink camera component exists when a camera source is configured
 /// or the camera's own H.264 is passed through to RTP; its nominal picture
 /// is the configured size and rate (the running stream's, once the stream
 /// reports it).
 fn camera_spec(c: &crate::camera::CameraConfig) -> Option<crate::vehicle::machine::CameraSpec> {
     use crate::camera::rtp::RtpDest;
-    let passthrough = !c.h264.passthrough.is_empty() && !c.rtp.iter().all(|d| *d == RtpDest::Off);
+    let passthrough = !c.h264.passthrough.is_empty()
+        && (c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off));
     let (width, height, fps) = if passthrough {
         c.h264.passthrough_shape()
     } else {

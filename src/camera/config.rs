@@ -11,6 +11,7 @@ use axum::http::Uri;
 use serde::{Deserialize, Serialize};
 
 use super::rtp::config::{H264Config, RtpDest, check_dests};
+use super::webrtc::config::WebRtcConfig;
 
 /// Where the camera's frames come from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, Default)]
@@ -88,8 +89,11 @@ pub struct CameraConfig {
     /// Where H.264 over RTP goes: `auto`, `off` or `udp://HOST:PORT`
     /// entries (`--video-rtp`).
     pub rtp: Vec<RtpDest>,
-    /// How the RTP stream is encoded.
+    /// How the RTP stream is encoded (the WebRTC viewers get the same
+    /// encode).
     pub h264: H264Config,
+    /// Video over WebRTC (Cockpit, the browser page).
+    pub webrtc: WebRtcConfig,
 }
 
 impl Default for CameraConfig {
@@ -109,6 +113,7 @@ impl Default for CameraConfig {
             url: None,
             rtp: vec![RtpDest::Auto],
             h264: H264Config::default(),
+            webrtc: WebRtcConfig::default(),
         }
     }
 }
@@ -156,6 +161,9 @@ impl CameraConfig {
         self.backoff.validate()?;
         check_dests(&self.rtp).map_err(|e| CameraConfigError::Rtp(e.to_string()))?;
         self.h264
+            .validate()
+            .map_err(|e| CameraConfigError::Rtp(e.to_string()))?;
+        self.webrtc
             .validate()
             .map_err(|e| CameraConfigError::Rtp(e.to_string()))?;
         match self.source {
@@ -290,7 +298,8 @@ impl Default for MjpgStreamerConfig {
 /// A configuration value out of range, with the fix.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CameraConfigError {
-    /// `rtp` or `[camera.h264]` (the message names the key and the fix).
+    /// `rtp`, `[camera.h264]` or `[camera.webrtc]` (the message names the
+    /// key and the fix).
     #[error("{0}")]
     Rtp(String),
     #[error(

@@ -37,6 +37,7 @@ mod shared;
 mod source;
 pub mod splitter;
 mod synthetic;
+pub mod webrtc;
 
 use std::sync::Arc;
 

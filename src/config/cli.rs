@@ -84,10 +84,48 @@ pub struct RunArgs {
     /// `off` [default: auto].
     #[arg(long = "video-rtp", value_name = "udp://HOST:PORT|auto|off")]
     pub video_rtp: Vec<crate::camera::rtp::RtpDest>,
+    /// Video over WebRTC for Cockpit and the browser page, from the same
+    /// H.264 encode as the RTP video: on or off [default: on]. Independent
+    /// of --video-rtp: with `--video-rtp off` WebRTC viewers still watch.
+    #[arg(long, value_name = "on|off")]
+    pub webrtc: Option<OnOff>,
+    /// The WebRTC signalling WebSocket (mavlink-camera-manager's protocol)
+    /// on a port of its own, or `off` [default: port 6021, where Cockpit
+    /// looks, on the HMI's address]; it is also on the HMI's port at /webrtc.
+    #[arg(long, value_name = "ADDR|off")]
+    pub webrtc_signalling: Option<crate::camera::webrtc::SignallingAddr>,
+    /// ICE server for WebRTC viewers away from the tether, repeatable:
+    /// stun:HOST[:PORT] (the vehicle asks it for its public address) or
+    /// turn:HOST[:PORT] (for the browser; credentials in [camera.webrtc]
+    /// ice_servers) [default: none].
+    #[allow(
+        rustdoc::broken_intra_doc_links,
+        reason = "clap prints this comment as --help verbatim: [camera.webrtc] is the file's section, not a link"
+    )]
+    #[arg(long = "ice-server", value_name = "URL")]
+    pub ice_server: Vec<crate::camera::webrtc::IceServer>,
     /// Check the configuration (file and flags), print what it resolves
     /// to, and exit: 0 when it is valid.
     #[arg(long)]
     pub check: bool,
+}
+
+/// `on` or `off`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OnOff {
+    On,
+    Off,
+}
+
+impl std::str::FromStr for OnOff {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "on" => Ok(Self::On),
+            "off" => Ok(Self::Off),
+            _ => Err(format!("\"{s}\" is neither on nor off")),
+        }
+    }
 }
 
 /// `--tls` and `[hmi] tls`.

@@ -18,8 +18,8 @@ use std::path::PathBuf;
 #[cfg(feature = "hil")]
 pub use cli::GenuineArgs;
 pub use cli::{
-    Cli, CliCommand, EmulateArgs, HmiCommand, HttpAddr, ProfilesCommand, RunArgs, SigningCommand,
-    TlsModeName,
+    Cli, CliCommand, EmulateArgs, HmiCommand, HttpAddr, OnOff, ProfilesCommand, RunArgs,
+    SigningCommand, TlsModeName,
 };
 pub use file::{BoardFileConfig, FileConfig, HmiFileConfig, MavlinkFileConfig};
 pub use resolve::{BoardSource, MavlinkSettings, Settings, resolve, resolve_emulator};

@@ -164,6 +164,15 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
             if !args.video_rtp.is_empty() {
                 camera.rtp = args.video_rtp.clone();
             }
+            if let Some(on) = args.webrtc {
+                camera.webrtc.enabled = on == super::cli::OnOff::On;
+            }
+            if let Some(addr) = args.webrtc_signalling {
+                camera.webrtc.signalling = Some(addr);
+            }
+            if !args.ice_server.is_empty() {
+                camera.webrtc.ice_servers = args.ice_server.clone();
+            }
             camera
                 .validate()
                 .map_err(|e| ConfigError::Invalid(format!("camera: {e}")))?;

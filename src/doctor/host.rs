@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use super::Check;
+use crate::camera::webrtc::SignallingAddr;
 use crate::camera::{CameraConfig, SourceKind};
 use crate::config::Settings;
 use crate::mavlink::endpoint::EndpointSpec;
@@ -232,6 +233,16 @@ pub fn ports(settings: &Settings) -> Check {
     if let Some(a) = settings.hmi.http {
         listens.push((format!("HMI http {a}"), tcp(a)));
     }
+    let w = &settings.camera.webrtc;
+    if w.enabled {
+        if let Some(a) = SignallingAddr::resolve(w.signalling, settings.hmi.http) {
+            listens.push((format!("WebRTC signalling {a}"), tcp(a)));
+        }
+        if w.udp_port != 0 {
+            let a = SocketAddr::from(([0, 0, 0, 0], w.udp_port));
+            listens.push((format!("WebRTC media udp {a}"), udp(a)));
+        }
+    }
     let taken: Vec<String> = listens
         .iter()
         .filter_map(|(what, r)| r.as_ref().err().map(|e| format!("{what}: {e}")))
@@ -253,7 +264,7 @@ pub fn ports(settings: &Settings) -> Check {
         Check::fail(
             name,
             format!("in use: {}", taken.join("; ")),
-            "another program listens there — is neptunus already running (`systemctl status neptunus`; stop it to run doctor)? Otherwise change [mavlink] endpoints or [hmi] http".to_owned(),
+            "another program listens there — is neptunus (or mavlink-camera-manager, on 6021) already running (`systemctl status neptunus`; stop it to run doctor)? Otherwise change [mavlink] endpoints, [hmi] http or [camera.webrtc] signalling and udp_port".to_owned(),
         )
     }
 }

@@ -103,6 +103,27 @@ pub(crate) fn layer(app: Router, shared: Arc<Shared>) -> Router {
     app.layer(axum::middleware::from_fn_with_state(shared, check))
 }
 
+/// The same guard for a port beside the HMI's (the WebRTC signalling's):
+/// the page's own origin there is still the HMI's, on `page_port`.
+pub(crate) fn layer_beside(app: Router, shared: Arc<Shared>, page_port: u16) -> Router {
+    app.layer(axum::middleware::from_fn_with_state(
+        (shared, page_port),
+        check_beside,
+    ))
+}
+
+async fn check_beside(
+    State((shared, page_port)): State<(Arc<Shared>, u16)>,
+    req: Request,
+    next: Next,
+) -> Response {
+    guard(&shared, Some(page_port), req, next).await
+}
+
+async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> Response {
+    guard(&shared, None, req, next).await
+}
+
 fn refuse(shared: &Shared, status: StatusCode, what: String, text: &'static str) -> Response {
     let first = shared
         .refused
@@ -116,7 +137,9 @@ fn refuse(shared: &Shared, status: StatusCode, what: String, text: &'static str)
     (status, text).into_response()
 }
 
-async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> Response {
+/// Host, Origin and the records' login; `page_port`: the request came on
+/// a port beside the HMI's, whose page is on this port.
+async fn guard(shared: &Shared, page_port: Option<u16>, req: Request, next: Next) -> Response {
     let ip = client_ip(req.extensions());
     let client = ip.map_or_else(|| "an unknown address".to_owned(), |i| i.to_string());
     let host = host_of(&req);
@@ -124,7 +147,7 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
         && !shared.gate.host_ok(h)
     {
         return refuse(
-            &shared,
+            shared,
             StatusCode::FORBIDDEN,
             format!(
                 "a request for host {} from {client} (DNS rebinding or a wrong name: use the vehicle's IP address or name, or add the origin to [hmi] allowed_origins)",
@@ -141,12 +164,14 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
         && let Some(origin) = req.headers().get(header::ORIGIN)
     {
         let origin = origin.to_str().unwrap_or("(not text)");
-        if !shared
-            .gate
-            .origin_ok(origin, host.as_deref(), is_tls(req.extensions()))
+        let tls = is_tls(req.extensions());
+        let page = page_port.and_then(|p| host.as_deref().and_then(|h| auth::with_port(h, p, tls)));
+        let gate = &shared.gate;
+        if !gate.origin_ok(origin, host.as_deref(), tls)
+            && !page.is_some_and(|h| gate.origin_ok(origin, Some(&h), tls))
         {
             return refuse(
-                &shared,
+                shared,
                 StatusCode::FORBIDDEN,
                 format!(
                     "a {} {path} from a page at origin {} (client {client}): not this HMI's own origin nor in [hmi] allowed_origins",
@@ -157,7 +182,7 @@ async fn check(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> R
             );
         }
     }
-    if is_record(path) && !may_pilot(&shared, ip, logged_in(&shared, req.headers())) {
+    if is_record(path) && !may_pilot(shared, ip, logged_in(shared, req.headers())) {
         let message = if shared.password.is_some() {
             "the vehicle's records are for pilots: log in first (POST /api/login {\"password\": …} sets the login cookie)".to_owned()
         } else {

@@ -29,6 +29,7 @@
 
 pub mod assets;
 pub mod auth;
+mod beside;
 pub mod guard;
 pub mod headers;
 pub mod m2r;
@@ -40,6 +41,7 @@ pub mod server;
 pub mod session;
 pub mod tls;
 
+pub use beside::{Beside, VideoRoutes};
 pub(crate) use outlet::queued;
 pub use outlet::{Deliveries, Delivery, Outlet};
 
@@ -177,6 +179,11 @@ pub struct HmiContext {
     /// Connection limits and TLS ([`server::Transport::default`]: the
     /// default limits, plain HTTP).
     pub transport: server::Transport,
+    /// WebRTC runs: `/webrtc` and `/api/webrtc` are among `extra_routes`.
+    pub webrtc: bool,
+    /// A port beside the HMI's with routes of its own (the WebRTC
+    /// signalling, where Cockpit looks for it), under the same guard.
+    pub beside: Option<Beside>,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -204,6 +211,8 @@ pub(crate) struct Shared {
     pub data_dir: PathBuf,
     /// Camera routes are merged: `/video.mjpg` exists.
     pub video: bool,
+    /// WebRTC's routes are merged: `/api/webrtc` exists.
+    pub webrtc: bool,
     pub free_sysids: Mutex<BTreeSet<u8>>,
     pub sysid_range: (u8, u8),
     pub next_session: AtomicU64,
@@ -324,6 +333,7 @@ pub async fn serve(
         camera_rotation_deg: ctx.camera_rotation_deg,
         data_dir: ctx.data_dir,
         video: ctx.extra_routes.is_some(),
+        webrtc: ctx.webrtc,
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
         next_session: AtomicU64::new(2),
@@ -349,7 +359,31 @@ pub async fn serve(
     let app = guard::layer(app, Arc::clone(&shared));
     // Around everything merged, fallback included: every response has them.
     let app = app.layer(axum::middleware::from_fn(headers::security_headers));
-    let result = server::run(listener, app, ctx.transport, shutdown).await;
+    // One shutdown for both listeners.
+    let (stop_tx, stop_rx) = watch::channel(false);
+    let stopped = move || {
+        let mut rx = stop_rx.clone();
+        async move {
+            let _ = rx.wait_for(|s| *s).await;
+        }
+    };
+    let beside = ctx.beside.map(|b| {
+        let page_port = listener.local_addr().map_or(0, |a| a.port());
+        b.spawn(&shared, page_port, ctx.transport.clone(), stopped())
+    });
+    let main = server::run(listener, app, ctx.transport, stopped());
+    tokio::pin!(main);
+    let result = tokio::select! {
+        r = &mut main => r,
+        () = shutdown => {
+            let _ = stop_tx.send(true);
+            main.await
+        }
+    };
+    let _ = stop_tx.send(true);
+    if let Some(b) = beside {
+        let _ = b.await;
+    }
     watcher.abort();
     sweeper.abort();
     fan_out.abort();
@@ -370,6 +404,8 @@ fn warn_plaintext(password_set: bool, local: SocketAddr) {
 /// The app's handle on a running HMI: the inputs its sessions produce.
 pub struct Hmi {
     inputs: Option<mpsc::Receiver<Input>>,
+    /// Where the port beside listens, when it does.
+    beside: Option<SocketAddr>,
     outlet: Outlet,
     m2r_outlet: Outlet,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
@@ -382,19 +418,26 @@ impl Hmi {
     /// `--http off`). The bound address is logged
     /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
     /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
-    /// certificate or key file is an error naming it.
+    /// certificate or key file is an error naming it. `video`: the camera's
+    /// routes, and the WebRTC signalling's own port under the same guard
+    /// and TLS.
     pub async fn start(
         settings: &HmiSettings,
         endpoint: usize,
         vehicle_sysid: u8,
         z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
         data_dir: PathBuf,
-        extra_routes: Option<axum::Router>,
+        video: Option<VideoRoutes>,
     ) -> Result<Self, HmiError> {
+        let (extra_routes, webrtc, beside) = match video {
+            Some(v) => (Some(v.routes), v.webrtc, v.signalling),
+            None => (None, false, None),
+        };
         let outlet = Outlet::new(endpoint);
         let m2r_outlet = Outlet::every_component(endpoint + 1);
         let off = Self {
             inputs: None,
+            beside: None,
             outlet: outlet.clone(),
             m2r_outlet: m2r_outlet.clone(),
             stop: None,
@@ -463,6 +506,11 @@ impl Hmi {
         }
         tracing::info!(addr = %local, "browser HMI listening on {url}");
         log_access_policy(settings, password.is_some(), signing);
+        let beside = match beside {
+            Some((addr, routes)) => Beside::bind(addr, routes, tls.is_some()).await,
+            None => None,
+        };
+        let beside_addr = beside.as_ref().and_then(|b| b.listener.local_addr().ok());
         let (tx, rx) = mpsc::channel(1024);
         let ctx = HmiContext {
             outlet: outlet.clone(),
@@ -480,10 +528,12 @@ impl Hmi {
             camera_rotation_deg: settings.camera_rotation_deg,
             data_dir,
             extra_routes,
+            webrtc,
             transport: server::Transport {
                 limits: settings.limits,
                 tls: tls.map(|t| t.config),
             },
+            beside,
         };
         let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
         let task = tokio::spawn(async move {
@@ -496,6 +546,7 @@ impl Hmi {
         });
         Ok(Self {
             inputs: Some(rx),
+            beside: beside_addr,
             outlet,
             m2r_outlet,
             stop: Some(stop_tx),
@@ -512,6 +563,11 @@ impl Hmi {
             },
             None => std::future::pending().await,
         }
+    }
+
+    /// Where the port beside the HMI's listens (the WebRTC signalling).
+    pub fn beside_addr(&self) -> Option<SocketAddr> {
+        self.beside
     }
 
     /// The vehicle task's side of the hub.

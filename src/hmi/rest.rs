@@ -220,10 +220,15 @@ async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
     })
 }
 
-/// Whether the page should load `/video.mjpg` (asked first, so a vehicle
-/// without a camera costs the page no failed request).
+/// Whether the page should load `/video.mjpg`, and where WebRTC is
+/// described when it runs (asked first, so a vehicle without a camera or
+/// WebRTC costs the page no failed request).
 async fn video(State(shared): State<Arc<Shared>>) -> Json<serde_json::Value> {
-    Json(serde_json::json!({ "available": shared.video, "url": "/video.mjpg" }))
+    Json(serde_json::json!({
+        "available": shared.video,
+        "url": "/video.mjpg",
+        "webrtc": shared.webrtc.then_some("/api/webrtc"),
+    }))
 }
 
 #[derive(Serialize)]

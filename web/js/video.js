@@ -1,12 +1,21 @@
-// The camera picture: reads the vehicle's MJPEG stream (/video.mjpg) with
-// fetch, so the page knows when each frame arrived, draws every frame on a
-// canvas (rotated as the camera is mounted) and starts the stream again by
-// itself when it stops or the vehicle comes back. The canvas is also what a
-// snapshot saves and a recording records. No DOM outside the canvas it is
-// given. docs/ARCHITECTURE.md is the map of the whole program.
+// The camera picture: over WebRTC when the vehicle offers it (webrtc.js:
+// H.264 decoded by the browser, lighter on the tether), else from the
+// vehicle's MJPEG stream (/video.mjpg) read with fetch. MJPEG shows the
+// first picture while WebRTC connects and stops at WebRTC's first frame; it
+// takes over again by itself when WebRTC fails or stalls. Either way the page knows when each frame arrived,
+// draws every frame on a canvas (rotated as the camera is mounted) and
+// starts the stream again by itself when it stops or the vehicle comes
+// back. The canvas is also what a snapshot saves and a recording records.
+// No DOM outside the canvas it is given. docs/ARCHITECTURE.md is the map
+// of the whole program.
+
+import { WebRtcVideo } from '/js/webrtc.js';
 
 /** A stream that delivers nothing for this long is started again. */
 const RESTART_AFTER_MS = 3000;
+/** A WebRTC session with no picture this long after it began is given up
+ * for MJPEG (ICE and DTLS take well under a second on a tether). */
+const WEBRTC_FIRST_FRAME_MS = 6000;
 const RETRY_MS = 1000;
 /** A part header larger than this is not a part header: resynchronise. */
 const MAX_HEADER = 1024;
@@ -23,6 +32,11 @@ export class Video {
     this.frames = 0;
     this.abort = null;
     this.running = false;
+    this.transport = null; // 'webrtc' or 'mjpeg', once a frame came
+    this.webrtc = null; // the WebRTC session while one runs
+    this.webrtcStartedAt = null;
+    this.webrtcEnded = null; // resolves when that session ends
+    this.webrtcFailed = null; // why WebRTC was given up (MJPEG until the vehicle comes back)
   }
 
   /** Milliseconds since the latest frame (Infinity before the first). */
@@ -35,16 +49,25 @@ export class Video {
     if (this.running) return;
     this.running = true;
     this.loop();
-    // A stream that stalls without closing (a network hiccup) is restarted.
+    // A stream that stalls without closing (a network hiccup) is restarted;
+    // WebRTC that gives no picture is given up for MJPEG.
     setInterval(() => {
-      if (this.abort && this.frameAgeMs() > RESTART_AFTER_MS && this.streamAgeMs() > RESTART_AFTER_MS) {
+      const now = performance.now();
+      const w = this.webrtc;
+      if (w && now - this.webrtcStartedAt > WEBRTC_FIRST_FRAME_MS
+        && (this.transport !== 'webrtc' || this.frameAgeMs(now) > RESTART_AFTER_MS)) {
+        w.end(this.transport === 'webrtc' ? 'the WebRTC picture stopped' : 'no picture over WebRTC');
+      } else if (this.abort && this.frameAgeMs(now) > RESTART_AFTER_MS && this.streamAgeMs() > RESTART_AFTER_MS) {
         this.abort.abort();
       }
     }, 500);
   }
 
-  /** Starts the stream again at once (the vehicle came back). */
+  /** Starts the stream again at once (the vehicle came back): WebRTC is
+   * tried again. A WebRTC session still running is on the live vehicle
+   * (a restarted one closes its signalling), so it goes on. */
   restart() {
+    this.webrtcFailed = null;
     if (this.abort) this.abort.abort();
   }
 
@@ -56,9 +79,14 @@ export class Video {
     for (;;) {
       try {
         const r = await fetch('/api/video', { cache: 'no-store' });
-        const available = r.ok && (await r.json()).available;
+        const info = r.ok ? await r.json() : {};
+        const available = info.available === true;
         this.setAvailable(available);
-        if (available) await this.read();
+        if (available && info.webrtc && !this.webrtc && this.webrtcFailed === null) {
+          await this.startWebRtc(info.webrtc);
+        }
+        if (available && this.webrtc && this.transport === 'webrtc') await this.webrtcEnded;
+        else if (available) await this.read();
       } catch {
         // The vehicle is not answering: try again shortly.
       }
@@ -71,6 +99,38 @@ export class Video {
       this.available = a;
       this.onState();
     }
+  }
+
+  /** Starts a WebRTC session (described at `url`) beside the MJPEG
+   * stream; its first frame stops MJPEG. Nothing when the vehicle lists no
+   * stream. */
+  async startWebRtc(url) {
+    if (typeof RTCPeerConnection === 'undefined') {
+      this.webrtcFailed = 'this browser has no WebRTC';
+      return;
+    }
+    const r = await fetch(url, { cache: 'no-store' });
+    const info = r.ok ? await r.json() : {};
+    if (!info.streams || !info.streams.length) return;
+    let ended;
+    this.webrtcEnded = new Promise((resolve) => { ended = resolve; });
+    const w = new WebRtcVideo({
+      iceServers: info.ice_servers || [],
+      onFrame: (video, width, height) => {
+        this.paint(video, width, height, 'webrtc');
+        if (this.abort) this.abort.abort();
+      },
+      onEnd: (reason) => {
+        this.webrtc = null;
+        this.webrtcFailed = reason;
+        console.info(`video: WebRTC ended (${reason}); MJPEG instead`);
+        ended();
+      },
+    });
+    this.webrtc = w;
+    this.webrtcStartedAt = performance.now();
+    const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
+    w.start(`${scheme}://${location.host}${info.path}`);
   }
 
   /** Reads one /video.mjpg response until it ends or is aborted. */
@@ -107,9 +167,17 @@ export class Video {
     } catch {
       return; // a damaged frame: the next one will do
     }
+    // One more JPEG may come after WebRTC took over: it is older.
+    if (!(this.webrtc && this.transport === 'webrtc')) this.paint(bitmap, bitmap.width, bitmap.height, 'mjpeg');
+    bitmap.close();
+  }
+
+  /** Draws one frame (`src` is `sw` × `sh`) that came over `transport`. */
+  paint(src, sw, sh, transport) {
+    if (!sw || !sh) return;
     const quarter = this.rotation % 180 !== 0;
-    const w = quarter ? bitmap.height : bitmap.width;
-    const h = quarter ? bitmap.width : bitmap.height;
+    const w = quarter ? sh : sw;
+    const h = quarter ? sw : sh;
     const c = this.canvas;
     if (c.width !== w || c.height !== h) {
       c.width = w;
@@ -119,11 +187,15 @@ export class Video {
     ctx.save();
     ctx.translate(w / 2, h / 2);
     ctx.rotate((this.rotation * Math.PI) / 180);
-    ctx.drawImage(bitmap, -bitmap.width / 2, -bitmap.height / 2);
+    ctx.drawImage(src, -sw / 2, -sh / 2, sw, sh);
     ctx.restore();
-    bitmap.close();
     this.lastFrameAt = performance.now();
     this.frames += 1;
+    if (this.transport !== transport) {
+      this.transport = transport;
+      c.dataset.transport = transport;
+      c.title = transport === 'webrtc' ? 'Camera (WebRTC, H.264)' : 'Camera (MJPEG)';
+    }
     if (this.frames === 1) this.onState();
   }
 }

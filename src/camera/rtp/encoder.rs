@@ -117,6 +117,10 @@ impl Encode {
         for s in [
             "-c:v",
             "libx264",
+            // Constrained baseline: what every WebRTC browser decodes
+            // (profile-level-id 42e01f in the WebRTC offer), and QGC too.
+            "-profile:v",
+            "baseline",
             "-preset",
             "ultrafast",
             "-tune",
@@ -366,6 +370,7 @@ mod tests {
         );
         assert!(a.contains("-g 15 "), "{a}");
         assert!(a.contains("repeat-headers=1"), "{a}");
+        assert!(a.contains("-c:v libx264 -profile:v baseline"), "{a}");
         assert!(
             a.ends_with("-f rtp -payload_type 96 rtp://127.0.0.1:5600?pkt_size=1200"),
             "{a}"

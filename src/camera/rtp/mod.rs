@@ -16,6 +16,13 @@
 //! stream copied without decoding (`passthrough`, `-c:v copy`). This module
 //! must never send to an address nobody configured or heard from, nor panic
 //! on what the child does.
+//!
+//! The WebRTC viewers ([`super::webrtc`]) get the same encode: while one
+//! watches, or whenever the encoder runs anyway, the loopback port the
+//! WebRTC side reads is one more destination. So the encoder runs while a
+//! ground station has a destination *or* a WebRTC viewer watches —
+//! `--video-rtp off` stops the RTP to ground stations, not WebRTC — and the
+//! RTP stream announced to ground stations never names the loopback one.
 
 pub(super) mod config;
 mod encoder;
@@ -36,6 +43,7 @@ pub use stations::{GroundStations, STATION_TIMEOUT};
 use super::Camera;
 use super::backoff::Backoff;
 use super::config::CameraConfig;
+use super::webrtc::WebRtcFeed;
 use encoder::{Encode, destinations};
 use passthrough::Copy;
 
@@ -62,7 +70,9 @@ pub struct RtpVideo {
 
 impl RtpVideo {
     /// Starts sending `camera`'s frames to `cfg.rtp`; `auto` destinations
-    /// take their address from `station`.
+    /// take their address from `station`. With `webrtc`, its loopback port
+    /// is a destination too whenever the encoder runs, and the encoder
+    /// runs while a WebRTC viewer wants it.
     ///
     /// # Panics
     /// Outside a tokio runtime.
@@ -70,13 +80,15 @@ impl RtpVideo {
         cfg: &CameraConfig,
         camera: &Camera,
         station: watch::Receiver<Option<IpAddr>>,
+        webrtc: Option<WebRtcFeed>,
     ) -> RtpVideo {
         let (stream_tx, stream) = watch::channel(None);
         let (pid_tx, pid) = watch::channel(None);
         let off = cfg.rtp.iter().all(|d| *d == RtpDest::Off);
-        let task = (!off).then(|| {
+        let task = (!off || webrtc.is_some()).then(|| {
             let sup = Supervisor {
                 dests: cfg.rtp.clone(),
+                webrtc: webrtc.as_ref().map(|w| w.port),
                 h264: cfg.h264.clone(),
                 camera_fps: cfg.fps,
                 stall: cfg.stall_timeout(),
@@ -84,7 +96,8 @@ impl RtpVideo {
                 stream: stream_tx,
                 pid: pid_tx,
             };
-            tokio::spawn(sup.run(camera.clone_handle(), station))
+            let wanted = webrtc.map(|w| w.wanted);
+            tokio::spawn(sup.run(camera.clone_handle(), Wants { station, wanted }))
         });
         RtpVideo { stream, pid, task }
     }
@@ -115,8 +128,59 @@ impl Drop for RtpVideo {
     }
 }
 
+/// What the destinations follow: the ground station's address, and
+/// whether a WebRTC viewer wants the stream.
+struct Wants {
+    station: watch::Receiver<Option<IpAddr>>,
+    wanted: Option<watch::Receiver<bool>>,
+}
+
+impl Wants {
+    /// The next change of either (pending forever once both are gone).
+    async fn changed(&mut self) {
+        let Wants { station, wanted } = self;
+        let viewers = async {
+            if let Some(w) = wanted.as_mut()
+                && w.changed().await.is_ok()
+            {
+                return;
+            }
+            std::future::pending::<()>().await;
+        };
+        let moved = async {
+            if station.changed().await.is_err() {
+                std::future::pending::<()>().await;
+            }
+        };
+        tokio::select! {
+            () = moved => {}
+            () = viewers => {}
+        }
+    }
+}
+
+/// Where one run sends: the ground stations' destinations (announced)
+/// and, for the WebRTC viewers, the loopback port.
+#[derive(Debug, Clone, PartialEq)]
+struct Dests {
+    stations: Vec<(String, u16)>,
+    webrtc: Option<(String, u16)>,
+}
+
+impl Dests {
+    fn all(&self) -> Vec<(String, u16)> {
+        self.stations
+            .iter()
+            .cloned()
+            .chain(self.webrtc.clone())
+            .collect()
+    }
+}
+
 struct Supervisor {
     dests: Vec<RtpDest>,
+    /// The WebRTC side's loopback port.
+    webrtc: Option<u16>,
     h264: H264Config,
     camera_fps: f64,
     stall: std::time::Duration,
@@ -126,45 +190,59 @@ struct Supervisor {
 }
 
 impl Supervisor {
-    fn current(&self, station: &mut watch::Receiver<Option<IpAddr>>) -> Vec<(String, u16)> {
-        let auto = *station.borrow_and_update();
-        destinations(&self.dests, auto, self.h264.auto_port)
+    /// The destinations now: the ground stations', and the WebRTC
+    /// loopback while a viewer wants it or the encoder runs anyway (so a
+    /// viewer coming or going never restarts a ground station's stream).
+    fn current(&self, wants: &Wants) -> Dests {
+        let auto = *wants.station.borrow();
+        let stations = destinations(&self.dests, auto, self.h264.auto_port);
+        let wanted = wants.wanted.as_ref().is_some_and(|w| *w.borrow());
+        let webrtc = self
+            .webrtc
+            .filter(|_| wanted || !stations.is_empty())
+            .map(|port| ("127.0.0.1".to_owned(), port));
+        Dests { stations, webrtc }
     }
 
     /// One run encoding the camera's pictures.
-    async fn encode(&self, camera: &super::CameraHandle, dests: &[(String, u16)]) -> RtpError {
-        let enc = Encode::new(&self.h264, self.camera_fps, dests.to_vec());
-        tracing::info!(to = ?dests, fps = enc.fps, "RTP video: starting the H.264 encoder");
+    async fn encode(&self, camera: &super::CameraHandle, dests: &Dests) -> RtpError {
+        let enc = Encode::new(&self.h264, self.camera_fps, dests.all());
+        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), fps = enc.fps, "RTP video: starting the H.264 encoder");
         // Frames are wanted while the encoder runs.
         let _demand = camera.demand();
         let mut frames = camera.subscribe();
-        let uri = RtpDest::udp_uri(&dests[0].0, dests[0].1);
         encoder::run(&self.h264.program, &enc, &mut frames, |p, (w, h)| {
-            self.announce(p, uri.clone(), (w, h), enc.fps);
+            self.announce(p, &dests.stations, (w, h), enc.fps);
         })
         .await
     }
 
     /// One run copying the H.264 the camera gives: the camera's pictures
     /// are not asked for.
-    async fn copy(&self, dests: &[(String, u16)]) -> RtpError {
+    async fn copy(&self, dests: &Dests) -> RtpError {
         let copy = Copy {
             input: self.h264.passthrough.clone(),
-            dests: dests.to_vec(),
+            dests: dests.all(),
             stall: self.stall,
         };
-        tracing::info!(to = ?dests, "RTP video: passing the camera's H.264 through");
-        let uri = RtpDest::udp_uri(&dests[0].0, dests[0].1);
+        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), "RTP video: passing the camera's H.264 through");
         let (w, h, fps) = self.h264.passthrough_shape();
         passthrough::run(&self.h264.program, &copy, |p| {
-            self.announce(p, uri.clone(), (w, h), fps);
+            self.announce(p, &dests.stations, (w, h), fps);
         })
         .await
     }
 
-    /// The stream runs: say so to the camera component.
-    fn announce(&self, pid: Option<u32>, uri: String, (w, h): (u32, u32), fps: f64) {
+    /// The stream runs: say so to the camera component, naming the first
+    /// ground station's destination (none: only WebRTC viewers watch, and
+    /// no RTP stream is announced).
+    fn announce(&self, pid: Option<u32>, stations: &[(String, u16)], (w, h): (u32, u32), fps: f64) {
         self.pid.send_replace(pid);
+        let Some((host, port)) = stations.first() else {
+            self.stream.send_replace(None);
+            return;
+        };
+        let uri = RtpDest::udp_uri(host, *port);
         self.stream.send_replace(Some(RtpStream {
             uri,
             width: u16::try_from(w).unwrap_or(u16::MAX),
@@ -174,21 +252,15 @@ impl Supervisor {
         }));
     }
 
-    async fn run(
-        mut self,
-        camera: super::CameraHandle,
-        mut station: watch::Receiver<Option<IpAddr>>,
-    ) {
+    async fn run(mut self, camera: super::CameraHandle, mut wants: Wants) {
         let mut logged_not_found = false;
         loop {
-            let dests = self.current(&mut station);
-            if dests.is_empty() {
+            let dests = self.current(&wants);
+            if dests.stations.is_empty() && dests.webrtc.is_none() {
                 self.stream.send_replace(None);
                 self.pid.send_replace(None);
                 tracing::info!("RTP video: no destination, not sending");
-                if station.changed().await.is_err() {
-                    return;
-                }
+                wants.changed().await;
                 continue;
             }
             let started = Instant::now();
@@ -197,15 +269,12 @@ impl Supervisor {
             } else {
                 self.copy(&dests).boxed()
             };
-            let station = &mut station;
-            let (cfg_dests, auto_port) = (&self.dests, self.h264.auto_port);
+            let this = &self;
+            let wants = &mut wants;
             let moved = async {
                 loop {
-                    if station.changed().await.is_err() {
-                        return std::future::pending().await;
-                    }
-                    let auto = *station.borrow();
-                    if destinations(cfg_dests, auto, auto_port) != dests {
+                    wants.changed().await;
+                    if this.current(wants) != dests {
                         return;
                     }
                 }

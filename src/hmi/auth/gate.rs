@@ -101,6 +101,25 @@ fn split_host(hostport: &str) -> Option<&str> {
     }
 }
 
+/// `host[:port]` with its port replaced by `port` (left out when it is
+/// the scheme's default, as browsers write origins); `None` when `host` has
+/// a port that is not a number.
+pub fn with_port(host: &str, port: u16, tls: bool) -> Option<String> {
+    let host = host.trim();
+    let name = split_host(host)?;
+    let name = if name.contains(':') {
+        format!("[{name}]")
+    } else {
+        name.to_owned()
+    };
+    let default = if tls { 443 } else { 80 };
+    Some(if port == default {
+        name
+    } else {
+        format!("{name}:{port}")
+    })
+}
+
 /// The Host and Origin rules (see [`Gate::host_ok`], [`Gate::origin_ok`]).
 #[derive(Debug, Clone, Default)]
 pub struct Gate {
@@ -220,6 +239,21 @@ mod tests {
         ] {
             assert!(!g.host_ok(h), "{h}");
         }
+    }
+
+    #[test]
+    fn a_port_beside_knows_the_page_on_the_hmis_port() {
+        assert_eq!(
+            with_port("192.168.2.2:6021", 8080, false).as_deref(),
+            Some("192.168.2.2:8080")
+        );
+        assert_eq!(
+            with_port("[::1]:6021", 8080, false).as_deref(),
+            Some("[::1]:8080")
+        );
+        assert_eq!(with_port("rov", 80, false).as_deref(), Some("rov"));
+        assert_eq!(with_port("rov:6021", 443, true).as_deref(), Some("rov"));
+        assert_eq!(with_port("rov:x", 8080, false), None);
     }
 
     #[test]

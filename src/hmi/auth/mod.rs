@@ -20,7 +20,7 @@ mod password;
 mod throttle;
 
 pub use bursts::{BURST_QUIET, Bursts, loggable};
-pub use gate::{Gate, OpenControl, machine_hostname, parse_origin};
+pub use gate::{Gate, OpenControl, machine_hostname, parse_origin, with_port};
 pub use login::{COOKIE, LOGIN_LIFETIME, Tokens, cookie_value};
 pub use password::{
     MAX_PASSWORD_BYTES, MIN_PASSWORD_CHARS, PASSWORD_FILE, PasswordError, PasswordStore,

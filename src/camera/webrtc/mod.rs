@@ -1,0 +1,201 @@
+//! Video over WebRTC for Cockpit and the browser page, from the one H.264
+//! encode the RTP path makes: no encoder per viewer.
+//!
+//! While any viewer has a session, the RTP supervisor ([`super::rtp`])
+//! sends to one more destination, a loopback port this module reads
+//! (`hub`): the encoder's packets are put back together into pictures
+//! (`depay`) and each is handed to every viewer's peer connection
+//! (`peer`, str0m's sans-IO WebRTC), which packetizes, encrypts and sends
+//! it from the vehicle's own addresses (`net`; `stun` adds the public one
+//! when STUN servers are configured).
+//!
+//! Viewers find the stream through mavlink-camera-manager's signalling
+//! protocol (`protocol`, `signalling`), on a WebSocket at `/webrtc` on the
+//! HMI's port and at `/` on a port of its own (6021, where Cockpit looks):
+//! [`WebRtc::routes`] and [`WebRtc::signalling_routes`], served by the HMI
+//! behind its Host and Origin rules (`ws`).
+//!
+//! This module must never run a second encoder, send to an address no
+//! viewer's ICE checks came from, or panic on what a client or the network
+//! sends.
+
+pub mod config;
+pub mod depay;
+mod hub;
+mod net;
+pub mod peer;
+pub mod protocol;
+pub mod signalling;
+mod stun;
+mod ws;
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Instant;
+
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinHandle;
+
+pub use config::{
+    DEFAULT_MAX_VIEWERS, IceServer, IceServerError, MCM_SIGNALLING_PORT, SignallingAddr,
+    SignallingAddrError, WebRtcConfig, WebRtcConfigError,
+};
+pub use ws::PATH;
+
+use super::config::{CameraConfig, SourceKind};
+use protocol::Stream;
+
+/// What the RTP supervisor needs: the loopback port to add as a
+/// destination, and whether any viewer wants it now.
+#[derive(Debug, Clone)]
+pub struct WebRtcFeed {
+    pub port: u16,
+    pub wanted: watch::Receiver<bool>,
+}
+
+/// The running WebRTC side. Dropping it (or [`shutdown`](WebRtc::shutdown))
+/// ends every session.
+#[derive(Debug)]
+pub struct WebRtc {
+    feed: WebRtcFeed,
+    ctx: Arc<ws::Ctx>,
+    task: Option<JoinHandle<()>>,
+}
+
+impl std::fmt::Debug for ws::Ctx {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WebRtcCtx")
+            .field("stream", &self.stream)
+            .finish()
+    }
+}
+
+impl WebRtc {
+    /// Binds the loopback port the encoder will send to and starts the
+    /// hub (the media sockets are bound on each of the vehicle's addresses).
+    ///
+    /// # Errors
+    /// When no loopback UDP port can be bound.
+    ///
+    /// # Panics
+    /// Outside a tokio runtime.
+    pub fn start(cfg: &WebRtcConfig, stream: Option<Stream>) -> std::io::Result<WebRtc> {
+        let rtp = std::net::UdpSocket::bind(SocketAddr::from(([127, 0, 0, 1], 0)))?;
+        rtp.set_nonblocking(true)?;
+        let rtp = tokio::net::UdpSocket::from_std(rtp)?;
+        let port = rtp.local_addr()?.port();
+        let (wanted_tx, wanted) = watch::channel(false);
+        let (commands_tx, commands) = mpsc::channel(256);
+        let (inbound_tx, inbound) = mpsc::channel(1024);
+        let mut sockets = net::Sockets::new(cfg.udp_port, inbound_tx);
+        sockets.refresh();
+        let stun_servers = cfg
+            .ice_servers
+            .iter()
+            .filter(|s| s.is_stun())
+            .filter_map(|s| s.parts().ok().map(|(_, h, p)| (h, p)))
+            .collect();
+        let hub = hub::Hub {
+            commands,
+            rtp,
+            wanted: wanted_tx,
+            max_viewers: cfg.max_viewers,
+            sockets,
+            inbound,
+            reflexive: stun::Reflexive::new(stun_servers, Instant::now()),
+        };
+        tracing::info!(
+            loopback = port,
+            stream = stream.as_ref().map(|s| s.id.as_str()),
+            "WebRTC ready"
+        );
+        let task = tokio::spawn(hub.run());
+        let ctx = Arc::new(ws::Ctx::new(commands_tx, stream, cfg.ice_servers.clone()));
+        Ok(WebRtc {
+            feed: WebRtcFeed { port, wanted },
+            ctx,
+            task: Some(task),
+        })
+    }
+
+    pub fn feed(&self) -> WebRtcFeed {
+        self.feed.clone()
+    }
+
+    /// `/webrtc` (the signalling WebSocket) and `GET /api/webrtc`: merge
+    /// into the HMI's router.
+    pub fn routes(&self) -> axum::Router {
+        ws::routes(Arc::clone(&self.ctx))
+    }
+
+    /// The signalling WebSocket at `/`, for the dedicated port.
+    pub fn signalling_routes(&self) -> axum::Router {
+        ws::signalling_routes(Arc::clone(&self.ctx))
+    }
+
+    /// Where the dedicated port listens (for `GET /api/webrtc`).
+    pub fn set_signalling_addr(&self, addr: Option<SocketAddr>) {
+        if let Ok(mut a) = self.ctx.signalling.lock() {
+            *a = addr;
+        }
+    }
+
+    pub async fn shutdown(mut self) {
+        if let Some(t) = self.task.take() {
+            t.abort();
+            let _ = t.await;
+        }
+    }
+}
+
+impl Drop for WebRtc {
+    fn drop(&mut self) {
+        if let Some(t) = self.task.take() {
+            t.abort();
+        }
+    }
+}
+
+/// The camera as `availableStreams` lists it: one H.264 stream with the
+/// encode's size and rate (what the configuration says; unknown ones are
+/// `null`), or none without a camera. `id` is the stream's id for this run.
+pub fn stream_of(cfg: &CameraConfig, id: String) -> Option<Stream> {
+    let h = &cfg.h264;
+    let passthrough = !h.passthrough.is_empty();
+    if cfg.source == SourceKind::None && !passthrough {
+        return None;
+    }
+    let (w, hgt, fps) = if passthrough {
+        h.passthrough_shape()
+    } else if h.width > 0 {
+        (h.width, h.height, if h.fps > 0.0 { h.fps } else { cfg.fps })
+    } else if cfg.source == SourceKind::Synthetic {
+        (
+            cfg.width,
+            cfg.height,
+            if h.fps > 0.0 { h.fps } else { cfg.fps },
+        )
+    } else {
+        (0, 0, if h.fps > 0.0 { h.fps } else { cfg.fps })
+    };
+    let known = |v: u32| (v > 0).then_some(v);
+    Some(Stream {
+        id,
+        name: "Neptunus camera".into(),
+        encode: Some("H264".into()),
+        height: known(hgt),
+        width: known(w),
+        interval: (fps > 0.0).then(|| format!("1/{}", fps.round() as u32)),
+        source: Some(if passthrough {
+            "h264-passthrough".to_owned()
+        } else {
+            cfg.source.as_str().to_owned()
+        }),
+        created: None,
+    })
+}
+
+/// A new stream id (a random UUID, as mavlink-camera-manager's).
+pub fn new_stream_id() -> String {
+    ws::uuid()
+}

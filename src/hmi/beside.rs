@@ -1,0 +1,68 @@
+//! A port beside the HMI's: the WebRTC signalling, where Cockpit looks for
+//! it (6021), served with the HMI's guard (Host and Origin; the page's own
+//! origin there is the HMI's port), security headers and TLS.
+//!
+//! The routes are the camera's (`camera::webrtc`); this file only binds
+//! and serves them. A port that cannot be bound is a warning, never a
+//! failed start: `/webrtc` on the HMI's port still serves the viewers.
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+
+use tokio::net::TcpListener;
+use tokio::task::JoinHandle;
+
+use super::{Shared, guard, headers, server};
+
+/// What the HMI serves of the camera: its routes (`/video.mjpg` …, and
+/// WebRTC's when it runs) and the WebRTC signalling's own port.
+pub struct VideoRoutes {
+    pub routes: axum::Router,
+    /// `/webrtc` and `/api/webrtc` are among `routes`.
+    pub webrtc: bool,
+    /// The signalling's own address and its routes; a port that cannot be
+    /// bound is logged and left out.
+    pub signalling: Option<(SocketAddr, axum::Router)>,
+}
+
+/// A listener beside the HMI's and what it serves.
+pub struct Beside {
+    pub listener: TcpListener,
+    pub routes: axum::Router,
+}
+
+impl Beside {
+    /// Binds `addr`; `None`, with the reason and the fix in the log, when
+    /// it cannot.
+    pub(super) async fn bind(addr: SocketAddr, routes: axum::Router, tls: bool) -> Option<Beside> {
+        match TcpListener::bind(addr).await {
+            Ok(listener) => {
+                let at = listener.local_addr().unwrap_or(addr);
+                let scheme = if tls { "wss" } else { "ws" };
+                tracing::info!(addr = %at, "WebRTC signalling (mavlink-camera-manager's protocol) on {scheme}://{at}/");
+                Some(Beside { listener, routes })
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "cannot listen for WebRTC signalling on {addr}: {e} — viewers can still use /webrtc on the HMI's port; \
+                     free the port (is mavlink-camera-manager running?) or set camera.webrtc.signalling (--webrtc-signalling)"
+                );
+                None
+            }
+        }
+    }
+
+    /// Serves the routes behind the guard until `stopped` resolves.
+    pub(super) fn spawn(
+        self,
+        shared: &Arc<Shared>,
+        page_port: u16,
+        transport: server::Transport,
+        stopped: impl Future<Output = ()> + Send + 'static,
+    ) -> JoinHandle<std::io::Result<()>> {
+        let app = guard::layer_beside(self.routes, Arc::clone(shared), page_port)
+            .layer(axum::middleware::from_fn(headers::security_headers));
+        tokio::spawn(server::run(self.listener, app, transport, stopped))
+    }
+}
