@@ -15,30 +15,37 @@
 //!   the firmware's own arithmetic.
 //! - [`pins`]: the board's outputs as an instrument reads them: ESC and
 //!   servo pulse widths from pin edges, lights and lasers from their timer.
-//! - [`runner`]: [`GenuineBoard`], the firmware paced to the wall clock on
+//! - `bench`: the board without a clock — the firmware in simavr with what
+//!   is wired to it ([`Wiring`], [`Analog`]), run to a given cycle.
+//! - [`runner`]: [`GenuineBoard`], the bench paced to the wall clock on
 //!   its own thread, its UART0 on a pty, its analog inputs set in volts and
 //!   amperes, its depth sensor's water, its IMU's attitude, a reset line,
 //!   and the records tests and benches read.
+//! - [`surroundings`]: the simulated vehicle around the board (ESC pulses
+//!   in, sensor inputs out, on the board's time), sans-IO.
+//! - [`rov`]: [`HilRov`], the loop closed at real time for `neptunus --hil`.
 //!
 //! The firmware is test data, not part of Neptunus: this module builds and
 //! runs it, it never changes it. Nothing here decides what the vehicle
 //! does; the firmware decides what the board does.
 
 mod avr;
+mod bench;
 pub mod bno055;
 pub mod compile;
 pub mod ms5803;
 pub mod pins;
 pub mod rov;
 pub mod runner;
+pub mod surroundings;
 
 pub use avr::{AvrError, F_CPU_HZ};
+pub use bench::{Analog, Wiring};
 pub use bno055::Attitude;
 pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
 pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};
 pub use rov::{HilError, HilRov};
 pub use runner::{
-    Analog, GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
-    Wiring,
+    GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
 };
