@@ -36,7 +36,7 @@ const fn ioctl(a: u8, b: u8, c: u8, d: u8) -> u32 {
 }
 
 /// What can go wrong loading or running the firmware.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum AvrError {
     #[error("simavr does not know the MCU {0:?}")]
     UnknownMcu(String),

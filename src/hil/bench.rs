@@ -8,9 +8,9 @@
 //! it: the host's bytes go onto the UART line as its receiver takes them
 //! (injected frames between two of the host's), the firmware's prints come
 //! back, and pin edges become pulse widths ([`super::pins`]). Both ways of
-//! running the board can use it: [`super::runner`] paces it to the wall
-//! clock behind a pty. It never reads a clock and never decides what the
-//! board does.
+//! running the board use it: [`super::runner`] paces it to the wall clock
+//! behind a pty, [`super::lockstep`] steps it by simulated time beside a
+//! scenario. It never reads a clock and never decides what the board does.
 
 use std::cell::RefCell;
 use std::collections::VecDeque;

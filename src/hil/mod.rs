@@ -1,8 +1,8 @@
 //! The genuine OpenROV firmware in the loop (feature `hil`): the controller
 //! board's own firmware, built from source and run in the simavr AVR
-//! simulator at real time behind a pseudo-terminal, so that Neptunus's
-//! serial link talks to what runs on the ROV rather than to our reading of
-//! it.
+//! simulator — at real time behind a pseudo-terminal, or in lock-step with
+//! a scenario's simulated time — so that Neptunus talks to what runs on the
+//! ROV rather than to our reading of it.
 //!
 //! - [`compile`]: finds the sketch and builds it with avr-gcc and Debian's
 //!   Arduino AVR core, caching the ELF.
@@ -24,6 +24,8 @@
 //! - [`surroundings`]: the simulated vehicle around the board (ESC pulses
 //!   in, sensor inputs out, on the board's time), sans-IO.
 //! - [`rov`]: [`HilRov`], the loop closed at real time for `neptunus --hil`.
+//! - [`lockstep`]: the loop closed on a scenario's simulated time for
+//!   `neptunus sim-report --hil`.
 //!
 //! The firmware is test data, not part of Neptunus: this module builds and
 //! runs it, it never changes it. Nothing here decides what the vehicle
@@ -33,6 +35,7 @@ mod avr;
 mod bench;
 pub mod bno055;
 pub mod compile;
+pub mod lockstep;
 pub mod ms5803;
 pub mod pins;
 pub mod rov;

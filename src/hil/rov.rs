@@ -4,7 +4,8 @@
 //!
 //! Owns the loop between the two, on its own thread: every few
 //! milliseconds it hands the board's time and measured ESC pulses to the
-//! simulated vehicle ([`super::surroundings`]) and the vehicle's readings back to the
+//! simulated vehicle ([`super::surroundings`], the same coupling the
+//! scenarios use on simulated time) and the vehicle's readings back to the
 //! board's sensors and ADC pins. So every number Neptunus reads has been
 //! through the firmware's own conversions, and every thrust through its own
 //! motor code. It decides nothing: the firmware decides what the board

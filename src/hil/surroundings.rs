@@ -6,8 +6,9 @@
 //! inputs are given.
 //!
 //! Owns that coupling and nothing else: whoever runs the board —
-//! [`super::rov`] on a thread at real time — passes the board's time and
-//! pulses in and hands the readings to the board. It never reads a clock. The sensors
+//! [`super::rov`] on a thread at real time, [`super::lockstep`] beside a
+//! scenario on simulated time — passes the board's time and pulses in and
+//! hands the readings to the board. It never reads a clock. The sensors
 //! get the plant's clean readings: the imperfections the board emulator
 //! adds (noise, bias, wild points) are the simulated chips' to add, and
 //! these add none; what the firmware does to them (rates, resolution,
