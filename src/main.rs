@@ -142,10 +142,10 @@ fn sim_report(
     run: &config::RunArgs,
 ) -> anyhow::Result<()> {
     use neptunus::scenario::report;
-    let outcomes = report::all();
     let mut out = std::io::stdout();
     let written = match hil {
         None => {
+            let outcomes = report::all();
             for o in &outcomes {
                 for (name, value, unit) in &o.metrics {
                     writeln!(out, "{:<22} {name:<28} {value:>9.3} {unit}", o.name)?;
@@ -154,7 +154,9 @@ fn sim_report(
             report::write(dir, &outcomes)?
         }
         Some(firmware) => {
+            // The firmware first: a build or a board that fails says so at once.
             let genuine = sim_report_hil(firmware, run)?;
+            let outcomes = report::all();
             write!(out, "{}", report::comparison_text(&outcomes, &genuine))?;
             report::write_beside(dir, &outcomes, &genuine)?
         }
