@@ -12,8 +12,10 @@
 #![cfg(feature = "hil")]
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::print_stdout)]
 
+mod common;
+
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::sync::OnceLock;
 
@@ -23,21 +25,6 @@ use neptunus::scenario::report;
 
 const DEPTH_BAND_M: f64 = 0.15;
 const HEADING_BAND_DEG: f64 = 5.0;
-
-fn firmware_dir() -> PathBuf {
-    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
-        });
-    let dir = root.join("30.0.2");
-    assert!(
-        dir.join("OpenROV/OpenROV.ino").is_file(),
-        "the genuine OpenROV firmware is not at {} — set OPENROV_FIRMWARE_DIR",
-        dir.display()
-    );
-    dir
-}
 
 /// Where the firmware is built and cached: the binary's `--data-dir` puts
 /// its cache in `<data dir>/openrov-firmware`, as the other tests' is.
@@ -50,8 +37,11 @@ fn data_dir() -> &'static Path {
 fn firmware() -> &'static Firmware {
     static BUILT: OnceLock<Firmware> = OnceLock::new();
     BUILT.get_or_init(|| {
-        prepare(&firmware_dir(), &data_dir().join("openrov-firmware"))
-            .unwrap_or_else(|e| panic!("building the 30.0.2 firmware: {e}"))
+        prepare(
+            &common::firmware_dir("30.0.2"),
+            &data_dir().join("openrov-firmware"),
+        )
+        .unwrap_or_else(|e| panic!("building the 30.0.2 firmware: {e}"))
     })
 }
 
@@ -140,7 +130,7 @@ fn with_the_genuine_firmware_in_the_loop_depth_and_heading_hold_and_surface_work
     let run = Command::new(env!("CARGO_BIN_EXE_neptunus"))
         .arg("sim-report")
         .arg("--hil")
-        .arg(firmware_dir())
+        .arg(common::firmware_dir("30.0.2"))
         .arg(out.path())
         .arg("--data-dir")
         .arg(data_dir())
