@@ -401,7 +401,7 @@ pub fn write(dir: &Path, outcomes: &[Outcome]) -> Result<Vec<PathBuf>, ReportErr
     write_files(dir, &[(outcomes, "")], &summary)
 }
 
-/// Writes the simulator's files as [`write`] does, the other run's beside
+/// Writes the simulator's files as [`write()`] does, the other run's beside
 /// them with [`HIL_SUFFIX`] (`DIR/<scenario>-hil.csv`, `.png`), and
 /// `DIR/summary.md` with the two side by side ([`comparison`]).
 pub fn write_beside(
