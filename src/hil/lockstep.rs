@@ -115,11 +115,10 @@ impl std::fmt::Debug for HilRig {
 impl HilRig {
     /// Powers up the board running `firmware` in the simulated vehicle of
     /// `opts`, at rest at this depth and heading, and runs it until the
-    /// link is up and
-    /// the firmware prints navigation lines: a ROV on deck, its board in
-    /// its loop, before the scenario's time zero. (The link may report
-    /// itself up earlier, on the firmware's set-up prints; commands then
-    /// would meet a board still setting up.)
+    /// link is up and the firmware prints navigation lines: a ROV on deck,
+    /// its board in its loop, before the scenario's time zero. (The link
+    /// may report itself up earlier, on the firmware's set-up prints;
+    /// commands then would meet a board still setting up.)
     pub fn boot(
         firmware: &Firmware,
         opts: &EmulatorOptions,
@@ -209,7 +208,8 @@ impl HilRig {
     }
 
     fn instant(&self, cycle: u64) -> Instant {
-        self.origin + Duration::from_nanos(cycle * 1_000_000_000 / F_CPU_HZ)
+        let ns = u128::from(cycle) * 1_000_000_000 / u128::from(F_CPU_HZ);
+        self.origin + Duration::from_nanos(ns.min(u128::from(u64::MAX)) as u64)
     }
 
     /// Runs the board, the link and the water to cycle `end`.
