@@ -19,8 +19,9 @@
 //!   failsafes, estimator, autopilots, parameters, telemetry) — sans-IO.
 //! - [`scenario`]: closed-loop scenarios on simulated time (`sim-report`).
 //! - `hil` (feature `hil`): the genuine OpenROV firmware built from source
-//!   and run in the simavr AVR simulator behind a pty, for tests against the
-//!   real board's behaviour.
+//!   and run in the simavr AVR simulator — behind a pty at real time, or in
+//!   lock-step with a scenario — for tests against the real board's
+//!   behaviour, `--hil` and `sim-report --hil`.
 //! - [`camera`]: video sources (synthetic, ffmpeg, mjpg-streamer, url) and
 //!   the MJPEG, snapshot and status routes.
 

@@ -38,17 +38,7 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
         Some(CliCommand::Profiles {
             command: ProfilesCommand::Check { dir },
         }) => profiles_check(dir.as_deref())?,
-        Some(CliCommand::SimReport { dir }) => {
-            let outcomes = neptunus::scenario::report::all();
-            let mut out = std::io::stdout();
-            for o in &outcomes {
-                for (name, value, unit) in &o.metrics {
-                    writeln!(out, "{:<22} {name:<28} {value:>9.3} {unit}", o.name)?;
-                }
-            }
-            let written = neptunus::scenario::report::write(&dir, &outcomes)?;
-            writeln!(out, "wrote {} files to {}", written.len(), dir.display())?;
-        }
+        Some(CliCommand::SimReport { dir, hil }) => sim_report(&dir, hil.as_deref(), &cli.run)?,
         Some(CliCommand::Doctor { json }) => {
             let report = neptunus::doctor::run(&cli.run);
             let mut out = std::io::stdout();
@@ -142,6 +132,79 @@ fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::R
     rt.block_on(shutdown_signal());
     drop(board);
     Ok(())
+}
+
+/// `sim-report [--hil FIRMWARE] DIR`: the scenarios on the simulator, and
+/// with the genuine firmware in the loop beside them if asked.
+fn sim_report(
+    dir: &std::path::Path,
+    hil: Option<&std::path::Path>,
+    run: &config::RunArgs,
+) -> anyhow::Result<()> {
+    use neptunus::scenario::report;
+    let mut out = std::io::stdout();
+    let written = match hil {
+        None => {
+            let outcomes = report::all();
+            for o in &outcomes {
+                for (name, value, unit) in &o.metrics {
+                    writeln!(out, "{:<22} {name:<28} {value:>9.3} {unit}", o.name)?;
+                }
+            }
+            report::write(dir, &outcomes)?
+        }
+        Some(firmware) => {
+            // The firmware first: a build or a board that fails says so at once.
+            let genuine = sim_report_hil(firmware, run)?;
+            let outcomes = report::all();
+            write!(out, "{}", report::comparison_text(&outcomes, &genuine))?;
+            report::write_beside(dir, &outcomes, &genuine)?
+        }
+    };
+    writeln!(out, "wrote {} files to {}", written.len(), dir.display())?;
+    Ok(())
+}
+
+/// The scenarios with the genuine firmware in the loop, and what that took.
+#[cfg(feature = "hil")]
+fn sim_report_hil(
+    firmware: &std::path::Path,
+    run: &config::RunArgs,
+) -> anyhow::Result<Vec<neptunus::scenario::report::Outcome>> {
+    use neptunus::hil::lockstep::GenuineRigs;
+    let cache = config::resolve(run)?.data_dir.join("openrov-firmware");
+    let firmware = neptunus::hil::prepare(firmware, &cache)?;
+    let mut out = std::io::stdout();
+    writeln!(
+        out,
+        "running the scenarios with the genuine firmware {} ({}) in simavr …",
+        firmware.elf.display(),
+        firmware.framing
+    )?;
+    let started = std::time::Instant::now();
+    let mut rigs = GenuineRigs::new(firmware);
+    let outcomes = neptunus::scenario::report::all_on(&mut rigs)?;
+    let wall_s = started.elapsed().as_secs_f64();
+    let board_s: f64 = outcomes
+        .iter()
+        .map(|o| o.samples.last().map_or(0.0, |s| s.t_s))
+        .chain(rigs.runs().iter().map(|f| f.boot_s))
+        .sum();
+    writeln!(
+        out,
+        "{} scenarios, {board_s:.0} s of board time (boot included) in {wall_s:.0} s of wall time ({:.1}× real time)",
+        outcomes.len(),
+        board_s / wall_s.max(1e-9)
+    )?;
+    Ok(outcomes)
+}
+
+#[cfg(not(feature = "hil"))]
+fn sim_report_hil(
+    _firmware: &std::path::Path,
+    _run: &config::RunArgs,
+) -> anyhow::Result<Vec<neptunus::scenario::report::Outcome>> {
+    anyhow::bail!(config::hil_not_built("sim-report --hil FIRMWARE DIR"))
 }
 
 /// `--check`: what the configuration resolves to, for the operator to read.

@@ -26,6 +26,30 @@ fn missing_serial_device_is_one_clear_line_suggesting_sim() {
     assert!(lines[0].contains("--sim"), "{err}");
 }
 
+/// The genuine firmware's scenarios need the `hil` feature; without it the
+/// flag is there and says how to get a build that has it, before running
+/// anything.
+#[cfg(not(feature = "hil"))]
+#[test]
+fn sim_report_with_the_firmware_in_the_loop_says_how_to_get_a_build_with_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report");
+    let out = Command::new(BIN)
+        .args(["sim-report", "--hil", "../shared/openrov-firmware/30.0.2"])
+        .arg(&report)
+        .arg("--data-dir")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("the `hil` feature"), "{err}");
+    assert!(err.contains("sim-report --hil FIRMWARE DIR"), "{err}");
+    assert!(err.contains("gcc-avr"), "{err}");
+    assert!(!report.exists(), "nothing written");
+}
+
 #[test]
 fn bad_config_file_names_line_and_key() {
     let dir = tempfile::tempdir().unwrap();

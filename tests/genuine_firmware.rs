@@ -16,7 +16,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
@@ -40,24 +40,6 @@ const WAIT: Duration = Duration::from_secs(15);
 
 fn bin() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_neptunus"))
-}
-
-/// The firmware snapshot `version` (`30.0.2`, `2014-12`).
-fn firmware_dir(version: &str) -> PathBuf {
-    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
-        });
-    let dir = root.join(version);
-    assert!(
-        dir.join("OpenROV/OpenROV.ino").is_file(),
-        "the genuine OpenROV firmware {version} is not at {} — set OPENROV_FIRMWARE_DIR to a folder \
-         holding {version}/ (git clone https://github.com/OpenROV/openrov-software-arduino {version} \
-         && git -C {version} checkout {version}; the 2014-12 snapshot is commit 60a085280663)",
-        dir.display()
-    );
-    dir
 }
 
 fn neutral(us: Option<f64>) -> bool {
@@ -121,7 +103,7 @@ impl GenuineRig {
     /// starts `neptunus --serial <its pty>`.
     fn start(version: &str, add_ons: bool) -> Self {
         let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
-        let firmware = prepare(&firmware_dir(version), &cache)
+        let firmware = prepare(&common::firmware_dir(version), &cache)
             .unwrap_or_else(|e| panic!("building the {version} firmware: {e}"));
         let framing = firmware.framing.to_string();
         let analog = Analog {

@@ -14,7 +14,9 @@
 #![cfg(feature = "hil")]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::Path;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::time::{Duration, Instant};
 
@@ -45,24 +47,8 @@ fn one_board() -> std::sync::MutexGuard<'static, ()> {
 
 fn firmware_30_0_2() -> Firmware {
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
-    prepare(&firmware_dir("30.0.2"), &cache)
+    prepare(&common::firmware_dir("30.0.2"), &cache)
         .unwrap_or_else(|e| panic!("building the 30.0.2 firmware: {e}"))
-}
-
-fn firmware_dir(version: &str) -> PathBuf {
-    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
-        });
-    let dir = root.join(version);
-    assert!(
-        dir.join("OpenROV/OpenROV.ino").is_file(),
-        "the genuine OpenROV firmware {version} is not at {} — set OPENROV_FIRMWARE_DIR to a folder \
-         holding {version}/ (docs/guide/src/hil.md says how to get it)",
-        dir.display()
-    );
-    dir
 }
 
 /// The board's output as `name:value` fields (each ended by `;`), and

@@ -40,6 +40,8 @@
 #![cfg(feature = "hil")]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::{Read as _, Write as _};
 use std::os::unix::fs::OpenOptionsExt as _;
@@ -149,22 +151,6 @@ const END_MS: u64 = 25_500;
 /// Only one genuine board at a time: simavr takes a core.
 static GENUINE: Mutex<()> = Mutex::new(());
 
-fn firmware_dir(version: &str) -> PathBuf {
-    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
-        });
-    let dir = root.join(version);
-    assert!(
-        dir.join("OpenROV/OpenROV.ino").is_file(),
-        "the genuine OpenROV firmware {version} is not at {} — set OPENROV_FIRMWARE_DIR to the folder \
-         that holds 30.0.2/ and 2014-12/",
-        dir.display()
-    );
-    dir
-}
-
 fn framed(version: FirmwareVersion, t: &str) -> Vec<u8> {
     match version {
         FirmwareVersion::V30_0_2 => {
@@ -251,7 +237,7 @@ fn run_emulator(version: FirmwareVersion, sent: &[Duration]) -> Capture {
 fn run_genuine(version: FirmwareVersion) -> (Capture, Vec<Duration>) {
     let _one = GENUINE.lock().unwrap_or_else(|p| p.into_inner());
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
-    let firmware = prepare(&firmware_dir(&version.to_string()), &cache)
+    let firmware = prepare(&common::firmware_dir(&version.to_string()), &cache)
         .unwrap_or_else(|e| panic!("building the genuine firmware {version}: {e}"));
     // No I2C sensor wired, as on the emulator's side.
     let wiring = Wiring {

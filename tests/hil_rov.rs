@@ -15,7 +15,7 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use common::{Gcs, Traffic, Vehicle};
@@ -39,21 +39,6 @@ const NEUTRAL_STICKS: Traffic = Traffic::Sticks { x: 0, z: 500, r: 0 };
 
 fn bin() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_neptunus"))
-}
-
-fn firmware_dir() -> PathBuf {
-    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
-        });
-    let dir = root.join("30.0.2");
-    assert!(
-        dir.join("OpenROV/OpenROV.ino").is_file(),
-        "the genuine OpenROV firmware is not at {} — set OPENROV_FIRMWARE_DIR",
-        dir.display()
-    );
-    dir
 }
 
 /// `a − b` wrapped into (−180, 180].
@@ -154,7 +139,7 @@ fn set_mode(gcs: &mut Gcs, vehicle: &mut Vehicle, mode: u32) {
 #[test]
 fn the_genuine_firmware_dives_turns_holds_and_surfaces_the_simulated_rov() {
     let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
-    let firmware = prepare(&firmware_dir(), &cache)
+    let firmware = prepare(&common::firmware_dir("30.0.2"), &cache)
         .unwrap_or_else(|e| panic!("building the 30.0.2 firmware: {e}"));
     let elf = firmware.elf.to_string_lossy().into_owned();
     let dir = tempfile::tempdir().unwrap();

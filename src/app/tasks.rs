@@ -305,12 +305,9 @@ async fn genuine_board(
     _emulator: &crate::firmware::emulator::EmulatorOptions,
     _settings: &mut Settings,
 ) -> Result<SimulatedBoard, AppError> {
-    Err(AppError::Hil(
-        "this neptunus was built without the genuine-firmware simulator: build it with the `hil` feature \
-         (`cargo run --features hil -- --hil FIRMWARE`; it needs Debian's gcc-avr avr-libc arduino-core-avr \
-         libclang-dev libelf-dev libzstd-dev pkg-config)"
-            .into(),
-    ))
+    Err(AppError::Hil(crate::config::hil_not_built(
+        "--hil FIRMWARE",
+    )))
 }
 
 impl Tasks {

@@ -212,6 +212,13 @@ pub enum CliCommand {
     /// Run the autopilot step-response scenarios on the simulator (simulated
     /// time, fixed seeds) and write a CSV and a PNG plot per scenario to DIR.
     SimReport {
+        /// Also run them with the genuine OpenROV firmware in the loop
+        /// (FIRMWARE as for --hil: a checkout of openrov-software-arduino,
+        /// its OpenROV folder, or a built .elf), stepped on simulated time,
+        /// and print its figures beside the simulator's; its files end in
+        /// `-hil`. Needs a build with the `hil` feature.
+        #[arg(long, value_name = "FIRMWARE")]
+        hil: Option<PathBuf>,
         /// Output directory (created if missing).
         dir: PathBuf,
     },

@@ -44,6 +44,16 @@ pub enum ConfigError {
     NoDataDir,
 }
 
+/// What a build without the `hil` feature answers when asked for the
+/// genuine firmware; `example` is the command line that would work with it.
+pub fn hil_not_built(example: &str) -> String {
+    format!(
+        "this neptunus was built without the genuine-firmware simulator: build it with the `hil` feature \
+         (`cargo run --features hil -- {example}`; it needs Debian's gcc-avr avr-libc arduino-core-avr \
+         libclang-dev libelf-dev libzstd-dev pkg-config)"
+    )
+}
+
 /// The default data directory (`~/.local/share/neptunus` on Linux).
 pub fn default_data_dir() -> Result<PathBuf, ConfigError> {
     directories::ProjectDirs::from("", "", "neptunus")

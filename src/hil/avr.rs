@@ -17,7 +17,7 @@
 )]
 
 use std::cell::RefCell;
-use std::ffi::{CString, c_int, c_void};
+use std::ffi::{CString, c_char, c_int, c_void};
 use std::path::{Path, PathBuf};
 use std::ptr::NonNull;
 use std::rc::Rc;
@@ -36,7 +36,7 @@ const fn ioctl(a: u8, b: u8, c: u8, d: u8) -> u32 {
 }
 
 /// What can go wrong loading or running the firmware.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum AvrError {
     #[error("simavr does not know the MCU {0:?}")]
     UnknownMcu(String),
@@ -217,6 +217,20 @@ unsafe extern "C" fn on_twi(_: *mut ffi::avr_irq_t, value: u32, param: *mut c_vo
     }
 }
 
+/// simavr's logger, for every message: none is printed. With an AVR each
+/// message is below the level `load` sets (0) anyway; without one (the ELF
+/// loader's "Loaded … bytes" lines) simavr's own logger would print it on
+/// our standard output. What matters is reported through `AvrError`.
+/// Generic over the `va_list` argument, whose type differs between
+/// architectures; it is never read.
+unsafe extern "C" fn quiet_logger<VaList>(
+    _: *mut ffi::avr_t,
+    _: c_int,
+    _: *const c_char,
+    _: VaList,
+) {
+}
+
 impl Mcu {
     /// An ATmega2560 at 16 MHz with `elf` in its flash, reset and ready to
     /// run; `watch` lists the output pins whose edges [`Mcu::take_edges`]
@@ -228,6 +242,10 @@ impl Mcu {
             CString::new(elf.as_os_str().as_encoded_bytes()).map_err(|_| AvrError::Firmware {
                 path: elf.to_path_buf(),
             })?;
+        static QUIET: std::sync::Once = std::sync::Once::new();
+        // Safety: sets a process-wide function pointer simavr reads when it
+        // logs; the function ignores its arguments.
+        QUIET.call_once(|| unsafe { ffi::avr_global_logger_set(Some(quiet_logger)) });
         // Safety: plain C calls on freshly made objects; every pointer is
         // checked before use and owned by the returned `Mcu` (freed in `Drop`).
         unsafe {

@@ -1,8 +1,8 @@
 //! The genuine OpenROV firmware in the loop (feature `hil`): the controller
 //! board's own firmware, built from source and run in the simavr AVR
-//! simulator at real time behind a pseudo-terminal, so that Neptunus's
-//! serial link talks to what runs on the ROV rather than to our reading of
-//! it.
+//! simulator — at real time behind a pseudo-terminal, or in lock-step with
+//! a scenario's simulated time — so that Neptunus talks to what runs on the
+//! ROV rather than to our reading of it.
 //!
 //! - [`compile`]: finds the sketch and builds it with avr-gcc and Debian's
 //!   Arduino AVR core, caching the ELF.
@@ -15,30 +15,40 @@
 //!   the firmware's own arithmetic.
 //! - [`pins`]: the board's outputs as an instrument reads them: ESC and
 //!   servo pulse widths from pin edges, lights and lasers from their timer.
-//! - [`runner`]: [`GenuineBoard`], the firmware paced to the wall clock on
+//! - `bench`: the board without a clock — the firmware in simavr with what
+//!   is wired to it ([`Wiring`], [`Analog`]), run to a given cycle.
+//! - [`runner`]: [`GenuineBoard`], the bench paced to the wall clock on
 //!   its own thread, its UART0 on a pty, its analog inputs set in volts and
 //!   amperes, its depth sensor's water, its IMU's attitude, a reset line,
 //!   and the records tests and benches read.
+//! - [`surroundings`]: the simulated vehicle around the board (ESC pulses
+//!   in, sensor inputs out, on the board's time), sans-IO.
+//! - [`rov`]: [`HilRov`], the loop closed at real time for `neptunus --hil`.
+//! - [`lockstep`]: the loop closed on a scenario's simulated time for
+//!   `neptunus sim-report --hil`.
 //!
 //! The firmware is test data, not part of Neptunus: this module builds and
 //! runs it, it never changes it. Nothing here decides what the vehicle
 //! does; the firmware decides what the board does.
 
 mod avr;
+mod bench;
 pub mod bno055;
 pub mod compile;
+pub mod lockstep;
 pub mod ms5803;
 pub mod pins;
 pub mod rov;
 pub mod runner;
+pub mod surroundings;
 
 pub use avr::{AvrError, F_CPU_HZ};
+pub use bench::{Analog, Wiring};
 pub use bno055::Attitude;
 pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
 pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};
 pub use rov::{HilError, HilRov};
 pub use runner::{
-    Analog, GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
-    Wiring,
+    GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,
 };

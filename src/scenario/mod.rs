@@ -5,18 +5,22 @@
 //! and gives the same numbers every time (the simulator is seeded).
 //!
 //! Owns the loop that moves commands and telemetry between
-//! [`Vehicle::handle`] and a [`BuiltinSim`], and the recorded samples.
-//! Used by the acceptance tests and by `neptunus sim-report` ([`report`]).
-//! It must never read a clock or sleep.
+//! [`Vehicle::handle`] and a [`Rig`] — the board and the water around it:
+//! a [`BuiltinSim`], or with the feature `hil` the genuine firmware in
+//! simavr stepped in lock-step (`hil::lockstep`) — and the recorded
+//! samples. Used by the acceptance tests and by `neptunus sim-report`
+//! ([`report`]). It must never read a clock or sleep.
 
+mod plot;
+pub use plot::PlotError;
 pub mod report;
 
 use std::time::Duration;
 
 use crate::dialect::neptunus::*;
-use crate::firmware::codec::Event;
-use crate::firmware::emulator::EmulatorOptions;
-use crate::firmware::link::LinkState;
+use crate::firmware::codec::{Command, Event};
+use crate::firmware::emulator::{EmulatorOptions, SimSnapshot};
+use crate::firmware::link::{LinkEvent, LinkState};
 use crate::firmware::loopback::{BuiltinSim, LoopbackBoard};
 use crate::vehicle::machine::{Identity, Input, Now, Output, Sender, Vehicle};
 use crate::vehicle::params::ParamStore;
@@ -73,13 +77,51 @@ pub struct Sample {
     pub heading_rejected: u64,
 }
 
-/// A vehicle, its simulated board and a scripted pilot.
-pub struct Scenario {
+/// What a scenario's vehicle is connected to: a board on its serial link
+/// and the simulated vehicle it drives, run on the scenario's time. A rig
+/// is handed to a scenario with its link up.
+pub trait Rig {
+    /// Places the simulated vehicle, at rest, at this depth and heading.
+    fn place(&mut self, depth_m: f64, heading_deg: f64);
+    /// A command from the vehicle for the board, at `now`.
+    fn command(&mut self, cmd: &Command, now: Duration);
+    /// The vehicle is healthy at `now` (the board's dead man is fed).
+    fn healthy(&mut self, now: Duration);
+    /// Runs the board and the water to `now`; what the link reports since
+    /// the last step (telemetry, and changes of its state) is appended.
+    fn step(&mut self, now: Duration, events: &mut Vec<LinkEvent>);
+    /// Where the simulated vehicle really is.
+    fn truth(&self) -> SimSnapshot;
+}
+
+impl Rig for BuiltinSim {
+    fn place(&mut self, depth_m: f64, heading_deg: f64) {
+        BuiltinSim::place(self, depth_m, heading_deg);
+    }
+    fn command(&mut self, cmd: &Command, now: Duration) {
+        BuiltinSim::command(self, cmd, now);
+    }
+    fn healthy(&mut self, now: Duration) {
+        BuiltinSim::healthy(self, now);
+    }
+    fn step(&mut self, now: Duration, events: &mut Vec<LinkEvent>) {
+        let mut decoded: Vec<Event> = Vec::new();
+        BuiltinSim::step(self, now, &mut decoded);
+        events.extend(decoded.into_iter().map(LinkEvent::Telemetry));
+    }
+    fn truth(&self) -> SimSnapshot {
+        BuiltinSim::truth(self)
+    }
+}
+
+/// A vehicle, its board (the built-in simulator unless told otherwise) and
+/// a scripted pilot.
+pub struct Scenario<R: Rig = BuiltinSim> {
     vehicle: Vehicle,
-    sim: BuiltinSim,
+    rig: R,
     now: Duration,
     outputs: Vec<Output>,
-    events: Vec<Event>,
+    events: Vec<LinkEvent>,
     sticks: Sticks,
     next_stick: Duration,
     next_heartbeat: Duration,
@@ -97,9 +139,20 @@ impl Scenario {
     }
 
     pub fn with_params(opts: EmulatorOptions, params: ParamStore) -> Self {
+        Self::on(BuiltinSim::new(opts, Duration::ZERO), params)
+    }
+
+    pub fn board(&self) -> &LoopbackBoard {
+        self.rig.loopback()
+    }
+}
+
+impl<R: Rig> Scenario<R> {
+    /// A vehicle with these parameters connected to `rig`, at time zero.
+    pub fn on(rig: R, params: ParamStore) -> Self {
         let mut s = Self {
             vehicle: Vehicle::new(Identity::Ardupilot, params, 1),
-            sim: BuiltinSim::new(opts, Duration::ZERO),
+            rig,
             now: Duration::ZERO,
             outputs: Vec::with_capacity(64),
             events: Vec::with_capacity(16),
@@ -139,8 +192,8 @@ impl Scenario {
     fn apply(&mut self) {
         for out in std::mem::take(&mut self.outputs) {
             match out {
-                Output::Board(cmd) => self.sim.command(&cmd, self.now),
-                Output::Healthy => self.sim.healthy(self.now),
+                Output::Board(cmd) => self.rig.command(&cmd, self.now),
+                Output::Healthy => self.rig.healthy(self.now),
                 Output::Send { msg, .. } | Output::Text { msg, .. } => self.sent.push(msg),
                 _ => {}
             }
@@ -241,7 +294,7 @@ impl Scenario {
 
     /// Places the simulated vehicle (at rest).
     pub fn place(&mut self, depth_m: f64, heading_deg: f64) {
-        self.sim.place(depth_m, heading_deg);
+        self.rig.place(depth_m, heading_deg);
     }
 
     /// Runs for `duration` of simulated time, the ground station sending its
@@ -274,9 +327,12 @@ impl Scenario {
                     ..Default::default()
                 }));
             }
-            self.sim.step(self.now, &mut self.events);
+            self.rig.step(self.now, &mut self.events);
             for ev in std::mem::take(&mut self.events) {
-                self.input(Input::Board(ev));
+                self.input(match ev {
+                    LinkEvent::State { state, reason } => Input::Link { state, reason },
+                    LinkEvent::Telemetry(ev) => Input::Board(ev),
+                });
             }
             self.input(Input::Tick);
             self.steps += 1;
@@ -288,14 +344,14 @@ impl Scenario {
 
     fn record(&mut self) {
         let now = self.clock();
-        let snap = self.sim.snapshot();
+        let truth = self.rig.truth();
         let e = self.vehicle.estimate(now);
         let (depth_target, heading_target) = self.vehicle.targets();
         let demand = self.vehicle.applied_demand();
         let us = self.vehicle.motors_us();
         self.samples.push(Sample {
             t_s: self.now.as_secs_f64(),
-            depth_true_m: snap.sim.depth_m,
+            depth_true_m: truth.depth_m,
             depth_measured_m: self.vehicle.raw_depth_m().unwrap_or(f64::NAN),
             depth_estimate_m: if self.vehicle.raw_depth_m().is_some() {
                 e.depth_m
@@ -303,9 +359,9 @@ impl Scenario {
                 f64::NAN
             },
             depth_target_m: depth_target.unwrap_or(f64::NAN),
-            heave_true_mps: snap.sim.heave_mps,
+            heave_true_mps: truth.heave_mps,
             heave_estimate_mps: e.heave_mps,
-            heading_true_deg: snap.sim.heading_deg,
+            heading_true_deg: truth.heading_deg,
             heading_measured_deg: self.vehicle.raw_heading_deg().unwrap_or(f64::NAN),
             heading_estimate_deg: if self.vehicle.raw_heading_deg().is_some() {
                 e.heading_deg
@@ -313,11 +369,11 @@ impl Scenario {
                 f64::NAN
             },
             heading_target_deg: heading_target.unwrap_or(f64::NAN),
-            yaw_rate_true_dps: snap.sim.yaw_rate_dps,
+            yaw_rate_true_dps: truth.yaw_rate_dps,
             yaw_rate_estimate_dps: e.yaw_rate_dps,
-            north_m: snap.sim.north_m,
-            east_m: snap.sim.east_m,
-            surge_mps: snap.sim.surge_mps,
+            north_m: truth.north_m,
+            east_m: truth.east_m,
+            surge_mps: truth.surge_mps,
             surge_demand: demand.surge,
             heave_demand: demand.heave,
             yaw_demand: demand.yaw,
@@ -337,8 +393,9 @@ impl Scenario {
         &self.vehicle
     }
 
-    pub fn board(&self) -> &LoopbackBoard {
-        self.sim.loopback()
+    /// The board and water the vehicle is connected to.
+    pub fn rig(&self) -> &R {
+        &self.rig
     }
 
     pub fn now(&self) -> Duration {
@@ -346,7 +403,7 @@ impl Scenario {
     }
 }
 
-impl Scenario {
+impl<R: Rig> Scenario<R> {
     /// The vehicle, for assertions on the core after a scenario.
     pub fn into_vehicle(self) -> Vehicle {
         self.vehicle

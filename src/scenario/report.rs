@@ -3,18 +3,22 @@
 //! 12.2–12.5 show the simulator (state, rate and command over time).
 //!
 //! Owns the scenario definitions (fixed seeds, so every run gives the same
-//! numbers), their figures of merit, and the CSV and PNG files. Plots are
-//! drawn with `plotters` as SVG and rasterised with `resvg`; text needs a
-//! system font (Debian: fonts-dejavu-core), and its absence is a clear error.
+//! numbers), their figures of merit, the CSV files and the summary; the
+//! plots are `super::plot`'s. Each scenario runs on the [`Rigs`] it is
+//! given: the built-in simulator ([`Simulator`]), or with the feature `hil`
+//! the genuine firmware in simavr (`neptunus sim-report --hil`), whose
+//! figures [`comparison`] sets beside the simulator's.
 
+use std::convert::Infallible;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use plotters::prelude::*;
-
-use super::{Sample, Scenario, Sticks};
+use super::plot::{PlotError, fonts, plot};
+use super::{Rig, Sample, Scenario, Sticks};
 use crate::firmware::emulator::EmulatorOptions;
+use crate::firmware::loopback::BuiltinSim;
 use crate::vehicle::mode::Mode;
+use crate::vehicle::params::ParamStore;
 
 /// Errors writing the report.
 #[derive(Debug, thiserror::Error)]
@@ -24,22 +28,23 @@ pub enum ReportError {
         path: PathBuf,
         source: std::io::Error,
     },
-    #[error("plot {name}: {message}")]
-    Plot { name: String, message: String },
-    #[error(
-        "no system font found to label the plots — install one (Debian: apt install fonts-dejavu-core)"
-    )]
-    NoFont,
+    #[error(transparent)]
+    Plot(#[from] PlotError),
 }
+
+/// A figure of merit: (name, value, unit).
+pub type Metric = (&'static str, f64, &'static str);
 
 /// A scenario's result: its samples and figures of merit.
 #[derive(Debug, Clone)]
 pub struct Outcome {
     pub name: &'static str,
     pub title: &'static str,
+    /// What it ran on, when not the built-in simulator ([`Rigs::label`]).
+    pub rig: Option<&'static str>,
     pub samples: Vec<Sample>,
-    /// (name, value, unit), in the order they are reported.
-    pub metrics: Vec<(&'static str, f64, &'static str)>,
+    /// In the order they are reported.
+    pub metrics: Vec<Metric>,
 }
 
 impl Outcome {
@@ -60,15 +65,97 @@ pub fn options(seed: u64) -> EmulatorOptions {
     o
 }
 
-fn armed_in(mode: Mode, opts: EmulatorOptions, depth_m: f64, heading_deg: f64) -> Scenario {
-    let mut s = Scenario::new(opts);
-    s.place(depth_m, heading_deg);
+/// Where the scenarios run: a fresh [`Rig`] for each scenario's options.
+pub trait Rigs {
+    type Rig: Rig;
+    type Error;
+    /// A rig with the simulated vehicle of `opts` at rest at this depth
+    /// and heading, its link up. (Placed before its board starts, so that
+    /// no reading from before the scenario is still on its way.)
+    fn rig(
+        &mut self,
+        opts: &EmulatorOptions,
+        depth_m: f64,
+        heading_deg: f64,
+    ) -> Result<Self::Rig, Self::Error>;
+    /// What the plots and tables call these runs (`None`: the built-in
+    /// simulator, as `neptunus sim-report` always ran).
+    fn label(&self) -> Option<&'static str> {
+        None
+    }
+    /// The bias of the heading the rig's compass reports for `opts`: the
+    /// heading step is judged in that frame.
+    fn compass_bias_deg(&self, opts: &EmulatorOptions) -> f64 {
+        opts.sim.noise.heading_bias_deg
+    }
+    /// After a scenario: an error if the rig did not run it to its end, else
+    /// figures of its own for the report.
+    fn finish(&mut self, _rig: &Self::Rig) -> Result<Vec<Metric>, Self::Error> {
+        Ok(Vec::new())
+    }
+}
+
+/// The built-in simulator: the board emulator and its simulator in the
+/// process (`firmware::loopback`).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Simulator;
+
+impl Rigs for Simulator {
+    type Rig = BuiltinSim;
+    type Error = Infallible;
+    fn rig(
+        &mut self,
+        opts: &EmulatorOptions,
+        depth_m: f64,
+        heading_deg: f64,
+    ) -> Result<BuiltinSim, Infallible> {
+        let mut sim = BuiltinSim::new(opts.clone(), Duration::ZERO);
+        sim.place(depth_m, heading_deg);
+        Ok(sim)
+    }
+}
+
+fn on_simulator<T>(run: impl FnOnce(&mut Simulator) -> Result<T, Infallible>) -> T {
+    match run(&mut Simulator) {
+        Ok(o) => o,
+        Err(never) => match never {},
+    }
+}
+
+fn armed_in<F: Rigs>(
+    rigs: &mut F,
+    mode: Mode,
+    opts: &EmulatorOptions,
+    depth_m: f64,
+    heading_deg: f64,
+) -> Result<Scenario<F::Rig>, F::Error> {
+    let s = rigs.rig(opts, depth_m, heading_deg)?;
+    let mut s = Scenario::on(s, ParamStore::default());
     // Telemetry first: the pre-arm checks want a fresh heading, and the
     // hold modes a depth estimate.
     s.run(Duration::from_secs(3));
     s.arm();
     s.set_mode(mode.number());
-    s
+    Ok(s)
+}
+
+/// The outcome of a scenario run on `rigs`, with the rig's own figures
+/// after the scenario's.
+fn outcome<F: Rigs>(
+    rigs: &mut F,
+    s: Scenario<F::Rig>,
+    name: &'static str,
+    title: &'static str,
+    mut metrics: Vec<Metric>,
+) -> Result<Outcome, F::Error> {
+    metrics.extend(rigs.finish(s.rig())?);
+    Ok(Outcome {
+        name,
+        title,
+        rig: rigs.label(),
+        samples: s.samples().to_vec(),
+        metrics,
+    })
 }
 
 /// First time after which the signal stays within ±`band` of `target`.
@@ -97,71 +184,85 @@ fn angle_diff(a: f64, b: f64) -> f64 {
 
 /// Depth step 0 → 2 m in ALT_HOLD.
 pub fn depth_step() -> Outcome {
-    let mut s = armed_in(Mode::AltHold, options(1), 0.0, 45.0);
+    on_simulator(depth_step_on)
+}
+
+/// [`depth_step`] on `rigs`.
+pub fn depth_step_on<F: Rigs>(rigs: &mut F) -> Result<Outcome, F::Error> {
+    let mut s = armed_in(rigs, Mode::AltHold, &options(1), 0.0, 45.0)?;
     s.run(Duration::from_secs(2));
     let start = s.now().as_secs_f64();
     s.set_depth_target(2.0);
     s.run(Duration::from_secs(40));
-    let samples = s.samples().to_vec();
-    let after: Vec<&Sample> = samples.iter().filter(|x| x.t_s >= start).collect();
-    let peak = after
+    let samples = s.samples();
+    let peak = samples
         .iter()
+        .filter(|x| x.t_s >= start)
         .map(|x| x.depth_true_m)
         .fold(f64::MIN, f64::max);
-    Outcome {
-        name: "depth_step",
-        title: "Depth step 0 → 2 m (ALT_HOLD)",
-        metrics: vec![
-            (
-                "settling_time_0.1m",
-                settling_time_s(&samples, start, 2.0, 0.1, |x| x.depth_true_m),
-                "s",
-            ),
-            ("overshoot", ((peak - 2.0) / 2.0 * 100.0).max(0.0), "%"),
-        ],
-        samples,
-    }
+    let metrics = vec![
+        (
+            "settling_time_0.1m",
+            settling_time_s(samples, start, 2.0, 0.1, |x| x.depth_true_m),
+            "s",
+        ),
+        ("overshoot", ((peak - 2.0) / 2.0 * 100.0).max(0.0), "%"),
+    ];
+    outcome(
+        rigs,
+        s,
+        "depth_step",
+        "Depth step 0 → 2 m (ALT_HOLD)",
+        metrics,
+    )
 }
 
 /// Heading step 30° → 120° in STABILIZE. Judged on the compass reading
 /// without noise (true heading plus the compass' configured bias): a
 /// heading hold can only hold the heading its compass reports.
 pub fn heading_step() -> Outcome {
+    on_simulator(heading_step_on)
+}
+
+/// [`heading_step`] on `rigs`.
+pub fn heading_step_on<F: Rigs>(rigs: &mut F) -> Result<Outcome, F::Error> {
     let opts = options(2);
-    let bias = opts.sim.noise.heading_bias_deg;
-    let mut s = armed_in(Mode::Stabilize, opts, 1.0, 30.0);
+    let bias = rigs.compass_bias_deg(&opts);
+    let mut s = armed_in(rigs, Mode::Stabilize, &opts, 1.0, 30.0)?;
     s.run(Duration::from_secs(2));
     let start = s.now().as_secs_f64();
     s.set_heading_target(120.0);
     s.run(Duration::from_secs(20));
-    let samples = s.samples().to_vec();
+    let samples = s.samples();
     let compass = |x: &Sample| x.heading_true_deg + bias;
     let peak = samples
         .iter()
         .filter(|x| x.t_s >= start)
         .map(|x| angle_diff(compass(x), 120.0))
         .fold(f64::MIN, f64::max);
-    Outcome {
-        name: "heading_step",
-        title: "Heading step 30° → 120° (STABILIZE)",
-        metrics: vec![
-            (
-                "settling_time_3deg",
-                settling_time_s(&samples, start, 0.0, 3.0, |x| angle_diff(compass(x), 120.0)),
-                "s",
-            ),
-            ("overshoot", peak.max(0.0), "deg"),
-            ("compass_bias", bias, "deg"),
-        ],
-        samples,
-    }
+    let metrics = vec![
+        (
+            "settling_time_3deg",
+            settling_time_s(samples, start, 0.0, 3.0, |x| angle_diff(compass(x), 120.0)),
+            "s",
+        ),
+        ("overshoot", peak.max(0.0), "deg"),
+        ("compass_bias", bias, "deg"),
+    ];
+    let title = "Heading step 30° → 120° (STABILIZE)";
+    outcome(rigs, s, "heading_step", title, metrics)
 }
 
 /// Depth hold at 2 m for 60 s in a 0.2 m/s current with tether drag.
 pub fn depth_hold_in_current() -> Outcome {
+    on_simulator(depth_hold_in_current_on)
+}
+
+/// [`depth_hold_in_current`] on `rigs`.
+pub fn depth_hold_in_current_on<F: Rigs>(rigs: &mut F) -> Result<Outcome, F::Error> {
     let mut opts = options(3);
     set_current(&mut opts, 0.2);
-    let mut s = armed_in(Mode::AltHold, opts, 2.0, 45.0);
+    let mut s = armed_in(rigs, Mode::AltHold, &opts, 2.0, 45.0)?;
     s.set_depth_target(2.0);
     // The vehicle drifts with the current while the pilot drives forward a little.
     s.set_sticks(Sticks {
@@ -172,25 +273,27 @@ pub fn depth_hold_in_current() -> Outcome {
     s.run(Duration::from_secs(5));
     let start = s.now().as_secs_f64();
     s.run(Duration::from_secs(60));
-    let samples = s.samples().to_vec();
-    let max_err = samples
+    let max_err = s
+        .samples()
         .iter()
         .filter(|x| x.t_s >= start)
         .map(|x| (x.depth_true_m - 2.0).abs())
         .fold(0.0, f64::max);
-    Outcome {
-        name: "depth_hold_current",
-        title: "Depth hold 2 m, 60 s, 0.2 m/s current, tether",
-        metrics: vec![("max_depth_error", max_err, "m")],
-        samples,
-    }
+    let title = "Depth hold 2 m, 60 s, 0.2 m/s current, tether";
+    let metrics = vec![("max_depth_error", max_err, "m")];
+    outcome(rigs, s, "depth_hold_current", title, metrics)
 }
 
 /// Depth and heading hold with 5 % wild points on both readings.
 pub fn wild_points() -> Outcome {
+    on_simulator(wild_points_on)
+}
+
+/// [`wild_points`] on `rigs`.
+pub fn wild_points_on<F: Rigs>(rigs: &mut F) -> Result<Outcome, F::Error> {
     let mut opts = options(4);
     set_wild_rate(&mut opts, 0.05);
-    let mut s = armed_in(Mode::AltHold, opts, 2.0, 30.0);
+    let mut s = armed_in(rigs, Mode::AltHold, &opts, 2.0, 30.0)?;
     s.set_depth_target(2.0);
     s.run(Duration::from_secs(5));
     // A turn, then a climb, so the estimates move while wild points arrive.
@@ -204,7 +307,7 @@ pub fn wild_points() -> Outcome {
     s.run(Duration::from_secs(3));
     s.set_sticks(Sticks::CENTRED);
     s.run(Duration::from_secs(46));
-    let samples = s.samples().to_vec();
+    let samples = s.samples();
     let max_jump = |f: &dyn Fn(&Sample) -> f64, wrap: bool| {
         samples
             .windows(2)
@@ -220,54 +323,57 @@ pub fn wild_points() -> Outcome {
             .fold(0.0, f64::max)
     };
     let last = samples.last().copied().unwrap_or_default();
-    Outcome {
-        name: "wild_points",
-        title: "5 % wild points on depth and heading",
-        metrics: vec![
-            (
-                "max_depth_estimate_jump",
-                max_jump(&|x| x.depth_estimate_m, false),
-                "m",
-            ),
-            (
-                "max_heading_estimate_jump",
-                max_jump(&|x| x.heading_estimate_deg, true),
-                "deg",
-            ),
-            ("depth_rejected", last.depth_rejected as f64, ""),
-            ("heading_rejected", last.heading_rejected as f64, ""),
-        ],
-        samples,
-    }
+    let metrics = vec![
+        (
+            "max_depth_estimate_jump",
+            max_jump(&|x| x.depth_estimate_m, false),
+            "m",
+        ),
+        (
+            "max_heading_estimate_jump",
+            max_jump(&|x| x.heading_estimate_deg, true),
+            "deg",
+        ),
+        ("depth_rejected", last.depth_rejected as f64, ""),
+        ("heading_rejected", last.heading_rejected as f64, ""),
+    ];
+    let title = "5 % wild points on depth and heading";
+    outcome(rigs, s, "wild_points", title, metrics)
 }
 
 /// SURFACE from 3 m.
 pub fn surface() -> Outcome {
-    let mut s = armed_in(Mode::Surface, options(5), 3.0, 45.0);
+    on_simulator(surface_on)
+}
+
+/// [`surface`] on `rigs`.
+pub fn surface_on<F: Rigs>(rigs: &mut F) -> Result<Outcome, F::Error> {
+    let mut s = armed_in(rigs, Mode::Surface, &options(5), 3.0, 45.0)?;
     let start = s.now().as_secs_f64();
     s.run(Duration::from_secs(25));
-    let samples = s.samples().to_vec();
-    let surfaced = samples
+    let surfaced = s
+        .samples()
         .iter()
         .find(|x| x.t_s >= start && x.depth_true_m <= 0.1)
         .map_or(f64::INFINITY, |x| x.t_s - start);
-    Outcome {
-        name: "surface",
-        title: "SURFACE from 3 m",
-        metrics: vec![("time_to_surface", surfaced, "s")],
-        samples,
-    }
+    let metrics = vec![("time_to_surface", surfaced, "s")];
+    outcome(rigs, s, "surface", "SURFACE from 3 m", metrics)
 }
 
 /// Every scenario of the report.
 pub fn all() -> Vec<Outcome> {
-    vec![
-        depth_step(),
-        heading_step(),
-        depth_hold_in_current(),
-        wild_points(),
-        surface(),
-    ]
+    on_simulator(all_on)
+}
+
+/// Every scenario of the report, on `rigs`, in the order [`all`] runs them.
+pub fn all_on<F: Rigs>(rigs: &mut F) -> Result<Vec<Outcome>, F::Error> {
+    Ok(vec![
+        depth_step_on(rigs)?,
+        heading_step_on(rigs)?,
+        depth_hold_in_current_on(rigs)?,
+        wild_points_on(rigs)?,
+        surface_on(rigs)?,
+    ])
 }
 
 /// A current across the vehicle's heading (it flows towards the east).
@@ -280,8 +386,49 @@ fn set_wild_rate(opts: &mut EmulatorOptions, rate: f64) {
     opts.sim.wild_rate = rate;
 }
 
+/// What the files of a run on the genuine firmware end in, before the
+/// extension (`depth_step-hil.csv`).
+pub const HIL_SUFFIX: &str = "-hil";
+
 /// Writes `DIR/<scenario>.csv`, `DIR/<scenario>.png` and `DIR/summary.md`.
 pub fn write(dir: &Path, outcomes: &[Outcome]) -> Result<Vec<PathBuf>, ReportError> {
+    let mut summary = String::from("| scenario | figure | value |\n|---|---|---|\n");
+    for o in outcomes {
+        for (name, value, unit) in &o.metrics {
+            summary.push_str(&format!("| {} | {name} | {value:.3} {unit} |\n", o.title));
+        }
+    }
+    write_files(dir, &[(outcomes, "")], &summary)
+}
+
+/// Writes the simulator's files as [`write()`] does, the other run's beside
+/// them with [`HIL_SUFFIX`] (`DIR/<scenario>-hil.csv`, `.png`), and
+/// `DIR/summary.md` with the two side by side ([`comparison`]).
+pub fn write_beside(
+    dir: &Path,
+    sim: &[Outcome],
+    hil: &[Outcome],
+) -> Result<Vec<PathBuf>, ReportError> {
+    let mut summary =
+        String::from("| scenario | figure | sim | hil | unit |\n|---|---|---|---|---|\n");
+    for row in comparison(sim, hil) {
+        summary.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            row.title,
+            row.figure,
+            cell(row.sim),
+            cell(row.hil),
+            row.unit
+        ));
+    }
+    write_files(dir, &[(sim, ""), (hil, HIL_SUFFIX)], &summary)
+}
+
+fn write_files(
+    dir: &Path,
+    runs: &[(&[Outcome], &str)],
+    summary: &str,
+) -> Result<Vec<PathBuf>, ReportError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
         move |source| ReportError::Write { path, source }
@@ -289,23 +436,105 @@ pub fn write(dir: &Path, outcomes: &[Outcome]) -> Result<Vec<PathBuf>, ReportErr
     std::fs::create_dir_all(dir).map_err(io(dir))?;
     let fonts = fonts()?;
     let mut written = Vec::new();
-    let mut summary = String::from("| scenario | figure | value |\n|---|---|---|\n");
-    for o in outcomes {
-        let csv_path = dir.join(format!("{}.csv", o.name));
-        std::fs::write(&csv_path, csv(&o.samples)).map_err(io(&csv_path))?;
-        written.push(csv_path);
-        let png_path = dir.join(format!("{}.png", o.name));
-        let png = plot(o, &fonts)?;
-        std::fs::write(&png_path, png).map_err(io(&png_path))?;
-        written.push(png_path);
-        for (name, value, unit) in &o.metrics {
-            summary.push_str(&format!("| {} | {name} | {value:.3} {unit} |\n", o.title));
+    for (outcomes, suffix) in runs {
+        for o in *outcomes {
+            let csv_path = dir.join(format!("{}{suffix}.csv", o.name));
+            std::fs::write(&csv_path, csv(&o.samples)).map_err(io(&csv_path))?;
+            written.push(csv_path);
+            let png_path = dir.join(format!("{}{suffix}.png", o.name));
+            let title = match o.rig {
+                Some(rig) => format!("{} — {rig}", o.title),
+                None => o.title.to_owned(),
+            };
+            let png = plot(o.name, &title, &o.samples, &fonts)?;
+            std::fs::write(&png_path, png).map_err(io(&png_path))?;
+            written.push(png_path);
         }
     }
     let summary_path = dir.join("summary.md");
     std::fs::write(&summary_path, summary).map_err(io(&summary_path))?;
     written.push(summary_path);
     Ok(written)
+}
+
+/// One figure of one scenario, from two runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    pub scenario: &'static str,
+    pub title: &'static str,
+    pub figure: &'static str,
+    pub unit: &'static str,
+    /// On the built-in simulator; `None` where that run has no such figure.
+    pub sim: Option<f64>,
+    /// On the other rigs (the genuine firmware).
+    pub hil: Option<f64>,
+}
+
+/// The figures of two runs of the same scenarios side by side: every
+/// figure of either, grouped by scenario in the order they ran.
+pub fn comparison(sim: &[Outcome], hil: &[Outcome]) -> Vec<Row> {
+    let mut rows: Vec<Row> = Vec::new();
+    for (run, is_sim) in [(sim, true), (hil, false)] {
+        for o in run {
+            for &(figure, value, unit) in &o.metrics {
+                let i = match rows
+                    .iter()
+                    .position(|r| r.scenario == o.name && r.figure == figure)
+                {
+                    Some(i) => i,
+                    None => {
+                        rows.push(Row {
+                            scenario: o.name,
+                            title: o.title,
+                            figure,
+                            unit,
+                            sim: None,
+                            hil: None,
+                        });
+                        rows.len() - 1
+                    }
+                };
+                if is_sim {
+                    rows[i].sim = Some(value);
+                } else {
+                    rows[i].hil = Some(value);
+                }
+            }
+        }
+    }
+    // A figure only the second run has goes with its scenario's others.
+    let mut order: Vec<&'static str> = Vec::new();
+    for r in &rows {
+        if !order.contains(&r.scenario) {
+            order.push(r.scenario);
+        }
+    }
+    rows.sort_by_key(|r| order.iter().position(|&n| n == r.scenario));
+    rows
+}
+
+/// A figure in a table: three decimals, or a dash where the run has none.
+fn cell(value: Option<f64>) -> String {
+    value.map_or_else(|| "—".to_owned(), |v| format!("{v:.3}"))
+}
+
+/// [`comparison`] as a plain-text table for a terminal.
+pub fn comparison_text(sim: &[Outcome], hil: &[Outcome]) -> String {
+    let mut out = format!(
+        "{:<20} {:<26} {:>10} {:>10}\n",
+        "scenario", "figure", "sim", "hil"
+    );
+    for r in comparison(sim, hil) {
+        out.push_str(&format!(
+            "{:<20} {:<26} {:>10} {:>10} {}\n",
+            r.scenario,
+            r.figure,
+            cell(r.sim),
+            cell(r.hil),
+            r.unit
+        ));
+    }
+    out
 }
 
 /// The samples as CSV, one column per field.
@@ -326,168 +555,4 @@ north_m,east_m,surge_mps,surge_demand,heave_demand,yaw_demand,port_us,vertical_u
         ));
     }
     out
-}
-
-fn fonts() -> Result<resvg::usvg::Options<'static>, ReportError> {
-    let mut opt = resvg::usvg::Options::default();
-    opt.fontdb_mut().load_system_fonts();
-    if opt.fontdb.is_empty() {
-        return Err(ReportError::NoFont);
-    }
-    let family = ["DejaVu Sans", "Liberation Sans", "Noto Sans"]
-        .into_iter()
-        .find(|f| {
-            opt.fontdb
-                .faces()
-                .any(|face| face.families.iter().any(|(n, _)| n == f))
-        })
-        .map(str::to_owned)
-        .or_else(|| {
-            opt.fontdb
-                .faces()
-                .next()
-                .and_then(|f| f.families.first().map(|(n, _)| n.clone()))
-        })
-        .ok_or(ReportError::NoFont)?;
-    opt.font_family = family.clone();
-    opt.fontdb_mut().set_sans_serif_family(family);
-    Ok(opt)
-}
-
-/// One panel: a title, a y label and its series (label, colour, value).
-type Series = (&'static str, RGBColor, fn(&Sample) -> f64);
-
-fn plot(o: &Outcome, opt: &resvg::usvg::Options<'static>) -> Result<Vec<u8>, ReportError> {
-    let err = |e: String| ReportError::Plot {
-        name: o.name.into(),
-        message: e,
-    };
-    let depth: [Series; 4] = [
-        ("true", BLUE, |s| s.depth_true_m),
-        ("measured", RGBColor(170, 170, 170), |s| s.depth_measured_m),
-        ("estimate", RED, |s| s.depth_estimate_m),
-        ("target", BLACK, |s| s.depth_target_m),
-    ];
-    let heave: [Series; 2] = [
-        ("true w", BLUE, |s| s.heave_true_mps),
-        ("estimate", RED, |s| s.heave_estimate_mps),
-    ];
-    let heading: [Series; 4] = [
-        ("true", BLUE, |s| s.heading_true_deg),
-        ("measured", RGBColor(170, 170, 170), |s| {
-            s.heading_measured_deg
-        }),
-        ("estimate", RED, |s| s.heading_estimate_deg),
-        ("target", BLACK, |s| s.heading_target_deg),
-    ];
-    let rate: [Series; 2] = [
-        ("true r", BLUE, |s| s.yaw_rate_true_dps),
-        ("estimate", RED, |s| s.yaw_rate_estimate_dps),
-    ];
-    let demand: [Series; 3] = [
-        ("heave", BLUE, |s| s.heave_demand),
-        ("yaw", RED, |s| s.yaw_demand),
-        ("surge", RGBColor(0, 150, 0), |s| s.surge_demand),
-    ];
-    let panels: [(&str, &[Series]); 5] = [
-        ("depth (m, down)", &depth),
-        ("heave speed (m/s, down)", &heave),
-        ("heading (deg)", &heading),
-        ("yaw rate (deg/s)", &rate),
-        ("thrust demand (−1..1)", &demand),
-    ];
-    let (w, h) = (1000u32, 1250u32);
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(e.to_string()))?;
-        let root = root
-            .titled(o.title, ("sans-serif", 24))
-            .map_err(|e| err(e.to_string()))?;
-        let areas = root.split_evenly((panels.len(), 1));
-        let t_end = o.samples.last().map_or(1.0, |s| s.t_s);
-        for (area, (label, series)) in areas.iter().zip(panels) {
-            let finite = |f: fn(&Sample) -> f64| {
-                o.samples
-                    .iter()
-                    .map(f)
-                    .filter(|v| v.is_finite())
-                    .collect::<Vec<_>>()
-            };
-            let mut lo = f64::MAX;
-            let mut hi = f64::MIN;
-            for (_, _, f) in series {
-                for v in finite(*f) {
-                    lo = lo.min(v);
-                    hi = hi.max(v);
-                }
-            }
-            if lo > hi {
-                (lo, hi) = (0.0, 1.0);
-            }
-            let pad = ((hi - lo) * 0.08).max(0.05);
-            let mut chart = ChartBuilder::on(area)
-                .margin(8)
-                .x_label_area_size(28)
-                .y_label_area_size(60)
-                .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))
-                .map_err(|e| err(e.to_string()))?;
-            chart
-                .configure_mesh()
-                .x_desc("time (s)")
-                .y_desc(label)
-                .label_style(("sans-serif", 13))
-                .draw()
-                .map_err(|e| err(e.to_string()))?;
-            for &(name, colour, f) in series {
-                // NaN (not held) breaks the line instead of drawing to zero.
-                let mut segment: Vec<(f64, f64)> = Vec::new();
-                let mut first = true;
-                let flush = |seg: &mut Vec<(f64, f64)>,
-                             chart: &mut ChartContext<_, _>,
-                             first: &mut bool|
-                 -> Result<(), ReportError> {
-                    if seg.is_empty() {
-                        return Ok(());
-                    }
-                    let series = chart
-                        .draw_series(LineSeries::new(seg.drain(..), colour.stroke_width(2)))
-                        .map_err(|e| err(e.to_string()))?;
-                    if std::mem::take(first) {
-                        series.label(name).legend(move |(x, y)| {
-                            PathElement::new([(x, y), (x + 16, y)], colour.stroke_width(2))
-                        });
-                    }
-                    Ok(())
-                };
-                for s in &o.samples {
-                    let v = f(s);
-                    if v.is_finite() {
-                        segment.push((s.t_s, v));
-                    } else {
-                        flush(&mut segment, &mut chart, &mut first)?;
-                    }
-                }
-                flush(&mut segment, &mut chart, &mut first)?;
-            }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 13))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(|e| err(e.to_string()))?;
-        }
-        root.present().map_err(|e| err(e.to_string()))?;
-    }
-    let tree = resvg::usvg::Tree::from_str(&svg, opt).map_err(|e| err(e.to_string()))?;
-    let mut pixmap =
-        resvg::tiny_skia::Pixmap::new(w, h).ok_or_else(|| err("empty image".into()))?;
-    resvg::render(
-        &tree,
-        resvg::tiny_skia::Transform::default(),
-        &mut pixmap.as_mut(),
-    );
-    pixmap.encode_png().map_err(|e| err(e.to_string()))
 }

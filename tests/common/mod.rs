@@ -844,3 +844,24 @@ pub const COCKPIT_RATES: [(u32, f32); 38] = [
     (242, 1.0),
     (285, 5.0),
 ];
+
+/// The genuine OpenROV firmware's sources of `version` (`30.0.2`,
+/// `2014-12`): `$OPENROV_FIRMWARE_DIR/<version>`, else
+/// `../shared/openrov-firmware/<version>` beside the repository.
+pub fn firmware_dir(version: &str) -> PathBuf {
+    let root = std::env::var_os("OPENROV_FIRMWARE_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/openrov-firmware")
+        });
+    let dir = root.join(version);
+    assert!(
+        dir.join("OpenROV/OpenROV.ino").is_file(),
+        "the genuine OpenROV firmware {version} is not at {} — set OPENROV_FIRMWARE_DIR to a folder \
+         holding {version}/ (git clone https://github.com/OpenROV/openrov-software-arduino {version} \
+         && git -C {version} checkout {version}; the 2014-12 snapshot is commit 60a085280663; \
+         docs/guide/src/hil.md says more)",
+        dir.display()
+    );
+    dir
+}

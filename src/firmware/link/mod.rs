@@ -17,7 +17,9 @@
 //! Every decision above lives in `session/`, a sans-IO state machine that
 //! takes the time as an argument; `io.rs` is the tokio loop that owns the
 //! device and the channels and only moves bytes, requests and timers
-//! between them and the session. This file holds the types both share.
+//! between them and the session (the genuine firmware's scenarios,
+//! `hil::lockstep`, drive the same session on simulated time). This file
+//! holds the types both share.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -28,7 +30,7 @@ use tokio::sync::{mpsc, watch};
 use super::codec::{Command, DecodeStats, Event, Framing};
 
 mod io;
-mod session;
+pub(crate) mod session;
 
 /// How the link talks to the board.
 #[derive(Debug, Clone, PartialEq)]

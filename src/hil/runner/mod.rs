@@ -5,19 +5,14 @@
 //! Owns the pacing (simulated cycles against the wall clock, in 1 ms
 //! slices; the simulator's speed against real time is measured, not
 //! assumed), the bridge (bytes from the host go onto the UART line at its
-//! baud rate, bytes the firmware prints go to the pty), the analog inputs
-//! (battery voltage, currents, board temperature, in volts and amperes
-//! converted to what the board's dividers put on its ADC pins), the sensors
-//! on its I2C bus (depth and water temperature, [`super::ms5803`]; the
-//! vehicle's attitude, [`super::bno055`]), the output measurement
-//! ([`super::pins`]), a hardware reset, and the figures and records a test
-//! or a bench reads ([`GenuineControl`]). It never decides
+//! baud rate, bytes the firmware prints go to the pty), and the controls
+//! and figures a test or a bench reads ([`GenuineControl`]). The board
+//! itself — what is wired to it (analog inputs, the sensors on its I2C
+//! bus) and its outputs measured — is `super::bench`'s. It never decides
 //! anything the board does: that is the firmware's.
 
-use std::cell::RefCell;
 use std::io;
 use std::path::{Path, PathBuf};
-use std::rc::Rc;
 use std::sync::mpsc::{self, Receiver, Sender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -25,15 +20,16 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::avr::{AvrError, F_CPU_HZ, Mcu};
-use super::bno055::{Attitude, Bno055};
+use super::avr::{AvrError, F_CPU_HZ};
+use super::bench::{Analog, Bench, Wiring};
+use super::bno055::Attitude;
 use super::compile::Firmware;
-use super::ms5803::{Ms5803, Prom, Water};
-use super::pins::{PinsReport, PulseChange, WATCHED};
+use super::ms5803::Water;
+use super::pins::{PinsReport, PulseChange};
 use crate::firmware::pty::{PtyError, open_raw, remove_link_to, symlink_to};
 
 mod pacing;
-use pacing::{Runner, Sensors};
+use pacing::Runner;
 
 /// Simulated time run between looks at the wall clock, the pty and the controls.
 const SLICE_CYCLES: u64 = F_CPU_HZ / 1000;
@@ -43,72 +39,6 @@ const SLICE_CYCLES: u64 = F_CPU_HZ / 1000;
 const MAX_DEBT_CYCLES: u64 = F_CPU_HZ / 4;
 /// How often the speed figures are renewed.
 const SPEED_WINDOW: Duration = Duration::from_secs(1);
-
-/// The analog inputs of controller board 2.5, in the units the board reports.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Analog {
-    /// Battery voltage on A4 (`vout`, `BRDV`: ADC × 20 / 1023).
-    pub battery_v: f64,
-    /// Board current on A0 (`iout`, `BRDI`: ADC × 2 / 1023).
-    pub board_current_a: f64,
-    /// Battery tube currents on A6 and A5 (`BT1I`, `BT2I`: ADC × 10 / 1023).
-    pub battery_current_a: [f64; 2],
-    /// Board temperature sensor on A8 (`BRDT`: (ADC × 5 / 1024 − 0.4) × 51.28).
-    pub board_temp_c: f64,
-}
-
-/// What is wired to the simulated board besides its serial line.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Wiring {
-    /// The analog inputs at power-up.
-    pub analog: Analog,
-    /// The MS5803-14BA depth sensor on the I2C bus (the kit's depth add-on).
-    /// Without it the firmware reads zeros and says so, as a basic kit does.
-    pub depth_sensor: bool,
-    /// The BNO055 IMU on the I2C bus (the kit's IMU add-on). Without it the
-    /// firmware finds no IMU and prints a level attitude heading north.
-    pub imu: bool,
-}
-
-impl Default for Wiring {
-    fn default() -> Self {
-        Self {
-            analog: Analog::default(),
-            depth_sensor: true,
-            imu: true,
-        }
-    }
-}
-
-impl Default for Analog {
-    fn default() -> Self {
-        Self {
-            battery_v: 12.0,
-            board_current_a: 0.2,
-            battery_current_a: [0.0; 2],
-            board_temp_c: 25.0,
-        }
-    }
-}
-
-impl Analog {
-    /// `(ADC channel, millivolts)` for each input: the smallest voltage whose
-    /// 10-bit conversion (against 5 V) is the code nearest the wanted reading.
-    fn inputs(&self) -> [(u8, u32); 5] {
-        let mv_for_code = |code: f64| {
-            let code = code.round().clamp(0.0, 1023.0);
-            (code * 5000.0 / 1023.0).ceil() as u32
-        };
-        let temp_code = (self.board_temp_c / 51.28 + 0.4) * 1024.0 / 5.0;
-        [
-            (4, mv_for_code(self.battery_v / 20.0 * 1023.0)),
-            (0, mv_for_code(self.board_current_a / 2.0 * 1023.0)),
-            (6, mv_for_code(self.battery_current_a[0] / 10.0 * 1023.0)),
-            (5, mv_for_code(self.battery_current_a[1] / 10.0 * 1023.0)),
-            (8, mv_for_code(temp_code * 1023.0 / 1024.0)),
-        ]
-    }
-}
 
 /// Errors starting the genuine board.
 #[derive(Debug, thiserror::Error)]
@@ -296,36 +226,17 @@ impl GenuineBoard {
             .name("genuine-board".into())
             .spawn(move || {
                 // simavr's objects never leave this thread.
-                let depth = rig.depth_sensor.then(|| {
-                    Rc::new(RefCell::new(Ms5803::new(
-                        Prom::typical(),
-                        &Water::default(),
-                    )))
-                });
-                let imu = rig
-                    .imu
-                    .then(|| Rc::new(RefCell::new(Bno055::new(&Attitude::default()))));
-                let loaded = Mcu::load(&elf, &WATCHED).and_then(|mut mcu| {
-                    if let Some(sensor) = &depth {
-                        mcu.attach_twi(sensor.clone())?;
-                    }
-                    if let Some(sensor) = &imu {
-                        mcu.attach_twi(sensor.clone())?;
-                    }
-                    Ok(mcu)
-                });
-                let mcu = match loaded {
-                    Ok(mcu) => {
+                let bench = match Bench::load(&elf, &rig) {
+                    Ok(bench) => {
                         let _ = ready_tx.send(Ok(()));
-                        mcu
+                        bench
                     }
                     Err(e) => {
                         let _ = ready_tx.send(Err(e));
                         return;
                     }
                 };
-                let sensors = Sensors { depth, imu };
-                let mut runner = Runner::new(mcu, sensors, pty.master, analog, shared);
+                let mut runner = Runner::new(bench, pty.master, shared);
                 runner.run(&rx);
                 drop(pty.slave);
                 if let Some((link, target)) = link {
@@ -375,29 +286,5 @@ impl Drop for GenuineBoard {
         if let Some(t) = self.thread.take() {
             let _ = t.join();
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn analog_inputs_land_on_the_nearest_code() {
-        let a = Analog {
-            battery_v: 12.0,
-            board_current_a: 0.2,
-            battery_current_a: [1.5, 0.0],
-            board_temp_c: 25.0,
-        };
-        let code = |mv: u32| (u64::from(mv) * 1023 / 5000) as f64;
-        let inputs = a.inputs();
-        // The board's own arithmetic on the code simavr converts.
-        assert!((code(inputs[0].1) * 20.0 / 1023.0 - 12.0).abs() < 0.02);
-        assert!((code(inputs[1].1) * 2.0 / 1023.0 - 0.2).abs() < 0.002);
-        assert!((code(inputs[2].1) * 10.0 / 1023.0 - 1.5).abs() < 0.01);
-        assert_eq!(inputs[3].1, 0);
-        let t = (code(inputs[4].1) * 5.0 / 1024.0 - 0.4) * 51.28;
-        assert!((t - 25.0).abs() < 0.3, "{t}");
     }
 }

@@ -1,47 +1,27 @@
-//! The simulator thread of [`super`]: simavr paced to the wall clock in
-//! 1 ms slices, the UART bridged to the pty at its baud rate, the controls
-//! applied between slices, the pin edges measured, and the figures kept.
-//! Nothing here leaves this thread but what goes through the shared
-//! snapshot and the subscribers' channels.
+//! The simulator thread of [`super`]: the bench ([`super::super::bench`])
+//! paced to the wall clock in 1 ms slices, the UART bridged to the pty at
+//! its baud rate, the controls applied between slices, the pulse changes
+//! stamped with the wall time, and the figures kept. Nothing here leaves
+//! this thread but what goes through the shared snapshot and the
+//! subscribers' channels.
 
-use std::cell::RefCell;
 use std::os::fd::{AsFd, OwnedFd};
-use std::rc::Rc;
 use std::sync::mpsc::{Receiver, Sender, TryRecvError};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use super::super::avr::{AvrError, Edge, F_CPU_HZ, Mcu};
-use super::super::bno055::{Attitude, Bno055};
-use super::super::ms5803::{Ms5803, Water};
-use super::super::pins::{Pins, PulseChange, reg};
+use super::super::avr::{AvrError, F_CPU_HZ};
+use super::super::bench::Bench;
+use super::super::pins::PulseChange;
 use super::{
-    Analog, Ctl, GenuineSnapshot, MAX_DEBT_CYCLES, SLICE_CYCLES, SPEED_WINDOW, SerialChunk,
-    TimedChange,
+    Ctl, GenuineSnapshot, MAX_DEBT_CYCLES, SLICE_CYCLES, SPEED_WINDOW, SerialChunk, TimedChange,
 };
-
-/// The devices on the I2C bus, each if wired; the runner keeps its own
-/// handle to change their surroundings between slices.
-pub(super) struct Sensors {
-    pub(super) depth: Option<Rc<RefCell<Ms5803>>>,
-    pub(super) imu: Option<Rc<RefCell<Bno055>>>,
-}
 
 /// The simulator thread's state.
 pub(super) struct Runner {
-    mcu: Mcu,
+    bench: Bench,
     master: OwnedFd,
-    analog: Analog,
-    sensors: Sensors,
-    water: Water,
-    attitude: Attitude,
     shared: Arc<Mutex<GenuineSnapshot>>,
-    pins: Pins,
-    /// Host bytes not yet on the UART line.
-    from_host: std::collections::VecDeque<u8>,
-    /// Whether the last host byte put on the line ended a frame.
-    host_at_boundary: bool,
-    inject: std::collections::VecDeque<Vec<u8>>,
     serial_subs: Vec<Sender<SerialChunk>>,
     change_subs: Vec<Sender<TimedChange>>,
     anchor_cycle: u64,
@@ -52,34 +32,17 @@ pub(super) struct Runner {
 }
 
 impl Runner {
-    pub(super) fn new(
-        mut mcu: Mcu,
-        sensors: Sensors,
-        master: OwnedFd,
-        analog: Analog,
-        shared: Arc<Mutex<GenuineSnapshot>>,
-    ) -> Self {
-        for (channel, mv) in analog.inputs() {
-            mcu.set_adc_mv(channel, mv);
-        }
+    pub(super) fn new(bench: Bench, master: OwnedFd, shared: Arc<Mutex<GenuineSnapshot>>) -> Self {
         let stats = shared
             .lock()
             .map(|s| s.clone())
             .unwrap_or_else(|p| p.into_inner().clone());
         let now = Instant::now();
-        let cycle = mcu.cycle();
+        let cycle = bench.cycle();
         Self {
-            mcu,
+            bench,
             master,
-            analog,
-            sensors,
-            water: Water::default(),
-            attitude: Attitude::default(),
             shared,
-            pins: Pins::default(),
-            from_host: Default::default(),
-            host_at_boundary: true,
-            inject: Default::default(),
             serial_subs: Vec::new(),
             change_subs: Vec::new(),
             anchor_cycle: cycle,
@@ -98,7 +61,7 @@ impl Runner {
 
     pub(super) fn run(&mut self, rx: &Receiver<Ctl>) {
         let mut out = Vec::with_capacity(4096);
-        let mut edges: Vec<Edge> = Vec::with_capacity(256);
+        let mut changes: Vec<PulseChange> = Vec::with_capacity(16);
         let mut buf = [0u8; 1024];
         loop {
             loop {
@@ -113,7 +76,7 @@ impl Runner {
             let due = now.saturating_duration_since(self.anchor_wall);
             let target =
                 self.anchor_cycle + (due.as_nanos() * u128::from(F_CPU_HZ) / 1_000_000_000) as u64;
-            let cycle = self.mcu.cycle();
+            let cycle = self.bench.cycle();
             if cycle >= target {
                 self.publish(now);
                 // Ahead of the wall clock: wait for host bytes or the next slice.
@@ -135,9 +98,8 @@ impl Runner {
             // A whole slice, even if that runs up to a slice ahead of the
             // wall clock: the wait above then sleeps instead of spinning.
             let end = cycle + SLICE_CYCLES;
-            self.feed_uart();
             let started = Instant::now();
-            if let Err(e) = self.mcu.run_until(end) {
+            if let Err(e) = self.bench.run_until(end, &mut out, &mut changes) {
                 self.stop_with(e);
                 // A crashed board stays silent until stopped (or reset).
                 if !self.wait_for_reset(rx) {
@@ -146,60 +108,29 @@ impl Runner {
                 continue;
             }
             self.busy += started.elapsed();
-            self.mcu.take_output(&mut out);
             if !out.is_empty() {
                 self.send_to_host(&out);
                 out.clear();
             }
-            self.mcu.take_edges(&mut edges);
-            for e in edges.drain(..) {
-                if let Some(c) = self.pins.edge(e.pin, e.cycle, e.high) {
-                    self.emit_change(c);
-                }
-            }
-            let cycle = self.mcu.cycle();
-            for c in self.pins.expire(cycle) {
+            for c in changes.drain(..) {
                 self.emit_change(c);
             }
-            self.pins.timer5(
-                self.mcu.data(reg::TCCR5A),
-                self.mcu.data(reg::OCR5BL),
-                self.mcu.data(reg::OCR5CL),
-                self.mcu.data(reg::PORTL),
-            );
         }
     }
 
     fn control(&mut self, c: Ctl) {
         match c {
-            Ctl::Analog(a) => {
-                self.analog = a;
-                for (channel, mv) in a.inputs() {
-                    self.mcu.set_adc_mv(channel, mv);
-                }
-            }
-            Ctl::Water(w) => {
-                self.water = w;
-                if let Some(sensor) = &self.sensors.depth {
-                    sensor.borrow_mut().set_water(&w);
-                }
-            }
-            Ctl::Attitude(a) => {
-                self.attitude = a;
-                if let Some(sensor) = &self.sensors.imu {
-                    sensor.borrow_mut().set_attitude(&a);
-                }
-            }
+            Ctl::Analog(a) => self.bench.set_analog(a),
+            Ctl::Water(w) => self.bench.set_water(w),
+            Ctl::Attitude(a) => self.bench.set_attitude(a),
             Ctl::Reset => {
-                self.mcu.reset();
                 self.stats.resets += 1;
                 self.stats.error = None;
-                let cycle = self.mcu.cycle();
-                for c in self.pins.clear(cycle) {
+                for c in self.bench.reset() {
                     self.emit_change(c);
                 }
             }
-            Ctl::Inject(bytes) => self.inject.push_back(bytes),
+            Ctl::Inject(bytes) => self.bench.inject(bytes),
             Ctl::Serial(tx) => self.serial_subs.push(tx),
             Ctl::Changes(tx) => self.change_subs.push(tx),
             Ctl::Stop => {}
@@ -214,7 +145,7 @@ impl Runner {
                 Ok(n) => {
                     self.stats.bytes_to_board += n as u64;
                     let chunk = &buf[..n];
-                    self.from_host.extend(chunk);
+                    self.bench.host_wrote(chunk);
                     let at = Instant::now();
                     self.serial_subs.retain(|s| {
                         s.send(SerialChunk {
@@ -226,26 +157,6 @@ impl Runner {
                     });
                 }
             }
-        }
-    }
-
-    /// Puts waiting bytes on the UART line while its receiver has room;
-    /// injected frames go in between two of the host's.
-    fn feed_uart(&mut self) {
-        while self.mcu.uart_ready() {
-            if self.host_at_boundary
-                && let Some(frame) = self.inject.pop_front()
-            {
-                for b in frame {
-                    self.mcu.uart_send(b);
-                }
-                continue;
-            }
-            let Some(b) = self.from_host.pop_front() else {
-                break;
-            };
-            self.mcu.uart_send(b);
-            self.host_at_boundary = b == b';';
         }
     }
 
@@ -281,7 +192,7 @@ impl Runner {
     }
 
     fn publish(&mut self, now: Instant) {
-        let cycle = self.mcu.cycle();
+        let cycle = self.bench.cycle();
         let (w0, c0, b0) = self.window_start;
         let wall = now.saturating_duration_since(w0);
         if wall >= SPEED_WINDOW {
@@ -294,10 +205,10 @@ impl Runner {
             self.window_start = (now, cycle, self.busy);
         }
         self.stats.sim_time_s = cycle as f64 / F_CPU_HZ as f64;
-        self.stats.pins = self.pins.report(cycle);
-        self.stats.analog = self.analog;
-        self.stats.water = self.water;
-        self.stats.attitude = self.attitude;
+        self.stats.pins = self.bench.pins();
+        self.stats.analog = self.bench.analog();
+        self.stats.water = self.bench.water();
+        self.stats.attitude = self.bench.attitude();
         if let Ok(mut s) = self.shared.lock() {
             *s = self.stats.clone();
         }
@@ -316,7 +227,7 @@ impl Runner {
                 Ok(Ctl::Stop) | Err(_) => return false,
                 Ok(Ctl::Reset) => {
                     self.control(Ctl::Reset);
-                    self.anchor_cycle = self.mcu.cycle();
+                    self.anchor_cycle = self.bench.cycle();
                     self.anchor_wall = Instant::now();
                     return true;
                 }

@@ -77,7 +77,7 @@ const STATS_PERIOD: Duration = Duration::from_millis(100);
 
 /// What the session asks the I/O loop to deliver, in the order it decided.
 #[derive(Debug, Clone, PartialEq)]
-pub(super) enum Output {
+pub(crate) enum Output {
     /// Publish these figures (a copy taken when they were decided).
     Stats(LinkStats),
     /// Hand this to the vehicle task; if it has no room, tell
@@ -162,7 +162,7 @@ struct Connection {
 
 /// The link's state machine (see the module docs).
 #[derive(Debug)]
-pub(super) struct Session {
+pub(crate) struct Session {
     cfg: LinkConfig,
     stats: LinkStats,
     outbox: Outbox,
@@ -179,7 +179,7 @@ pub(super) struct Session {
 
 impl Session {
     /// A session for a device not opened yet (reported down at once).
-    pub(super) fn new(cfg: LinkConfig) -> Self {
+    pub(crate) fn new(cfg: LinkConfig) -> Self {
         let mut session = Self {
             backoff: cfg.backoff_min,
             cfg,
@@ -196,17 +196,17 @@ impl Session {
     }
 
     /// The figures as they are now.
-    pub(super) fn stats(&self) -> &LinkStats {
+    pub(crate) fn stats(&self) -> &LinkStats {
         &self.stats
     }
 
     /// The next thing to deliver, oldest first.
-    pub(super) fn poll_output(&mut self) -> Option<Output> {
+    pub(crate) fn poll_output(&mut self) -> Option<Output> {
         self.outputs.pop_front()
     }
 
     /// The vehicle task had no room for `event`.
-    pub(super) fn event_dropped(&mut self, event: &LinkEvent) {
+    pub(crate) fn event_dropped(&mut self, event: &LinkEvent) {
         self.stats.events_dropped += 1;
         if matches!(event, LinkEvent::State { .. }) {
             self.publish();
@@ -216,17 +216,17 @@ impl Session {
     /// A command from the vehicle task. Thruster commands are coalesced:
     /// only the newest pending one is written. Taken while the device is
     /// down too, so the newest one is what goes out once the board is back.
-    pub(super) fn command(&mut self, cmd: Command) {
+    pub(crate) fn command(&mut self, cmd: Command) {
         self.outbox.push(cmd, &mut self.stats);
     }
 
     /// The vehicle task said it is alive at `now`.
-    pub(super) fn healthy(&mut self, now: Instant) {
+    pub(crate) fn healthy(&mut self, now: Instant) {
         self.last_healthy = Some(now);
     }
 
     /// The device could not be opened. Returns when to try again.
-    pub(super) fn open_failed(&mut self, reason: String, now: Instant) -> Instant {
+    pub(crate) fn open_failed(&mut self, reason: String, now: Instant) -> Instant {
         self.report(LinkState::Down, Some(reason));
         self.publish();
         self.retry_at(now)
@@ -234,7 +234,7 @@ impl Session {
 
     /// The device was opened at `now`: wait for `boot` (or `boot_wait`),
     /// then handshake.
-    pub(super) fn opened(&mut self, now: Instant) {
+    pub(crate) fn opened(&mut self, now: Instant) {
         self.stats.opens += 1;
         self.conn = Some(Connection {
             opened_at: now,
@@ -254,7 +254,7 @@ impl Session {
     }
 
     /// The device failed or closed for `reason`. Returns when to reopen.
-    pub(super) fn closed(&mut self, reason: String, now: Instant) -> Instant {
+    pub(crate) fn closed(&mut self, reason: String, now: Instant) -> Instant {
         self.conn = None;
         // What was pending was decided for a board that is gone; the vehicle
         // task decides again when the link is back.
@@ -267,7 +267,7 @@ impl Session {
     }
 
     /// Bytes read from the device at `now`: decoded and passed on.
-    pub(super) fn received(&mut self, bytes: &[u8], now: Instant) {
+    pub(crate) fn received(&mut self, bytes: &[u8], now: Instant) {
         let Some(conn) = self.conn.as_mut() else {
             return;
         };
@@ -318,7 +318,7 @@ impl Session {
     /// keep-alive, then one pending command if pacing allows. The frame is
     /// encoded into `frame`; call [`Session::transmitted`] once it is
     /// written (a frame that fails to write is lost with the device).
-    pub(super) fn poll_transmit(&mut self, now: Instant, frame: &mut Vec<u8>) -> Option<Command> {
+    pub(crate) fn poll_transmit(&mut self, now: Instant, frame: &mut Vec<u8>) -> Option<Command> {
         let healthy = self.vehicle_healthy(now);
         let conn = self.conn.as_mut()?;
         // Handshake: after `boot`, or after boot_wait for a board that was already up.
@@ -407,7 +407,7 @@ impl Session {
 
     /// `cmd`, `frame_len` bytes long, was written at `now` (the `now` its
     /// [`Session::poll_transmit`] was given).
-    pub(super) fn transmitted(&mut self, cmd: &Command, frame_len: usize, now: Instant) {
+    pub(crate) fn transmitted(&mut self, cmd: &Command, frame_len: usize, now: Instant) {
         self.stats.bytes_out += frame_len as u64;
         self.stats.commands_written += 1;
         if cmd.is_thrust() {
@@ -421,7 +421,7 @@ impl Session {
 
     /// The timers at `now`: the telemetry watchdog (down when the board is
     /// silent, up once a handshaken board talks) and the figures.
-    pub(super) fn poll_timers(&mut self, now: Instant) {
+    pub(crate) fn poll_timers(&mut self, now: Instant) {
         let Some(conn) = self.conn.as_ref() else {
             return;
         };
@@ -472,7 +472,7 @@ impl Session {
 
     /// When the session next has something to do without new input (a
     /// sleep of at most 100 ms, so the watchdog runs).
-    pub(super) fn next_wake(&self, now: Instant) -> Instant {
+    pub(crate) fn next_wake(&self, now: Instant) -> Instant {
         let Some(conn) = self.conn.as_ref() else {
             return now + STATS_PERIOD;
         };
