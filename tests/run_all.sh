@@ -120,6 +120,13 @@ fi
 if ! command -v npm >/dev/null 2>&1; then
     as_root apt-get update -q && as_root apt-get install -y -q nodejs npm
 fi
+# The many-viewers recipe (tests/browser/janus.test.js) runs Debian's Janus
+# with a configuration of its own; the package's service is not used.
+if ! dpkg -s janus >/dev/null 2>&1; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q janus
+fi
+dpkg-query -W -f 'janus ${Version}\n' janus
 (cd tests/browser && npm ci --no-audit --no-fund --ignore-scripts) || status=1
 rm -f target/browser-junit.xml
 (cd tests/browser && NEPTUNUS_BIN="$PWD/../../target/debug/neptunus" node --test --test-concurrency=1 \
