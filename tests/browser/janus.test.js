@@ -54,7 +54,10 @@ function janusLibDir() {
 
 /** The guide's configuration, on the ports given: the core, the HTTP
  * transport on loopback, and the streaming plugin with the vehicle's
- * mountpoint. Everything else Janus would load is turned off. */
+ * mountpoint. Everything else Janus would load is turned off. Chromium
+ * names its own addresses by mDNS; Janus is told not to look them up (a
+ * test machine may have no mDNS), and learns them from Chromium's
+ * connectivity checks instead. */
 function writeJanusConfig(dir, lib, { httpPort, videoPort }) {
   const others = (sub, keep) => readdirSync(join(lib, sub)).filter((f) => f.endsWith('.so') && f !== keep).join(',');
   writeFileSync(join(dir, 'janus.jcfg'), `general: {
@@ -127,23 +130,27 @@ async function startJanus() {
   child.on('error', (e) => { exited = String(e); });
   const logTail = () => { try { return readFileSync(join(dir, 'janus.log'), 'utf8').slice(-3000); } catch { return ''; } };
   const api = `http://127.0.0.1:${httpPort}/janus`;
-  await until(async () => {
-    if (exited !== null) throw new Error(`janus exited (${exited}):\n${logTail()}`);
-    try {
-      const info = await (await fetch(`${api}/info`)).json();
-      return info.plugins && info.plugins['janus.plugin.streaming'];
-    } catch { return null; }
-  }, 30000, 'Janus\'s HTTP API with the streaming plugin');
-  return {
-    api, videoPort, pid: child.pid, log: logTail,
-    async stop() {
-      if (exited === null) {
-        child.kill('SIGTERM');
-        await until(() => exited !== null, 15000, 'janus to exit').catch(() => child.kill('SIGKILL'));
-      }
-      rmSync(dir, { recursive: true, force: true });
-    },
+  const stop = async () => {
+    if (exited === null) {
+      child.kill('SIGTERM');
+      await until(() => exited !== null, 15000, 'janus to exit').catch(() => child.kill('SIGKILL'));
+    }
+    rmSync(dir, { recursive: true, force: true });
   };
+  try {
+    await until(async () => {
+      if (exited !== null) throw new Error(`janus exited (${exited}):\n${logTail()}`);
+      try {
+        const info = await (await fetch(`${api}/info`)).json();
+        return info.plugins && info.plugins['janus.plugin.streaming'];
+      } catch { return null; }
+    }, 30000, 'Janus\'s HTTP API with the streaming plugin');
+  } catch (e) {
+    e.message += `\n--- janus log (tail) ---\n${logTail()}`;
+    await stop();
+    throw e;
+  }
+  return { api, videoPort, pid: child.pid, log: logTail, stop };
 }
 
 const CLK_TCK = Number(spawnSync('getconf', ['CLK_TCK'], { encoding: 'utf8' }).stdout.trim()) || 100;
