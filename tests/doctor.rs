@@ -58,6 +58,18 @@ fn config(dir: &Path, serial: &Path, framing: &str, extra: &str) -> PathBuf {
         dir.join("data").display(),
         serial.display(),
     );
+    // The WebRTC signalling on a free port too: 6021 may be another
+    // vehicle's on a machine running tests side by side. A test that sets
+    // it itself says so in `extra`.
+    let text = if extra.contains("[camera.webrtc]") {
+        text
+    } else {
+        let free = std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .map(|a| a.port())
+            .expect("a free port");
+        format!("{text}\n[camera.webrtc]\nsignalling = \"127.0.0.1:{free}\"\n")
+    };
     let path = dir.join("neptunus.toml");
     std::fs::write(&path, text).expect("config written");
     path
@@ -282,4 +294,47 @@ fn camera_ports_and_data_dir_fail_with_their_fixes() {
     // And a configuration that does not parse fails first, with the others not checked.
     std::fs::write(&cfg, "[board]\nbaud = \"fast\"\n").unwrap();
     assert_fails(&cfg, "config", "--check");
+}
+
+#[test]
+fn a_signalling_port_in_use_is_a_warning_the_vehicle_starts_without_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::start("crc8");
+    // Another program (mavlink-camera-manager, say) holds the port.
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = held.local_addr().unwrap().port();
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        &format!(
+            "[camera]\nsource = \"synthetic\"\n[camera.webrtc]\nsignalling = \"127.0.0.1:{port}\"\n"
+        ),
+    );
+    let o = doctor(&cfg, false);
+    let text = stdout(&o);
+    assert!(
+        o.status.success(),
+        "a busy signalling port fails doctor:\n{text}"
+    );
+    let line = text
+        .lines()
+        .find(|l| l.split_whitespace().nth(1) == Some("ports"))
+        .unwrap_or_else(|| panic!("no ports line:\n{text}"));
+    assert!(
+        line.starts_with("warn") && line.contains(&format!("127.0.0.1:{port}")),
+        "{text}"
+    );
+    assert!(
+        text.contains("[camera.webrtc] signalling"),
+        "no fix naming the setting:\n{text}"
+    );
+    let v = report(&cfg);
+    let c = check(&v, "ports");
+    assert_eq!(
+        (c["ok"].clone(), c["warning"].clone()),
+        (true.into(), true.into()),
+        "{v}"
+    );
+    drop(held);
 }

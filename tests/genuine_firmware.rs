@@ -218,6 +218,33 @@ impl GenuineRig {
         })
     }
 
+    /// Bytes Neptunus wrote to the board before the board printed its
+    /// `boot:1;` (the end of its set-up), waiting for that line up to
+    /// `WAIT`. Reads the serial tap from the start: call it first.
+    fn written_before_boot(&mut self) -> usize {
+        let end = Instant::now() + WAIT;
+        let mut written = 0;
+        while Instant::now() < end {
+            for chunk in self.serial.try_iter() {
+                if chunk.to_board {
+                    if !self.from_board.windows(7).any(|w| w == b"boot:1;") {
+                        written += chunk.bytes.len();
+                    }
+                } else {
+                    self.from_board.extend(chunk.bytes);
+                }
+            }
+            if self.from_board.windows(7).any(|w| w == b"boot:1;") {
+                return written;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        panic!(
+            "the board printed no boot:1; within {WAIT:?}:\n{}",
+            String::from_utf8_lossy(&self.from_board)
+        );
+    }
+
     fn board_output(&mut self) -> String {
         for chunk in self.serial.try_iter() {
             if !chunk.to_board {
@@ -610,6 +637,16 @@ fn the_genuine_2015_firmware_arms_drives_and_stops() {
     let _one = one_board();
     // A ROV with the depth and IMU add-ons.
     let mut rig = GenuineRig::start("30.0.2", true);
+    // Its sensors' set-up takes longer than the link's boot wait, and it
+    // chatters meanwhile: nothing is written to it until it has booted (a
+    // frame then would wait unread in its receive buffer).
+    let early = rig.written_before_boot();
+    assert_eq!(
+        early,
+        0,
+        "{early} bytes written to the board during its set-up; it printed:\n{}",
+        rig.board_output()
+    );
     drives_the_board(&mut rig, "30.0.2");
 
     // Corrupted frames on the line: the board reports each, and Neptunus

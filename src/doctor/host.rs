@@ -233,20 +233,34 @@ pub fn ports(settings: &Settings) -> Check {
     if let Some(a) = settings.hmi.http {
         listens.push((format!("HMI http {a}"), tcp(a)));
     }
+    // The signalling port beside the HMI is optional: the vehicle starts
+    // without it (a warning), and viewers still have /webrtc on the HMI.
+    let mut optional: Option<(String, Result<(), std::io::Error>)> = None;
     let w = &settings.camera.webrtc;
     if w.enabled {
         if let Some(a) = SignallingAddr::resolve(w.signalling, settings.hmi.http) {
-            listens.push((format!("WebRTC signalling {a}"), tcp(a)));
+            optional = Some((format!("WebRTC signalling {a}"), tcp(a)));
         }
         if w.udp_port != 0 {
             let a = SocketAddr::from(([0, 0, 0, 0], w.udp_port));
             listens.push((format!("WebRTC media udp {a}"), udp(a)));
         }
     }
-    let taken: Vec<String> = listens
-        .iter()
-        .filter_map(|(what, r)| r.as_ref().err().map(|e| format!("{what}: {e}")))
-        .collect();
+    let in_use = |(what, r): &(String, Result<(), std::io::Error>)| {
+        r.as_ref().err().map(|e| format!("{what}: {e}"))
+    };
+    let taken: Vec<String> = listens.iter().filter_map(in_use).collect();
+    let signalling_taken = optional.as_ref().and_then(in_use);
+    if taken.is_empty()
+        && let Some(busy) = signalling_taken
+    {
+        return Check::warn(
+            name,
+            format!("in use: {busy}; the vehicle starts without it, and Cockpit then finds no video there (or another program's)"),
+            "stop the program listening there (mavlink-camera-manager, or another neptunus: `systemctl status neptunus`), or set [camera.webrtc] signalling to another address or off".to_owned(),
+        );
+    }
+    listens.extend(optional);
     if taken.is_empty() {
         let all: Vec<&str> = listens.iter().map(|(w, _)| w.as_str()).collect();
         Check::pass(

@@ -47,6 +47,12 @@ pub struct LinkConfig {
     /// How long to wait for `boot` after opening before handshaking anyway
     /// (a board that was already running prints no `boot`).
     pub boot_wait: Duration,
+    /// A board heard printing since the opening, but neither its `boot` nor
+    /// telemetry yet, is running its set-up (its sensors' chatter): the
+    /// handshake waits for `boot` past `boot_wait`, at most this long after
+    /// the opening (the firmware's own watchdog resets a set-up that hangs
+    /// after 8 s).
+    pub setup_allowance: Duration,
     pub backoff_min: Duration,
     pub backoff_max: Duration,
     /// Extra time after each frame's wire time before the next is written,
@@ -77,6 +83,7 @@ impl LinkConfig {
             healthy_window: Duration::from_millis(500),
             stale_after: Duration::from_millis(1500),
             boot_wait: Duration::from_millis(1500),
+            setup_allowance: Duration::from_secs(8),
             backoff_min: Duration::from_millis(200),
             backoff_max: Duration::from_secs(5),
             frame_gap: Duration::from_millis(2),

@@ -2,7 +2,8 @@
 //! to report, as a plain state machine over (state, event, now).
 //!
 //! Owns the start-up handshake (wait for `boot`, or `boot_wait` for a board
-//! that was already running; then `dms(1)`, `start()`), the keep-alive
+//! that was already running, longer for one heard in its set-up; then
+//! `dms(1)`, `start()`), the keep-alive
 //! `ping(0)` gated on the vehicle task's health (queued ahead of pending
 //! levels), the outbox that coalesces thruster commands and lights, laser
 //! and tilt levels (the newest wins), the pacing that keeps the board's
@@ -16,7 +17,10 @@
 //! echoed (`rawcmd:` with CRC-8 framing, `cmd:` with plain) fit in it — a
 //! board that stops echoing (busy, resetting) gets nothing more; a board
 //! that prints `boot` again has restarted, and the link handshakes again
-//! before it reports itself up; and after a gap in the pings longer than
+//! before it reports itself up; a board whose sensors' set-up takes longer
+//! than the boot wait (30.0.2 with an IMU: 2.5 s) prints its chatter first,
+//! and a handshake written then would sit unread in its buffer, its echoes
+//! time out and more frames follow into the full buffer; and after a gap in the pings longer than
 //! the board's dead-man timeout, a thrust command decided before the gap is
 //! replaced by neutral: the board has just stopped, and the ping that
 //! follows restarts it on its last target.
@@ -158,6 +162,23 @@ struct Connection {
     /// before that is its first start (still setting up when the boot wait
     /// ran out), not a reboot.
     board_talked: bool,
+    /// The board printed something (set-up chatter, a torn line) before
+    /// its first telemetry line.
+    heard: bool,
+    /// The board printed `boot` since the device was opened.
+    booted: bool,
+    /// When the board last printed anything at all.
+    last_heard: Option<Instant>,
+}
+
+impl Connection {
+    /// The board is still in its set-up: heard, but neither `boot` nor
+    /// telemetry yet. A command written now would wait in its receive
+    /// buffer through the set-up and its echo time out, and more would
+    /// follow into a buffer nobody empties.
+    fn setting_up(&self, now: Instant, allowance: Duration) -> bool {
+        self.heard && !self.booted && !self.board_talked && now < self.opened_at + allowance
+    }
 }
 
 /// The link's state machine (see the module docs).
@@ -249,6 +270,9 @@ impl Session {
             next_stats: now,
             lines_at_open: 0,
             board_talked: false,
+            heard: false,
+            booted: false,
+            last_heard: None,
         });
         self.report(LinkState::Handshaking, None);
     }
@@ -281,6 +305,7 @@ impl Session {
                 Event::Boot => {
                     tracing::info!("board booted; handshaking");
                     conn.handshake_due = Some(now);
+                    conn.booted = true;
                     // Whatever it had not taken is gone with its old state.
                     conn.in_flight.clear();
                     reboot = conn.handshaken && conn.board_talked;
@@ -308,6 +333,10 @@ impl Session {
             self.outputs
                 .push_back(Output::Event(LinkEvent::Telemetry(ev)));
         }
+        if !bytes.is_empty() {
+            conn.heard = true;
+            conn.last_heard = Some(now);
+        }
         if reboot {
             self.stats.board_reboots += 1;
             self.report(LinkState::Handshaking, Some("the board rebooted".into()));
@@ -321,8 +350,11 @@ impl Session {
     pub(crate) fn poll_transmit(&mut self, now: Instant, frame: &mut Vec<u8>) -> Option<Command> {
         let healthy = self.vehicle_healthy(now);
         let conn = self.conn.as_mut()?;
-        // Handshake: after `boot`, or after boot_wait for a board that was already up.
-        if conn.handshake_due.is_some_and(|t| now >= t) {
+        // Handshake: after `boot`, or after boot_wait for a board that was
+        // already up (or is silent) — but not while it is still setting up.
+        if conn.handshake_due.is_some_and(|t| now >= t)
+            && !conn.setting_up(now, self.cfg.setup_allowance)
+        {
             conn.handshake_due = None;
             conn.handshaken = true;
             self.stats.handshakes += 1;
@@ -432,10 +464,21 @@ impl Session {
         let settled = conn.handshaken && conn.board_talked;
         let handshaken = conn.handshaken;
         let lines_at_open = conn.lines_at_open;
-        let silent_since = self
+        let mut silent_since = self
             .last_line
             .filter(|t| *t >= opened_at)
             .unwrap_or(opened_at);
+        // A board printing its set-up chatter or its `boot` is alive though
+        // it prints no telemetry yet (a slow sensor, or a loaded simulator,
+        // stretches a set-up past the boot wait's allowance) — for as long as a
+        // set-up may last; a device that only ever prints what is not
+        // telemetry (a wrong baud rate) is down after that.
+        if !settled
+            && now < opened_at + self.cfg.setup_allowance
+            && let Some(heard) = conn.last_heard
+        {
+            silent_since = silent_since.max(heard);
+        }
         let allowed = self.cfg.stale_after
             + if settled {
                 Duration::ZERO
@@ -478,6 +521,11 @@ impl Session {
         };
         let mut wake = conn.next_stats.min(now + STATS_PERIOD);
         if let Some(t) = conn.handshake_due {
+            let t = if conn.setting_up(now, self.cfg.setup_allowance) {
+                t.max(conn.opened_at + self.cfg.setup_allowance)
+            } else {
+                t
+            };
             wake = wake.min(t);
         }
         if conn.handshaken && !self.outbox.is_empty() {

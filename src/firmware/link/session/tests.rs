@@ -366,3 +366,104 @@ fn a_dropped_state_event_is_counted_and_published() {
     assert_eq!(s.stats().events_dropped, 1);
     assert!(matches!(s.poll_output(), Some(Output::Stats(st)) if st.events_dropped == 1));
 }
+
+#[test]
+fn a_board_heard_in_its_set_up_is_handshaken_after_its_boot_line() {
+    // The 30.0.2 firmware with its sensors fitted prints their set-up
+    // chatter, then `boot:1;` about 2.5 s after power-up.
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    s.received(
+        b"BNO055.bootloader:21;\r\nDepth: Calibration constants are:\r\n",
+        t0 + Duration::from_millis(300),
+    );
+    let mut at = t0 + Duration::from_millis(300);
+    while at < t0 + Duration::from_millis(2500) {
+        assert_eq!(
+            drain_writes(&mut s, at),
+            [],
+            "written to a board still setting up"
+        );
+        s.poll_timers(at);
+        let wake = s.next_wake(at);
+        assert!(
+            wake > at,
+            "a withheld handshake must not make the loop spin"
+        );
+        at += Duration::from_millis(100);
+    }
+    let boot = t0 + Duration::from_millis(2500);
+    s.received(b"boot:1;\r\n", boot);
+    assert!(s.next_wake(boot) <= boot);
+    assert_eq!(drain_writes(&mut s, boot), HANDSHAKE);
+    assert_eq!(s.stats().handshakes, 1, "one handshake, after the set-up");
+    assert_eq!(s.stats().board_reboots, 0);
+    s.received(NAV, boot + Duration::from_millis(100));
+    s.poll_timers(boot + Duration::from_millis(100));
+    assert_eq!(s.stats().state, LinkState::Up);
+}
+
+#[test]
+fn a_set_up_that_never_ends_in_boot_is_handshaken_after_the_allowance() {
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    s.received(b"Depth: Calibration constants are:\r\n", t0);
+    let allowance = s.cfg.setup_allowance;
+    let before = t0 + allowance - Duration::from_millis(1);
+    assert_eq!(drain_writes(&mut s, before), []);
+    s.poll_timers(before);
+    assert_eq!(
+        s.next_wake(before),
+        (t0 + allowance).min(before + STATS_PERIOD)
+    );
+    assert_eq!(drain_writes(&mut s, t0 + allowance), HANDSHAKE);
+}
+
+#[test]
+fn a_running_board_first_heard_mid_line_is_handshaken_at_the_boot_wait() {
+    // Opened while the board runs: the first read may be the tail of a line
+    // (torn), then telemetry follows; that is no set-up.
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    s.received(b"00;yaw:10.00;fthr:0.00;\r\n", t0);
+    s.received(NAV, t0 + Duration::from_millis(100));
+    let boot_wait = s.cfg.boot_wait;
+    assert_eq!(drain_writes(&mut s, t0 + boot_wait), HANDSHAKE);
+}
+
+#[test]
+fn a_long_set_up_that_chatters_is_not_down_and_a_device_printing_only_noise_is() {
+    // A set-up stretched to 4.5 s (a loaded simulator): it chatters, so the
+    // link stays handshaking, not down, and comes up after its `boot`.
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    assert_eq!(states(&mut s), [LinkState::Down, LinkState::Handshaking]);
+    let mut at = t0;
+    while at < t0 + Duration::from_millis(4500) {
+        s.received(b"Depth: Calibration constants are:\r\n", at);
+        s.poll_timers(at);
+        drain_writes(&mut s, at);
+        at += Duration::from_millis(500);
+    }
+    assert!(
+        !states(&mut s).contains(&LinkState::Down),
+        "down while the board chattered through its set-up"
+    );
+    s.received(b"boot:1;\r\n", at);
+    drain_writes(&mut s, at);
+    s.received(NAV, at + Duration::from_millis(100));
+    s.poll_timers(at + Duration::from_millis(100));
+    assert_eq!(s.stats().state, LinkState::Up);
+
+    // A device that prints only what is not telemetry (a wrong baud rate)
+    // is down once a set-up would have ended.
+    let mut s = opened(t0);
+    let mut at = t0;
+    let end = t0 + s.cfg.setup_allowance + s.cfg.stale_after;
+    while at <= end {
+        s.received(b"\xf0\x0f\x81garbage\r\n", at);
+        s.poll_timers(at);
+        at += Duration::from_millis(100);
+    }
+    assert_eq!(s.stats().state, LinkState::Down);
+}
