@@ -129,14 +129,16 @@ rm -f target/browser-junit.xml
 
 echo "== interoperability tests with the genuine firmware in the loop (neptunus --hil)"
 # The same clients against `--hil`: QGroundControl's connect sequence,
-# pymavlink's everyday calls and depth hold, with the 30.0.2 firmware in
-# simavr reading the simulator's sensors and driving its thrusters.
+# pymavlink's everyday calls, depth hold and the mavlink2rest client
+# (Cockpit's API), with the 30.0.2 firmware in simavr reading the
+# simulator's sensors and driving its thrusters.
 rm -f target/interop-hil-junit.xml
 if cargo build --locked --features hil \
     && hil_elf=$(target/debug/neptunus genuine-board --build-only --data-dir target/hil-data "$firmware_dir/30.0.2" | cut -f1) \
     && [ -f "$hil_elf" ]; then
     NEPTUNUS_HIL_FIRMWARE="$hil_elf" NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest \
         tests/interop/test_qgc_connect.py tests/interop/test_pymavlink.py tests/interop/test_depth_hold.py \
+        tests/interop/test_mavlink2rest.py \
         -q -p no:cacheprovider --timeout 300 --junitxml target/interop-hil-junit.xml || status=1
 else
     echo "the genuine firmware could not be built for the --hil tests" >&2
