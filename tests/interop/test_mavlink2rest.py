@@ -24,6 +24,7 @@ import re
 import socket
 import threading
 import time
+import urllib.parse
 import urllib.request
 
 import websocket  # websocket-client
@@ -277,7 +278,7 @@ def test_websocket_streams_what_cockpit_shows(make_vehicle):
     addr = http_addr(v)
     wanted = ["HEARTBEAT", "ATTITUDE", "VFR_HUD", "SCALED_PRESSURE", "NAMED_VALUE_FLOAT"]
     # Only watching: the filter keeps the stream to these message types.
-    c = M2rClient(addr, "?filter=" + urllib.request.quote("^(" + "|".join(wanted) + ")$"))
+    c = M2rClient(addr, "?filter=" + urllib.parse.quote("^(" + "|".join(wanted) + ")$"))
     try:
         types: set[str] = set()
         names: set[str] = set()
