@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use common::core_rig::{CoreRig, acks};
 use neptunus::dialect::neptunus::*;
-use neptunus::firmware::codec::Command;
+use neptunus::firmware::codec::{Command, Event, StatusSample};
 use neptunus::scenario::report;
 use neptunus::scenario::{Scenario, Sticks};
 use neptunus::vehicle::machine::{Input, Mode, Now, Output, RunMode, Sender, Vehicle};
@@ -290,6 +290,62 @@ fn switching_run_mode_stops_the_thrusters_and_flags_telemetry_simulated() {
         panic!()
     };
     assert!(!h.base_mode.contains(MavModeFlag::MAV_MODE_FLAG_HIL_ENABLED));
+}
+
+/// The built-in simulator powers up at the switch (its `boot` line about a
+/// second later) and counts time on the vehicle's clock: neither is the
+/// vehicle's board restarting, so the vehicle stays armed in the simulator
+/// and back. A `boot` line from the board itself still disarms.
+#[test]
+fn the_simulators_power_up_is_no_board_restart() {
+    let mut r = armed_vehicle(Mode::Manual.number());
+    let (result, _) = command(
+        &mut r,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+        1.0,
+        f32::NAN,
+        3600,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
+    let status = |time_ms| {
+        Event::Status(StatusSample {
+            vout_v: Some(12.0),
+            time_ms: Some(time_ms),
+            ..StatusSample::default()
+        })
+    };
+    r.t = Duration::from_millis(4600);
+    r.input(Input::SimBoard(Event::Boot));
+    // The simulator's clock, behind the board's (about 3.5 s by now).
+    r.input(Input::SimBoard(status(100)));
+    assert!(r.v.armed(), "disarmed by the simulator's power-up");
+    let (result, _) = command(
+        &mut r,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+        0.0,
+        f32::NAN,
+        5600,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
+    r.t = Duration::from_millis(5700);
+    r.input(Input::Board(status(5700)));
+    assert!(r.v.armed(), "disarmed back in normal run mode");
+
+    // A board that really restarts while the simulator flies: disarmed.
+    let (result, _) = command(
+        &mut r,
+        GCS,
+        MavCmd::MAV_CMD_NEPTUNUS_SET_RUN_MODE,
+        1.0,
+        f32::NAN,
+        6600,
+    );
+    assert_eq!(result, Some(MavResult::MAV_RESULT_ACCEPTED));
+    r.t = Duration::from_millis(6700);
+    r.input(Input::Board(Event::Boot));
+    assert!(!r.v.armed(), "still armed after the board restarted");
 }
 
 #[test]

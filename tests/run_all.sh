@@ -136,15 +136,25 @@ rm -f target/browser-junit.xml
 
 echo "== interoperability tests with the genuine firmware in the loop (neptunus --hil)"
 # The same clients against `--hil`: QGroundControl's connect sequence,
-# pymavlink's everyday calls and depth hold, with the 30.0.2 firmware in
-# simavr reading the simulator's sensors and driving its thrusters.
-rm -f target/interop-hil-junit.xml
+# pymavlink's everyday calls, depth hold and the mavlink2rest client
+# (Cockpit's API), with the 30.0.2 firmware in simavr reading the
+# simulator's sensors and driving its thrusters. Then the pilot's browser
+# tests (tests/browser/pilot.test.js: arming, driving, the HUD's telemetry,
+# depth hold, failsafes, a hung and a restarted vehicle) against it.
+rm -f target/interop-hil-junit.xml target/browser-hil-junit.xml
 if cargo build --locked --features hil \
     && hil_elf=$(target/debug/neptunus genuine-board --build-only --data-dir target/hil-data "$firmware_dir/30.0.2" | cut -f1) \
     && [ -f "$hil_elf" ]; then
+    hil_elf=$(realpath "$hil_elf")
     NEPTUNUS_HIL_FIRMWARE="$hil_elf" NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest \
         tests/interop/test_qgc_connect.py tests/interop/test_pymavlink.py tests/interop/test_depth_hold.py \
+        tests/interop/test_mavlink2rest.py \
         -q -p no:cacheprovider --timeout 300 --junitxml target/interop-hil-junit.xml || status=1
+    (cd tests/browser && NEPTUNUS_HIL_FIRMWARE="$hil_elf" NEPTUNUS_BIN="$PWD/../../target/debug/neptunus" \
+        node --test --test-concurrency=1 \
+        --test-reporter=spec --test-reporter-destination=stdout \
+        --test-reporter=junit --test-reporter-destination=../../target/browser-hil-junit.xml \
+        pilot.test.js) || status=1
 else
     echo "the genuine firmware could not be built for the --hil tests" >&2
     status=1
@@ -175,6 +185,8 @@ read -r py_pass py_fail py_skip < <(junit_counts target/interop-junit.xml)
 read -r hil_pass hil_fail hil_skip < <(junit_counts target/interop-hil-junit.xml)
 py_pass=$((py_pass + hil_pass)); py_fail=$((py_fail + hil_fail)); py_skip=$((py_skip + hil_skip))
 read -r br_pass br_fail br_skip < <(junit_counts target/browser-junit.xml)
+read -r brh_pass brh_fail brh_skip < <(junit_counts target/browser-hil-junit.xml)
+br_pass=$((br_pass + brh_pass)); br_fail=$((br_fail + brh_fail)); br_skip=$((br_skip + brh_skip))
 awk -v pp="$((py_pass + br_pass + pk_pass))" -v pf="$((py_fail + br_fail + pk_fail))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt

@@ -1,6 +1,7 @@
 // Shared by the browser tests and the screenshot script: the real
-// `neptunus --sim` binary with its HMI on a free loopback port, and Debian's
-// Chromium driven by playwright-core (never a browser a tool downloads).
+// `neptunus --sim` binary (or `--hil`: NEPTUNUS_HIL_FIRMWARE) with its HMI
+// on a free loopback port, and Debian's Chromium driven by playwright-core
+// (never a browser a tool downloads).
 import { spawn, spawnSync } from 'node:child_process';
 import { mkdtempSync, readFileSync, rmSync, existsSync, openSync, writeFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
@@ -12,6 +13,10 @@ const here = dirname(fileURLToPath(import.meta.url));
 export const REPO = resolve(here, '..', '..');
 export const BIN = process.env.NEPTUNUS_BIN || join(REPO, 'target', 'debug', 'neptunus');
 export const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
+// With the genuine firmware in the loop (`neptunus --hil`): the firmware's
+// built .elf (`neptunus genuine-board --build-only`), else the emulator
+// (`--sim`) — the interoperability suite's convention (its conftest.py).
+export const HIL_FIRMWARE = process.env.NEPTUNUS_HIL_FIRMWARE || null;
 
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
@@ -27,7 +32,8 @@ export async function until(fn, ms, what) {
   throw new Error(`timed out after ${ms} ms waiting for ${what} (last: ${JSON.stringify(last)})`);
 }
 
-/** `neptunus --sim` with its HMI on 127.0.0.1:0; resolves once the page is served.
+/** `neptunus --sim` (or `--hil` with NEPTUNUS_HIL_FIRMWARE) with its HMI on
+ * 127.0.0.1:0; resolves once the page is served.
  * `password`: set first with `neptunus hmi set-password` (piped, as a script
  * would); `hmiToml`: the body of an `[hmi]` section of a config file. */
 export async function startVehicle(extraArgs = [], { password, hmiToml, toml, http = '127.0.0.1:0', dataDir } = {}) {
@@ -46,9 +52,10 @@ export async function startVehicle(extraArgs = [], { password, hmiToml, toml, ht
   // A restarted vehicle writes its address again: wait for the new one.
   rmSync(join(data, 'http.addr'), { force: true });
   const log = openSync(join(dir, 'stderr.txt'), 'w');
+  const board = HIL_FIRMWARE ? ['--hil', HIL_FIRMWARE] : ['--sim'];
   const child = spawn(
     BIN,
-    ['--sim', '--data-dir', data, '--http', http, '--mavlink', 'udpin:127.0.0.1:0', ...extraArgs],
+    [...board, '--data-dir', data, '--http', http, '--mavlink', 'udpin:127.0.0.1:0', ...extraArgs],
     { stdio: ['ignore', log, log], env: { ...process.env, NO_COLOR: '1', RUST_LOG: process.env.RUST_LOG || 'info' } },
   );
   let exited = null;
@@ -122,11 +129,23 @@ export async function withVehicle(body, args = [], opts = {}) {
 /** The latest telemetry the page holds. */
 export const telemetry = (page) => page.evaluate(() => window.neptunus.state.t);
 
-/** Waits until the vehicle is ready to arm, requests control and arms. */
+/** Waits until the vehicle is ready to arm, requests control and arms —
+ * again, as a pilot would, while the vehicle refuses: its pre-arm checks
+ * can fail for a moment after they passed (a board slowed down by a busy
+ * machine, the genuine firmware in simavr above all, reports late). */
 export async function takeControlAndArm(page) {
   await until(async () => (await telemetry(page)).health?.prearm, 20000, 'pre-arm checks');
   await page.click('[data-testid=request-control]');
   await until(async () => (await telemetry(page)).control.you, 10000, 'control');
-  await page.click('[data-testid=arm]');
-  await until(async () => (await telemetry(page)).armed, 10000, 'armed');
+  const end = Date.now() + 60000;
+  for (;;) {
+    await until(async () => (await telemetry(page)).health?.prearm, Math.max(end - Date.now(), 1000), 'pre-arm checks before arming');
+    await page.click('[data-testid=arm]');
+    try {
+      await until(async () => (await telemetry(page)).armed, 10000, 'armed');
+      return;
+    } catch (e) {
+      if (Date.now() >= end) throw e;
+    }
+  }
 }

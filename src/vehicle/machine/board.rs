@@ -142,6 +142,23 @@ impl Vehicle {
         self.failsafe_tick(now, out);
     }
 
+    /// The built-in simulator's board, in run mode SIMULATOR. It powers up
+    /// when the run mode switches to it and counts time on the vehicle's
+    /// clock, not the board's: its `boot` line and its uptime say nothing
+    /// of the vehicle's board, and taken as the board's they read as a
+    /// restart that disarms the vehicle a second into the simulator. The
+    /// board's own `boot` line still counts in SIMULATOR run mode.
+    pub(super) fn on_sim_board(&mut self, ev: Event, now: Now, out: &mut Vec<Output>) {
+        match ev {
+            Event::Boot => {}
+            Event::Status(mut s) => {
+                s.time_ms = None;
+                self.on_board(Event::Status(s), now, out);
+            }
+            ev => self.on_board(ev, now, out),
+        }
+    }
+
     pub(super) fn on_board(&mut self, ev: Event, now: Now, out: &mut Vec<Output>) {
         match ev {
             Event::Nav(NavSample {

@@ -549,7 +549,7 @@ impl Vehicle {
             }
             Input::SimBoard(ev) => {
                 if self.run_mode == RunMode::Simulator {
-                    self.on_board(ev, now, out);
+                    self.on_sim_board(ev, now, out);
                 }
             }
             Input::SimTruth(t) => self.board.on_sim_truth(t, now),
