@@ -8,7 +8,8 @@
 //
 // VIEWER_PORT: where this script serves the MCM viewer page, on 127.0.0.1;
 // the vehicle lists that origin in [hmi] allowed_origins, as it would
-// Cockpit's.
+// Cockpit's. (A page Playwright fulfils itself has no address, and
+// Chromium's local-network checks then block its WebSocket to loopback.)
 //
 // Three ways to watch, one after the other, each in a fresh browser context:
 // - hmi-mjpeg: the operator page itself with WebRTC hidden from it (its
