@@ -72,6 +72,11 @@ pub struct CameraConfig {
     /// browser's HUD draws them over any camera, and two would collide. On
     /// for viewers without the page (`/video.mjpg` in a video player).
     pub synthetic_overlay: bool,
+    /// The synthetic camera paints each frame's capture time into its
+    /// bottom-left corner as a block code ([`super::timecode`]), for the
+    /// camera-to-screen latency bench. Off by default: the pilot's picture
+    /// carries no code.
+    pub synthetic_timecode: bool,
     /// How the image must be turned for display (0, 90, 180 or 270,
     /// clockwise). Only reported in the status: the browser applies it with
     /// CSS so every browser shows the same picture.
@@ -105,6 +110,7 @@ impl Default for CameraConfig {
             fps: 10.0,
             jpeg_quality: 80,
             synthetic_overlay: false,
+            synthetic_timecode: false,
             rotation_deg: 0,
             stall_timeout_s: 5.0,
             backoff: BackoffConfig::default(),
@@ -148,6 +154,12 @@ impl CameraConfig {
         }
         if !(self.fps.is_finite() && (MIN_FPS..=MAX_FPS).contains(&self.fps)) {
             return Err(CameraConfigError::Fps(self.fps));
+        }
+        if self.synthetic_timecode && !super::timecode::fits(self.width, self.height) {
+            return Err(CameraConfigError::TimecodeSize {
+                width: self.width,
+                height: self.height,
+            });
         }
         if !(1..=100).contains(&self.jpeg_quality) {
             return Err(CameraConfigError::Quality(self.jpeg_quality));
@@ -306,6 +318,10 @@ pub enum CameraConfigError {
         "camera.width × camera.height = {width}×{height} is out of range — use 16 to 4096 pixels on each side (default 640×480)"
     )]
     Size { width: u32, height: u32 },
+    #[error(
+        "camera.synthetic_timecode needs a picture of at least 256×32 pixels, not {width}×{height} — make camera.width/camera.height larger or turn the time code off"
+    )]
+    TimecodeSize { width: u32, height: u32 },
     #[error("camera.fps = {0} is out of range — use 0.1 to 60 frames per second (default 10)")]
     Fps(f64),
     #[error("camera.jpeg_quality = {0} is out of range — use 1 to 100 (default 80)")]
@@ -410,6 +426,12 @@ mod tests {
         let err = toml::from_str::<CameraConfig>("synthetic_overlay = \"yes\"")
             .expect_err("not a boolean");
         assert!(err.to_string().contains("synthetic_overlay"), "{err}");
+        // The time code is for the latency bench only.
+        assert!(!sim.synthetic_timecode);
+        let small: CameraConfig =
+            toml::from_str("synthetic_timecode = true\nwidth = 200").expect("parses");
+        let err = small.validate().expect_err("too narrow for the code");
+        assert!(err.to_string().contains("256×32"), "{err}");
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //!
 //! [`Camera::start`] runs one source, chosen by [`CameraConfig::source`]:
 //! - `synthetic`: pictures drawn from the simulator's [`Scene`] (water,
-//!   horizon, light shafts; the instruments too with `synthetic_overlay`)
-//!   and encoded as JPEG in-process;
+//!   horizon, light shafts; the instruments too with `synthetic_overlay`,
+//!   the capture time as a block code with `synthetic_timecode`) and
+//!   encoded as JPEG in-process;
 //! - `ffmpeg` / `mjpg-streamer`: a supervised child process, restarted with
 //!   exponential backoff when it exits, stalls or cannot be found;
 //! - `url`: an MJPEG HTTP stream elsewhere, reconnected with the same
@@ -37,6 +38,7 @@ mod shared;
 mod source;
 pub mod splitter;
 mod synthetic;
+pub mod timecode;
 pub mod webrtc;
 
 use std::sync::Arc;

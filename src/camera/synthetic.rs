@@ -1,6 +1,6 @@
 //! The synthetic source: one picture of the current scene per frame period.
 
-use std::time::Duration;
+use std::time::{Duration, SystemTime};
 
 use tokio::sync::watch;
 use tokio::time::MissedTickBehavior;
@@ -24,12 +24,22 @@ pub(crate) async fn run(
     let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / cfg.fps));
     // A late frame is not made up for: the next one comes a period later.
     tick.set_missed_tick_behavior(MissedTickBehavior::Delay);
+    let timecode = cfg.synthetic_timecode;
     out.starting(None);
     loop {
         tick.tick().await;
+        // The capture instant: drawing and encoding count as the camera's
+        // own delay, as a real camera's readout and encoding would.
+        let captured_ms = SystemTime::now()
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(0, |d| d.as_millis() as u64);
         let now = scene.borrow().clone();
         let job = tokio::task::spawn_blocking(move || {
-            let jpeg = renderer.render_jpeg(&now);
+            renderer.render(&now);
+            if timecode {
+                renderer.stamp(captured_ms);
+            }
+            let jpeg = renderer.encode();
             (renderer, jpeg)
         });
         let Ok((back, jpeg)) = job.await else {

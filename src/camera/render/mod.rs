@@ -151,6 +151,12 @@ impl SyntheticRenderer {
         Ok(Bytes::from(out))
     }
 
+    /// Paints the capture time `unix_ms` ([`timecode`](super::timecode))
+    /// over what [`render`](Self::render) drew last.
+    pub fn stamp(&mut self, unix_ms: u64) {
+        super::timecode::paint(&mut self.rgb, self.width, self.height, unix_ms);
+    }
+
     pub fn render_jpeg(&mut self, scene: &Scene) -> Result<Bytes, RenderError> {
         self.render(scene);
         self.encode()
