@@ -111,18 +111,29 @@ fn run(
     stop: &AtomicBool,
 ) {
     let mut next_report = std::time::Instant::now() + REPORT_PERIOD;
+    // The longest wait between two of this loop's passes since the last
+    // report: while it waits (a machine too busy to run this thread), the
+    // board's sensors read a frozen world and the plant then catches up
+    // in one leap on the pulses of the moment.
+    let mut last_pass = std::time::Instant::now();
+    let mut widest_gap = Duration::ZERO;
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(LOOP_PERIOD);
+        let now = std::time::Instant::now();
+        widest_gap = widest_gap.max(now.duration_since(last_pass));
+        last_pass = now;
         let snap = control.snapshot();
-        if std::time::Instant::now() >= next_report {
+        if now >= next_report {
             next_report += REPORT_PERIOD;
             tracing::info!(
                 board_time_s = format_args!("{:.1}", snap.sim_time_s),
                 realtime_ratio = format_args!("{:.2}", snap.realtime_ratio),
                 speed_ratio = format_args!("{:.1}", snap.speed_ratio),
                 slips = snap.slips,
+                widest_gap_ms = widest_gap.as_millis(),
                 "genuine board in simavr"
             );
+            widest_gap = Duration::ZERO;
         }
         if snap.error.is_some() {
             // The board stopped; the vehicle stays where it is.
