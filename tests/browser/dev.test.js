@@ -119,12 +119,16 @@ test('reset data clears every plot, a zoomed one too, and it follows the new dat
   await addPlot(page, 'voltage_v');
   await until(async () => (await plotState(page, 'depth_m')).x.length > 40, 15000, 'two seconds of samples in the plot');
   // Zoom the first plot the way a user does: drag across its middle. A
-  // busy machine may lose a drag (the page still laying out the second
-  // plot); a user would drag again, and so does the test, up to three times.
+  // busy machine may lose a drag; a user would drag again, and so does the
+  // test, up to three times.
   const isZoomed = (s) => s.max - s.min < (s.x.at(-1) - s.x[0]) * 0.5;
   let zoomed;
   for (let attempt = 0; attempt < 3; attempt += 1) {
-    const over = await page.locator('#plots .plot').first().locator('.u-over').boundingBox();
+    // A user drags a plot they can see: scrolled into view first (the
+    // page may sit elsewhere when the view opened).
+    const overEl = page.locator('#plots .plot').first().locator('.u-over');
+    await overEl.scrollIntoViewIfNeeded();
+    const over = await overEl.boundingBox();
     const y = over.y + over.height / 2;
     await page.mouse.move(over.x + over.width * 0.3, y);
     await page.mouse.down();
@@ -137,7 +141,12 @@ test('reset data clears every plot, a zoomed one too, and it follows the new dat
     if (zoomed) break;
   }
   if (!zoomed) zoomed = await plotState(page, 'depth_m');
-  assert.ok(isZoomed(zoomed), `zoomed: ${zoomed.min}..${zoomed.max} of ${zoomed.x[0]}..${zoomed.x.at(-1)}`);
+  const onTop = await page.evaluate(() => {
+    const over = document.querySelector('#plots .plot .u-over').getBoundingClientRect();
+    const el = document.elementFromPoint(over.x + over.width * 0.4, over.y + over.height / 2);
+    return el ? `${el.tagName}.${el.className}#${el.id}` : 'nothing';
+  });
+  assert.ok(isZoomed(zoomed), `zoomed: ${zoomed.min}..${zoomed.max} of ${zoomed.x[0]}..${zoomed.x.at(-1)}; under the drag: ${onTop}`);
   const lastOld = await page.evaluate(() => window.neptunus.recorder.time.at(-1));
 
   // What Reset guarantees: nothing recorded before it is kept. Clicked and
