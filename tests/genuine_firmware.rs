@@ -478,6 +478,7 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
         "ESCs neutral only {board_s:.2} s after the stop; the serial line since:\n{traffic}"
     );
     rig.vehicle.signal(Signal::SIGCONT).unwrap();
+    let resumed_wall = Instant::now();
     // Back, the vehicle is disarmed and the board stays neutral although
     // the station still sends forward stick.
     let armed = rig.until_msg(
@@ -504,10 +505,25 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
             .unwrap();
         let _ = rig.gcs.recv();
         let p = rig.pins();
-        assert!(
-            p.esc_us.iter().all(|u| neutral(*u) || u.is_none()),
-            "the board drove again after the stall without a new arm: {p:?}"
-        );
+        if !p.esc_us.iter().all(|u| neutral(*u) || u.is_none()) {
+            std::thread::sleep(Duration::from_millis(300));
+            let traffic: String = rig
+                .serial
+                .try_iter()
+                .map(|c| {
+                    format!(
+                        "{:>6.3} s {} {}\n",
+                        c.at.saturating_duration_since(resumed_wall).as_secs_f64(),
+                        if c.to_board { "→" } else { "←" },
+                        String::from_utf8_lossy(&c.bytes).escape_debug()
+                    )
+                })
+                .collect();
+            panic!(
+                "the board drove again after the stall without a new arm: {p:?}\nthe serial line since the vehicle resumed:\n{traffic}\n{}",
+                strip_ansi(&rig.vehicle.stderr_tail())
+            );
+        }
     }
     // Arming again is the way back.
     rig.gcs.arm(&mut rig.vehicle).unwrap();

@@ -20,8 +20,8 @@
 //! before it reports itself up; a board whose sensors' set-up takes longer
 //! than the boot wait (30.0.2 with an IMU: 2.5 s) prints its chatter first,
 //! and a handshake written then would sit unread in its buffer, its echoes
-//! time out and more frames follow into the full buffer; and after a gap in the pings longer than
-//! the board's dead-man timeout, a thrust command decided before the gap is
+//! time out and more frames follow into the full buffer; and after a gap in the pings as long as
+//! the board's dead-man timeout, or nearly (its clock is not ours), a thrust command decided before the gap is
 //! replaced by neutral: the board has just stopped, and the ping that
 //! follows restarts it on its last target.
 //!
@@ -180,6 +180,11 @@ impl Connection {
         self.heard && !self.booted && !self.board_talked && now < self.opened_at + allowance
     }
 }
+
+/// How close to the board's dead-man timeout a gap in the pings counts as
+/// one that may have tripped it. Pings go every second while the vehicle is
+/// healthy, so only a vehicle that stood still comes this near.
+const DEAD_MAN_DOUBT: Duration = Duration::from_millis(500);
 
 /// The link's state machine (see the module docs).
 #[derive(Debug)]
@@ -365,10 +370,14 @@ impl Session {
             // A ping now, so the freshly armed dead-man has a full period.
             conn.next_ping = now;
         }
-        // A gap in the pings longer than the board's dead-man timeout.
+        // A gap in the pings that may have tripped the board's dead-man:
+        // within DEAD_MAN_DOUBT of its timeout counts, for the board's clock
+        // is not ours (a crystal's error, a simulator catching up) and a
+        // thrust written to a board that did trip is resumed by the ping
+        // that follows.
         let gap = conn
             .last_ping
-            .is_some_and(|t| now.duration_since(t) > self.cfg.dead_man_timeout);
+            .is_some_and(|t| now.duration_since(t) + DEAD_MAN_DOUBT > self.cfg.dead_man_timeout);
         if conn.handshaken && now >= conn.next_ping && healthy {
             conn.next_ping = now + self.cfg.ping_period;
             if !self.outbox.control.contains(&Command::Ping(0)) {

@@ -467,3 +467,30 @@ fn a_long_set_up_that_chatters_is_not_down_and_a_device_printing_only_noise_is()
     }
     assert_eq!(s.stats().state, LinkState::Down);
 }
+
+#[test]
+fn a_gap_just_short_of_the_dead_man_timeout_counts_as_one_that_tripped_it() {
+    // The board's clock is not the link's: a gap of 1.8 s by the link's may
+    // be 2 s by the board's, which then stopped and restarts on its last
+    // target at the next ping.
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    s.received(b"boot:1;\r\n", t0);
+    s.healthy(t0);
+    assert!(drain_writes(&mut s, t0).contains(&Command::Ping(0)));
+    s.command(go(1700));
+    let t = t0 + s.cfg.dead_man_timeout - Duration::from_millis(200);
+    s.healthy(t);
+    assert_eq!(
+        drain_writes(&mut s, t),
+        [go(NEUTRAL_US), Command::Ping(0)],
+        "neutral before the ping, no stale go() after a gap near the timeout"
+    );
+    // A regular second between pings is no gap: thrust goes as usual.
+    let t = t + Duration::from_secs(1);
+    s.command(go(1600));
+    s.healthy(t);
+    let written = drain_writes(&mut s, t);
+    assert!(written.contains(&go(1600)), "{written:?}");
+    assert!(!written.contains(&go(NEUTRAL_US)), "{written:?}");
+}
