@@ -20,10 +20,11 @@
 //! before it reports itself up; a board whose sensors' set-up takes longer
 //! than the boot wait (30.0.2 with an IMU: 2.5 s) prints its chatter first,
 //! and a handshake written then would sit unread in its buffer, its echoes
-//! time out and more frames follow into the full buffer; and after a gap in the pings as long as
-//! the board's dead-man timeout, or nearly (its clock is not ours), a thrust command decided before the gap is
-//! replaced by neutral: the board has just stopped, and the ping that
-//! follows restarts it on its last target.
+//! time out and more frames follow into the full buffer; and after a gap
+//! in the pings as long as the board's dead-man timeout, or nearly (its
+//! clock is not ours), a thrust command decided before the gap is replaced
+//! by neutral: the board has just stopped, and the ping that follows
+//! restarts it on its last target.
 //!
 //! It must never read a clock, sleep, or touch the serial device or a
 //! channel: the I/O loop (`io.rs`) passes the time in with every call, writes
