@@ -163,8 +163,8 @@ struct Connection {
     /// before that is its first start (still setting up when the boot wait
     /// ran out), not a reboot.
     board_talked: bool,
-    /// The board printed something (set-up chatter, a torn line) before
-    /// its first telemetry line.
+    /// The board printed something (set-up chatter, a torn line, anything)
+    /// since the device was opened.
     heard: bool,
     /// The board printed `boot` since the device was opened.
     booted: bool,
