@@ -249,10 +249,10 @@ pub fn ports(settings: &Settings) -> Check {
     let in_use = |(what, r): &(String, Result<(), std::io::Error>)| {
         r.as_ref().err().map(|e| format!("{what}: {e}"))
     };
-    let taken: Vec<String> = listens.iter().filter_map(in_use).collect();
+    let mut taken: Vec<String> = listens.iter().filter_map(in_use).collect();
     let signalling_taken = optional.as_ref().and_then(in_use);
     if taken.is_empty()
-        && let Some(busy) = signalling_taken
+        && let Some(busy) = &signalling_taken
     {
         return Check::warn(
             name,
@@ -260,6 +260,8 @@ pub fn ports(settings: &Settings) -> Check {
             "stop the program listening there (mavlink-camera-manager, or another neptunus: `systemctl status neptunus`), or set [camera.webrtc] signalling to another address or off".to_owned(),
         );
     }
+    // With a required address taken too, the signalling's is named with it.
+    taken.extend(signalling_taken);
     listens.extend(optional);
     if taken.is_empty() {
         let all: Vec<&str> = listens.iter().map(|(w, _)| w.as_str()).collect();
