@@ -306,6 +306,11 @@ fn the_genuine_firmware_dives_turns_holds_and_surfaces_the_simulated_rov() {
             .unwrap();
         assert!(held, "the hold did not last 30 s of vehicle time");
         let log = vehicle.stderr_text();
+        // The log read before the hold may have ended inside a character.
+        let mut mark = mark.min(log.len());
+        while !log.is_char_boundary(mark) {
+            mark -= 1;
+        }
         let before = runner_reports(&log[..mark]).last().copied();
         let during = runner_reports(&log[mark..]);
         let no_new_slip = match (before, during.last()) {
