@@ -245,6 +245,22 @@ impl GenuineRig {
         );
     }
 
+    /// The serial traffic not read yet, one chunk a line, stamped in
+    /// seconds from `t0` (for a failure's message).
+    fn serial_since(&self, t0: Instant) -> String {
+        self.serial
+            .try_iter()
+            .map(|c| {
+                format!(
+                    "{:>6.3} s {} {}\n",
+                    c.at.saturating_duration_since(t0).as_secs_f64(),
+                    if c.to_board { "→" } else { "←" },
+                    String::from_utf8_lossy(&c.bytes).escape_debug()
+                )
+            })
+            .collect()
+    }
+
     fn board_output(&mut self) -> String {
         for chunk in self.serial.try_iter() {
             if !chunk.to_board {
@@ -453,18 +469,7 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
         }
     }
     // The serial traffic from the stop on, for a failure's message.
-    let traffic: String = rig
-        .serial
-        .try_iter()
-        .map(|c| {
-            format!(
-                "{:>6.3} s {} {}\n",
-                c.at.saturating_duration_since(stopped_wall).as_secs_f64(),
-                if c.to_board { "→" } else { "←" },
-                String::from_utf8_lossy(&c.bytes).escape_debug()
-            )
-        })
-        .collect();
+    let traffic = rig.serial_since(stopped_wall);
     let cycle = neutral_at.unwrap_or_else(|| {
         panic!("the board's dead-man never brought the ESCs to neutral:\n{traffic}")
     });
@@ -507,18 +512,7 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
         let p = rig.pins();
         if !p.esc_us.iter().all(|u| neutral(*u) || u.is_none()) {
             std::thread::sleep(Duration::from_millis(300));
-            let traffic: String = rig
-                .serial
-                .try_iter()
-                .map(|c| {
-                    format!(
-                        "{:>6.3} s {} {}\n",
-                        c.at.saturating_duration_since(resumed_wall).as_secs_f64(),
-                        if c.to_board { "→" } else { "←" },
-                        String::from_utf8_lossy(&c.bytes).escape_debug()
-                    )
-                })
-                .collect();
+            let traffic = rig.serial_since(resumed_wall);
             panic!(
                 "the board drove again after the stall without a new arm: {p:?}\nthe serial line since the vehicle resumed:\n{traffic}\n{}",
                 strip_ansi(&rig.vehicle.stderr_tail())
