@@ -147,8 +147,10 @@ impl EndpointCtx {
         self.counters.warned.fetch_or(bit, Ordering::Relaxed) & bit == 0
     }
 
-    pub(super) fn send_error(&self, what: &str) {
-        self.counters.send_errors.fetch_add(1, Ordering::Relaxed);
+    pub(super) fn send_error(&self, frames: usize, what: &str) {
+        self.counters
+            .send_errors
+            .fetch_add(frames as u64, Ordering::Relaxed);
         if self.first_time(WARN_SEND) {
             tracing::warn!(endpoint = %self.url, "{what} (logged once; see send_errors)");
         }
@@ -214,8 +216,10 @@ impl EndpointCtx {
         allowed
     }
 
-    pub(super) fn sent(&self, bytes: usize) {
-        self.counters.frames_out.fetch_add(1, Ordering::Relaxed);
+    pub(super) fn sent(&self, frames: usize, bytes: usize) {
+        self.counters
+            .frames_out
+            .fetch_add(frames as u64, Ordering::Relaxed);
         self.counters
             .bytes_out
             .fetch_add(bytes as u64, Ordering::Relaxed);

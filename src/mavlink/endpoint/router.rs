@@ -216,7 +216,7 @@ impl RouterHandle {
             };
             if let Err(mpsc::error::TrySendError::Full(_)) = slot.queue.try_send(queued) {
                 slot.ctx
-                    .send_error("endpoint queue full: dropping outbound frames");
+                    .send_error(1, "endpoint queue full: dropping outbound frames");
             }
         }
     }

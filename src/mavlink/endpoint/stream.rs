@@ -37,7 +37,7 @@ pub(super) fn dispatch<'a>(
             continue;
         }
         if let Err(mpsc::error::TrySendError::Full(_)) = tx.try_send(Arc::clone(&q.bytes)) {
-            ctx.send_error("a client is not reading: dropping its frames");
+            ctx.send_error(1, "a client is not reading: dropping its frames");
         }
     }
 }
@@ -100,11 +100,11 @@ pub(super) async fn run_stream<S>(
         let mut wr = BufWriter::new(wr);
         while let Some(bytes) = rx.recv().await {
             wr.write_all(&bytes).await?;
-            ctx.sent(bytes.len());
+            ctx.sent(1, bytes.len());
             // Batch whatever else is already queued into the same write.
             while let Ok(bytes) = rx.try_recv() {
                 wr.write_all(&bytes).await?;
-                ctx.sent(bytes.len());
+                ctx.sent(1, bytes.len());
             }
             wr.flush().await?;
         }

@@ -20,6 +20,72 @@ use super::context::{EndpointCtx, MAX_PEERS, Queued, Target, stopped};
 use super::types::{PeerId, PeerStanding};
 use crate::mavlink::frame::{FrameStats, decode_datagram};
 
+/// The most bytes of MAVLink in one datagram: whole frames only, and inside
+/// the smallest MTU IPv6 guarantees (1280 bytes less the IPv6 and UDP
+/// headers), so no datagram is fragmented on the way to a station.
+pub(super) const DATAGRAM_MAX: usize = 1232;
+
+/// The most queued frames gathered into one round of sends: one tick's
+/// worth is a few dozen; a parameter list or a burst is sent in rounds, so
+/// the socket's receive side is served in between.
+const GATHER_MAX: usize = 64;
+
+/// One datagram to send: whole frames for one destination.
+#[derive(Debug, PartialEq)]
+pub(super) struct Datagram {
+    pub(super) dest: SocketAddr,
+    pub(super) bytes: Vec<u8>,
+    pub(super) frames: usize,
+}
+
+/// Packs frames into datagrams per destination, in order: each
+/// destination's frames arrive in the order they were queued, and a frame
+/// never straddles two datagrams.
+#[derive(Debug, Default)]
+pub(super) struct Packer {
+    /// Filled datagrams, in the order they filled.
+    full: Vec<Datagram>,
+    /// The datagram being filled for each destination.
+    open: Vec<Datagram>,
+}
+
+impl Packer {
+    pub(super) fn add(&mut self, dest: SocketAddr, frame: &[u8]) {
+        let i = match self.open.iter().position(|d| d.dest == dest) {
+            Some(i) => i,
+            None => {
+                self.open.push(Datagram {
+                    dest,
+                    bytes: Vec::with_capacity(DATAGRAM_MAX),
+                    frames: 0,
+                });
+                self.open.len() - 1
+            }
+        };
+        let d = &mut self.open[i];
+        if d.frames > 0 && d.bytes.len() + frame.len() > DATAGRAM_MAX {
+            let filled = std::mem::replace(
+                d,
+                Datagram {
+                    dest,
+                    bytes: Vec::with_capacity(DATAGRAM_MAX),
+                    frames: 0,
+                },
+            );
+            self.full.push(filled);
+        }
+        let d = &mut self.open[i];
+        d.bytes.extend_from_slice(frame);
+        d.frames += 1;
+    }
+
+    /// Every datagram, filled ones first (a destination's filled datagrams
+    /// hold its earlier frames); the packer is empty after.
+    pub(super) fn drain(&mut self) -> impl Iterator<Item = Datagram> + '_ {
+        self.full.drain(..).chain(self.open.drain(..))
+    }
+}
+
 struct UdpPeer {
     id: PeerId,
     last_seen: Instant,
@@ -86,6 +152,7 @@ pub(super) async fn run_udp(
     ctx.set_peers(fixed);
     let mut buf = vec![0u8; 65_536];
     let mut frames = Vec::new();
+    let mut packer = Packer::default();
     let mut sweep = tokio::time::interval((peer_timeout / 4).max(Duration::from_millis(10)));
     sweep.set_missed_tick_behavior(MissedTickBehavior::Delay);
 
@@ -125,27 +192,37 @@ pub(super) async fn run_udp(
                 }
             },
             queued = queue.recv() => {
-                let Some(queued) = queued else { break };
-                let mut dests: Vec<SocketAddr> = Vec::new();
-                match queued.target {
-                    Target::All => {
-                        dests.extend(target.map(|(addr, _)| addr));
-                        dests.extend(peers.keys().copied());
-                    }
-                    Target::Peer(id) => {
-                        if let Some((addr, _)) = target.filter(|&(_, t)| t == id) {
-                            ctx.log_reply(&target_standing, &queued.bytes);
-                            dests.push(addr);
-                        } else if let Some((addr, p)) = peers.iter().find(|(_, p)| p.id == id) {
-                            ctx.log_reply(&p.standing, &queued.bytes);
-                            dests.push(*addr);
+                let Some(first) = queued else { break };
+                // What is already queued goes with it: a tick's messages to
+                // one station share datagrams, as ArduPilot's do.
+                let mut next = Some(first);
+                let mut taken = 0;
+                while let Some(queued) = next {
+                    let mut add = |dest: SocketAddr| packer.add(dest, &queued.bytes);
+                    match queued.target {
+                        Target::All => {
+                            if let Some((addr, _)) = target {
+                                add(addr);
+                            }
+                            peers.keys().copied().for_each(add);
+                        }
+                        Target::Peer(id) => {
+                            if let Some((addr, _)) = target.filter(|&(_, t)| t == id) {
+                                ctx.log_reply(&target_standing, &queued.bytes);
+                                add(addr);
+                            } else if let Some((addr, p)) = peers.iter().find(|(_, p)| p.id == id) {
+                                ctx.log_reply(&p.standing, &queued.bytes);
+                                add(*addr);
+                            }
                         }
                     }
+                    taken += 1;
+                    next = if taken < GATHER_MAX { queue.try_recv().ok() } else { None };
                 }
-                for dest in dests {
-                    match socket.send_to(&queued.bytes, dest).await {
-                        Ok(_) => ctx.sent(queued.bytes.len()),
-                        Err(e) => ctx.send_error(&format!("UDP send to {dest} failed: {e}")),
+                for d in packer.drain() {
+                    match socket.send_to(&d.bytes, d.dest).await {
+                        Ok(_) => ctx.sent(d.frames, d.bytes.len()),
+                        Err(e) => ctx.send_error(d.frames, &format!("UDP send to {} failed: {e}", d.dest)),
                     }
                 }
             }
@@ -163,4 +240,54 @@ pub(super) async fn run_udp(
         }
     }
     ctx.set_peers(0);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn addr(port: u16) -> SocketAddr {
+        SocketAddr::from(([127, 0, 0, 1], port))
+    }
+
+    #[test]
+    fn frames_to_one_destination_share_a_datagram_in_order() {
+        let mut p = Packer::default();
+        p.add(addr(1), &[1; 30]);
+        p.add(addr(2), &[9; 40]);
+        p.add(addr(1), &[2; 50]);
+        let out: Vec<Datagram> = p.drain().collect();
+        assert_eq!(out.len(), 2);
+        assert_eq!(out[0].dest, addr(1));
+        assert_eq!(out[0].frames, 2);
+        assert_eq!(out[0].bytes, [vec![1; 30], vec![2; 50]].concat());
+        assert_eq!(out[1].dest, addr(2));
+        assert_eq!(out[1].bytes, vec![9; 40]);
+        assert_eq!(p.drain().count(), 0, "drained");
+    }
+
+    #[test]
+    fn a_full_datagram_goes_first_and_no_frame_is_split() {
+        let mut p = Packer::default();
+        // Five 280-byte frames (MAVLink 2's largest): four fit in 1232.
+        for i in 0..5u8 {
+            p.add(addr(1), &[i; 280]);
+        }
+        let out: Vec<Datagram> = p.drain().collect();
+        assert_eq!(out.len(), 2);
+        assert_eq!((out[0].frames, out[0].bytes.len()), (4, 1120));
+        assert_eq!(out[0].bytes[..280], [0; 280]);
+        assert_eq!((out[1].frames, &out[1].bytes), (1, &vec![4; 280]));
+        assert!(out.iter().all(|d| d.bytes.len() <= DATAGRAM_MAX));
+    }
+
+    #[test]
+    fn a_frame_larger_than_the_limit_still_goes_alone() {
+        let mut p = Packer::default();
+        p.add(addr(1), &[1; 10]);
+        p.add(addr(1), &[2; DATAGRAM_MAX + 1]);
+        let out: Vec<Datagram> = p.drain().collect();
+        assert_eq!(out.len(), 2);
+        assert_eq!(out[1].bytes.len(), DATAGRAM_MAX + 1);
+    }
 }

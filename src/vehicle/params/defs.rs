@@ -10,6 +10,7 @@
 //! [`ParamStore`]: super::ParamStore
 
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::sync::LazyLock;
 
 use crate::dialect::neptunus::MavParamType;
@@ -563,8 +564,33 @@ static DEFS: LazyLock<Vec<ParamDef>> = LazyLock::new(|| {
     defs
 });
 
-static INDEX: LazyLock<HashMap<&'static str, usize>> =
+/// The names' index. The core reads parameters by name on every tick, so
+/// the key hash is FNV-1a rather than SipHash: the table is fixed (nothing
+/// from the network is inserted), so SipHash's defence against chosen
+/// colliding keys buys nothing here, and it costs several times more.
+static INDEX: LazyLock<HashMap<&'static str, usize, BuildHasherDefault<Fnv1a>>> =
     LazyLock::new(|| DEFS.iter().enumerate().map(|(i, d)| (d.name, i)).collect());
+
+/// FNV-1a, 64 bits.
+struct Fnv1a(u64);
+
+impl Default for Fnv1a {
+    fn default() -> Fnv1a {
+        Fnv1a(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Hasher for Fnv1a {
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
 
 /// Every parameter, in index order (PARAM_REQUEST_READ by index uses it).
 pub fn definitions() -> &'static [ParamDef] {

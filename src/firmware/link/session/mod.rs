@@ -77,8 +77,14 @@ fn acknowledge(in_flight: &mut VecDeque<InFlight>, is_it: impl Fn(&[u8]) -> bool
     }
 }
 
-/// How often the figures are published while the device is open.
+/// How often the figures are published while the device is open (at most;
+/// when the session runs anyway), and while it is closed.
 const STATS_PERIOD: Duration = Duration::from_millis(100);
+
+/// The longest the session sleeps while the device is open and nothing is
+/// due (a link that is down, a silent board): its figures stay fresh to a
+/// second.
+const WATCHDOG_IDLE: Duration = Duration::from_secs(1);
 
 /// What the session asks the I/O loop to deliver, in the order it decided.
 #[derive(Debug, Clone, PartialEq)]
@@ -467,34 +473,9 @@ impl Session {
         let Some(conn) = self.conn.as_ref() else {
             return;
         };
-        let opened_at = conn.opened_at;
-        // Until the board's first telemetry line it may still be setting up
-        // (an IMU's self-test holds the 30.0.2 firmware ~2.5 s): the boot
-        // wait's allowance stays.
-        let settled = conn.handshaken && conn.board_talked;
         let handshaken = conn.handshaken;
         let lines_at_open = conn.lines_at_open;
-        let mut silent_since = self
-            .last_line
-            .filter(|t| *t >= opened_at)
-            .unwrap_or(opened_at);
-        // A board printing its set-up chatter or its `boot` is alive though
-        // it prints no telemetry yet (a slow sensor, or a loaded simulator,
-        // stretches a set-up past the boot wait's allowance) — for as long as a
-        // set-up may last; a device that only ever prints what is not
-        // telemetry (a wrong baud rate) is down after that.
-        if !settled
-            && now < opened_at + self.cfg.setup_allowance
-            && let Some(heard) = conn.last_heard
-        {
-            silent_since = silent_since.max(heard);
-        }
-        let allowed = self.cfg.stale_after
-            + if settled {
-                Duration::ZERO
-            } else {
-                self.cfg.boot_wait
-            };
+        let (silent_since, allowed) = self.silence(conn, now);
         if now.duration_since(silent_since) > allowed {
             if self.stats.state != LinkState::Down {
                 self.report(
@@ -523,13 +504,70 @@ impl Session {
         }
     }
 
-    /// When the session next has something to do without new input (a
-    /// sleep of at most 100 ms, so the watchdog runs).
+    /// Since when the board counts as silent at `now`, and how long it may
+    /// be.
+    fn silence(&self, conn: &Connection, now: Instant) -> (Instant, Duration) {
+        let opened_at = conn.opened_at;
+        // Until the board's first telemetry line it may still be setting up
+        // (an IMU's self-test holds the 30.0.2 firmware ~2.5 s): the boot
+        // wait's allowance stays.
+        let settled = conn.handshaken && conn.board_talked;
+        let mut silent_since = self
+            .last_line
+            .filter(|t| *t >= opened_at)
+            .unwrap_or(opened_at);
+        // A board printing its set-up chatter or its `boot` is alive though
+        // it prints no telemetry yet (a slow sensor, or a loaded simulator,
+        // stretches a set-up past the boot wait's allowance) — for as long as a
+        // set-up may last; a device that only ever prints what is not
+        // telemetry (a wrong baud rate) is down after that.
+        if !settled
+            && now < opened_at + self.cfg.setup_allowance
+            && let Some(heard) = conn.last_heard
+        {
+            silent_since = silent_since.max(heard);
+        }
+        let allowed = self.cfg.stale_after
+            + if settled {
+                Duration::ZERO
+            } else {
+                self.cfg.boot_wait
+            };
+        (silent_since, allowed)
+    }
+
+    /// When the telemetry watchdog next has something to decide: just past
+    /// the board's allowed silence, and the end of a set-up's allowance
+    /// (where chatter stops counting as life). None once the link is down:
+    /// the board's next line is what changes that.
+    fn watchdog_due(&self, conn: &Connection, now: Instant) -> Option<Instant> {
+        if self.stats.state == LinkState::Down {
+            return None;
+        }
+        let (silent_since, allowed) = self.silence(conn, now);
+        // Just past it: the check is "longer than allowed".
+        let mut due = silent_since + allowed + Duration::from_millis(1);
+        let setup_ends = conn.opened_at + self.cfg.setup_allowance;
+        if now < setup_ends {
+            due = due.min(setup_ends);
+        }
+        Some(due)
+    }
+
+    /// When the session next has something to do without new input: the
+    /// telemetry watchdog's deadline, the handshake, a frame the line has
+    /// room for, an echo's timeout, the next ping. The figures do not wake
+    /// it: they are published when it runs anyway, at most every 100 ms (a
+    /// talking board's lines wake it ten times a second; a silent one, the
+    /// watchdog, or at least every second).
     pub(crate) fn next_wake(&self, now: Instant) -> Instant {
         let Some(conn) = self.conn.as_ref() else {
             return now + STATS_PERIOD;
         };
-        let mut wake = conn.next_stats.min(now + STATS_PERIOD);
+        let mut wake = self
+            .watchdog_due(conn, now)
+            .unwrap_or(now + WATCHDOG_IDLE)
+            .min(now + WATCHDOG_IDLE);
         if let Some(t) = conn.handshake_due {
             let t = if conn.setting_up(now, self.cfg.setup_allowance) {
                 t.max(conn.opened_at + self.cfg.setup_allowance)

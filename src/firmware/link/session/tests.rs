@@ -494,3 +494,33 @@ fn a_gap_just_short_of_the_dead_man_timeout_counts_as_one_that_tripped_it() {
     assert!(written.contains(&go(1600)), "{written:?}");
     assert!(!written.contains(&go(NEUTRAL_US)), "{written:?}");
 }
+
+#[test]
+fn a_talking_board_wakes_the_link_for_its_watchdog_not_for_the_figures() {
+    let t0 = Instant::now();
+    let mut s = opened(t0);
+    let t = t0 + s.cfg.boot_wait;
+    drain_writes(&mut s, t);
+    s.received(NAV, t);
+    s.poll_timers(t);
+    assert_eq!(s.stats().state, LinkState::Up);
+    // No vehicle healthy: no ping is due; only the watchdog wakes the link,
+    // just past the board's allowed silence or after a second — not every
+    // 100 ms.
+    let stale_after = s.cfg.stale_after;
+    let watchdog =
+        move |at: Instant| (at + stale_after + Duration::from_millis(1)).min(at + WATCHDOG_IDLE);
+    assert_eq!(s.next_wake(t), watchdog(t));
+    // A line moves it on, and the figures go out whenever the link runs.
+    let later = t + Duration::from_millis(150);
+    s.received(NAV, later);
+    s.poll_timers(later);
+    assert_eq!(s.next_wake(later), watchdog(later));
+    assert_eq!(s.stats().telemetry_age_ms, Some(0));
+    // Silent past the allowance: down at the watchdog's wake, and from then
+    // on a sleep of at most a second.
+    let silent = later + stale_after + Duration::from_millis(1);
+    s.poll_timers(silent);
+    assert_eq!(s.stats().state, LinkState::Down);
+    assert_eq!(s.next_wake(silent), silent + WATCHDOG_IDLE);
+}
