@@ -23,7 +23,7 @@ use crate::mavlink::frame::{FrameStats, decode_datagram};
 /// The most bytes of MAVLink in one datagram: whole frames only, and inside
 /// the smallest MTU IPv6 guarantees (1280 bytes less the IPv6 and UDP
 /// headers), so no datagram is fragmented on the way to a station.
-pub(super) const DATAGRAM_MAX: usize = 1232;
+const DATAGRAM_MAX: usize = 1232;
 
 /// The most queued frames gathered into one round of sends: one tick's
 /// worth is a few dozen; a parameter list or a burst is sent in rounds, so
@@ -31,18 +31,28 @@ pub(super) const DATAGRAM_MAX: usize = 1232;
 const GATHER_MAX: usize = 64;
 
 /// One datagram to send: whole frames for one destination.
-#[derive(Debug, PartialEq)]
-pub(super) struct Datagram {
-    pub(super) dest: SocketAddr,
-    pub(super) bytes: Vec<u8>,
-    pub(super) frames: usize,
+#[derive(Debug)]
+struct Datagram {
+    dest: SocketAddr,
+    bytes: Vec<u8>,
+    frames: usize,
+}
+
+impl Datagram {
+    fn empty(dest: SocketAddr) -> Datagram {
+        Datagram {
+            dest,
+            bytes: Vec::with_capacity(DATAGRAM_MAX),
+            frames: 0,
+        }
+    }
 }
 
 /// Packs frames into datagrams per destination, in order: each
 /// destination's frames arrive in the order they were queued, and a frame
 /// never straddles two datagrams.
 #[derive(Debug, Default)]
-pub(super) struct Packer {
+struct Packer {
     /// Filled datagrams, in the order they filled.
     full: Vec<Datagram>,
     /// The datagram being filled for each destination.
@@ -50,29 +60,17 @@ pub(super) struct Packer {
 }
 
 impl Packer {
-    pub(super) fn add(&mut self, dest: SocketAddr, frame: &[u8]) {
+    fn add(&mut self, dest: SocketAddr, frame: &[u8]) {
         let i = match self.open.iter().position(|d| d.dest == dest) {
             Some(i) => i,
             None => {
-                self.open.push(Datagram {
-                    dest,
-                    bytes: Vec::with_capacity(DATAGRAM_MAX),
-                    frames: 0,
-                });
+                self.open.push(Datagram::empty(dest));
                 self.open.len() - 1
             }
         };
         let d = &mut self.open[i];
         if d.frames > 0 && d.bytes.len() + frame.len() > DATAGRAM_MAX {
-            let filled = std::mem::replace(
-                d,
-                Datagram {
-                    dest,
-                    bytes: Vec::with_capacity(DATAGRAM_MAX),
-                    frames: 0,
-                },
-            );
-            self.full.push(filled);
+            self.full.push(std::mem::replace(d, Datagram::empty(dest)));
         }
         let d = &mut self.open[i];
         d.bytes.extend_from_slice(frame);
@@ -81,7 +79,7 @@ impl Packer {
 
     /// Every datagram, filled ones first (a destination's filled datagrams
     /// hold its earlier frames); the packer is empty after.
-    pub(super) fn drain(&mut self) -> impl Iterator<Item = Datagram> + '_ {
+    fn drain(&mut self) -> impl Iterator<Item = Datagram> + '_ {
         self.full.drain(..).chain(self.open.drain(..))
     }
 }

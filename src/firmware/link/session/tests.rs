@@ -25,6 +25,18 @@ fn opened(t0: Instant) -> Session {
     s
 }
 
+/// A session whose board was handshaken at the boot wait and has talked:
+/// the link is up at the returned time.
+fn up(t0: Instant) -> (Session, Instant) {
+    let mut s = opened(t0);
+    let t = t0 + s.cfg.boot_wait;
+    assert_eq!(drain_writes(&mut s, t), HANDSHAKE);
+    s.received(NAV, t);
+    s.poll_timers(t);
+    assert_eq!(s.stats().state, LinkState::Up);
+    (s, t)
+}
+
 /// Everything written at `now` (pacing permitting), as commands; the
 /// board echoes each frame at once, as the genuine 2015 firmware does.
 fn drain_writes(s: &mut Session, now: Instant) -> Vec<Command> {
@@ -308,13 +320,7 @@ fn the_ping_goes_ahead_of_a_queue_of_levels() {
 
 #[test]
 fn up_on_telemetry_down_when_silent_and_backoff_doubles_then_resets() {
-    let t0 = Instant::now();
-    let mut s = opened(t0);
-    let t = t0 + s.cfg.boot_wait;
-    drain_writes(&mut s, t);
-    s.received(NAV, t);
-    s.poll_timers(t);
-    assert_eq!(s.stats().state, LinkState::Up);
+    let (mut s, t) = up(Instant::now());
     let silent = t + s.cfg.stale_after + Duration::from_millis(1);
     s.poll_timers(silent);
     assert_eq!(s.stats().state, LinkState::Down);
@@ -497,13 +503,7 @@ fn a_gap_just_short_of_the_dead_man_timeout_counts_as_one_that_tripped_it() {
 
 #[test]
 fn a_talking_board_wakes_the_link_for_its_watchdog_not_for_the_figures() {
-    let t0 = Instant::now();
-    let mut s = opened(t0);
-    let t = t0 + s.cfg.boot_wait;
-    drain_writes(&mut s, t);
-    s.received(NAV, t);
-    s.poll_timers(t);
-    assert_eq!(s.stats().state, LinkState::Up);
+    let (mut s, t) = up(Instant::now());
     // No vehicle healthy: no ping is due; only the watchdog wakes the link,
     // just past the board's allowed silence or after a second — not every
     // 100 ms.
@@ -511,12 +511,24 @@ fn a_talking_board_wakes_the_link_for_its_watchdog_not_for_the_figures() {
     let watchdog =
         move |at: Instant| (at + stale_after + Duration::from_millis(1)).min(at + WATCHDOG_IDLE);
     assert_eq!(s.next_wake(t), watchdog(t));
-    // A line moves it on, and the figures go out whenever the link runs.
+    // The figures go out whenever the link runs, at most every 100 ms.
+    let figures = |s: &mut Session| -> Vec<Option<u64>> {
+        std::iter::from_fn(|| s.poll_output())
+            .filter_map(|o| match o {
+                Output::Stats(st) => Some(st.telemetry_age_ms),
+                _ => None,
+            })
+            .collect()
+    };
+    figures(&mut s);
     let later = t + Duration::from_millis(150);
-    s.received(NAV, later);
     s.poll_timers(later);
+    assert_eq!(figures(&mut s), [Some(150)]);
+    s.poll_timers(later + Duration::from_millis(50));
+    assert_eq!(figures(&mut s), []);
+    // A line moves the watchdog on.
+    s.received(NAV, later);
     assert_eq!(s.next_wake(later), watchdog(later));
-    assert_eq!(s.stats().telemetry_age_ms, Some(0));
     // Silent past the allowance: down at the watchdog's wake, and from then
     // on a sleep of at most a second.
     let silent = later + stale_after + Duration::from_millis(1);
