@@ -187,6 +187,43 @@ py_pass=$((py_pass + hil_pass)); py_fail=$((py_fail + hil_fail)); py_skip=$((py_
 read -r br_pass br_fail br_skip < <(junit_counts target/browser-junit.xml)
 read -r brh_pass brh_fail brh_skip < <(junit_counts target/browser-hil-junit.xml)
 br_pass=$((br_pass + brh_pass)); br_fail=$((br_fail + brh_fail)); br_skip=$((br_skip + brh_skip))
+# What failed, and why, at the end where CI's excerpt of the log shows it:
+# a cargo test's panic lines, a pytest or node test's failure message, each
+# cut to its first lines.
+failure_details() {
+    "$venv/bin/python" - "$@" <<'PY' || true
+import re, sys, xml.etree.ElementTree as ET
+out, shown = [], 0
+def add(name, text):
+    global shown
+    shown += 1
+    if shown > 8:
+        return
+    lines = [l for l in text.splitlines() if l.strip()][:12]
+    out.append(f"-- {name}")
+    out.extend("   " + l[:300] for l in lines)
+try:
+    cargo = open(sys.argv[1], encoding="utf-8", errors="replace").read()
+except OSError:
+    cargo = ""
+for m in re.finditer(r"^---- (\S+) stdout ----\n(.*?)(?=^---- |^failures:|\Z)", cargo, re.M | re.S):
+    add(m.group(1), m.group(2))
+for path in sys.argv[2:]:
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError):
+        continue
+    for case in root.iter("testcase"):
+        bad = case.find("failure") if case.find("failure") is not None else case.find("error")
+        if bad is not None:
+            add(case.get("name", "?"), (bad.get("message") or "") + "\n" + (bad.text or ""))
+if shown:
+    print(f"== what failed ({shown}; the first lines of each{', the first 8' if shown > 8 else ''})")
+    print("\n".join(out))
+PY
+}
+failure_details target/test-output.txt target/interop-junit.xml target/interop-hil-junit.xml \
+    target/browser-junit.xml target/browser-hil-junit.xml
 awk -v pp="$((py_pass + br_pass + pk_pass))" -v pf="$((py_fail + br_fail + pk_fail))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
