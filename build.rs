@@ -19,6 +19,7 @@ fn main() {
         PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
     web_dependencies(&manifest_dir.join("web"));
     build_date();
+    packed_relocations();
     let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     let dialect_dir = manifest_dir.join("dialect");
     println!("cargo:rerun-if-changed={}", dialect_dir.display());
@@ -212,6 +213,35 @@ fn web_dependencies(web: &Path) {
 /// `NEPTUNUS_BUILD_UNIX_S` for `wallclock::BUILD_UNIX_S`: a vehicle clock
 /// before it is certainly wrong. `SOURCE_DATE_EPOCH` wins (reproducible
 /// builds); otherwise the time this script ran, which is never after the build.
+/// The program's relative relocations packed (DT_RELR): the loader reads
+/// them all at start, and as a plain table (24 bytes each on x86_64) they are
+/// most of a megabyte of the resident set; packed, a few kilobytes. Only
+/// where it is safe to know: a native build (not a cross build, whose C
+/// library this script cannot see) against a glibc that reads them (2.36
+/// and later say so with the version `GLIBC_ABI_DT_RELR`, which the program
+/// then needs). Elsewhere the table stays as it was.
+fn packed_relocations() {
+    let var = |k: &str| env::var(k).unwrap_or_default();
+    if var("CARGO_CFG_TARGET_OS") != "linux"
+        || var("CARGO_CFG_TARGET_ENV") != "gnu"
+        || var("HOST") != var("TARGET")
+    {
+        return;
+    }
+    let libc = Command::new("cc")
+        .arg("-print-file-name=libc.so.6")
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_owned());
+    let reads_relr = libc
+        .and_then(|path| fs::read(path).ok())
+        .is_some_and(|bytes| bytes.windows(17).any(|w| w == b"GLIBC_ABI_DT_RELR"));
+    if reads_relr {
+        println!("cargo:rustc-link-arg-bins=-Wl,-z,pack-relative-relocs");
+    }
+}
+
 fn build_date() {
     println!("cargo:rerun-if-env-changed=SOURCE_DATE_EPOCH");
     let secs = env::var("SOURCE_DATE_EPOCH")
