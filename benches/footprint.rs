@@ -31,8 +31,10 @@
 //! (utime + stime from `/proc/PID/stat`), context switches per second
 //! (voluntary + nonvoluntary over `/proc/PID/task/*/status`; threads that
 //! ended in the window lose theirs and are shown as `-N`), peak RSS
-//! (`VmHWM`) and the number of threads; then the vehicle's threads by name
-//! with their switches per second.
+//! (`VmHWM`) and the number of threads; then what the vehicle holds at the
+//! end of the window taken apart (its own memory, `RssAnon`, and the pages
+//! mapped from files, `RssFile`), and its threads by name with their
+//! switches per second.
 //!
 //! **Baseline, same run**: MAVProxy (the pins of
 //! `tests/interop/requirements.txt`, installed into `target/interop-venv`
@@ -353,6 +355,18 @@ fn print_table(rows: &[Row], details: bool) {
             println!("  {:<9} NOTE {n}", "");
         }
     }
+    println!(
+        "\nneptunus resident at the end of the window: its own memory (heap, stacks, relocated tables) + pages mapped from files (code and constants, clean; how many depends on the kernel's page cache)"
+    );
+    for r in rows {
+        let f = &r.vehicle;
+        println!(
+            "  {:<9} {:.1} MB own + {:.1} MB from files",
+            r.scenario.name(),
+            f.anon_mb,
+            f.file_mb
+        );
+    }
     println!("\nneptunus threads by name: count × name, context switches/s over the window");
     for r in rows {
         let threads: Vec<String> = r
@@ -380,6 +394,8 @@ fn median_figures(all: &[&Figures]) -> Figures {
         cpu_pct: m(|f| f.cpu_pct),
         cs_per_s: m(|f| f.cs_per_s),
         peak_rss_mb: m(|f| f.peak_rss_mb),
+        anon_mb: m(|f| f.anon_mb),
+        file_mb: m(|f| f.file_mb),
         threads: m(|f| f.threads as f64).round() as usize,
         exited: 0,
         started: 0,

@@ -1,7 +1,8 @@
 //! What a process costs over a window, read from `/proc`: CPU (utime +
 //! stime of the whole process, exited threads included), context switches
 //! (summed over `/proc/PID/task/*/status`, per thread name too), peak RSS
-//! (`VmHWM`) and its threads. Reads only; never signals a process.
+//! (`VmHWM`), what is resident at the end taken apart (`RssAnon`,
+//! `RssFile`) and its threads. Reads only; never signals a process.
 
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
@@ -25,6 +26,14 @@ pub struct Figures {
     pub cs_per_s: f64,
     /// Peak resident set (VmHWM), MB.
     pub peak_rss_mb: f64,
+    /// Resident at the end of the window, MB: the process's own memory
+    /// (`RssAnon`: heap, stacks, relocated tables).
+    pub anon_mb: f64,
+    /// Resident at the end of the window, MB: pages mapped from files
+    /// (`RssFile`: code and constants of the program and its libraries —
+    /// clean, given back under memory pressure, and as many as the kernel's
+    /// page cache maps around each page touched).
+    pub file_mb: f64,
     /// Threads at the end of the window.
     pub threads: usize,
     /// Threads that ended within the window: their switches since the first
@@ -75,6 +84,11 @@ pub fn figures(pid: u32, a: &Snapshot, b: &Snapshot) -> anyhow::Result<Figures> 
     let hwm_kb: f64 = field(&status, "VmHWM:")
         .and_then(|v| v.trim_end_matches("kB").trim().parse().ok())
         .context("no VmHWM in /proc/PID/status")?;
+    let mb = |key: &str| {
+        field(&status, key)
+            .and_then(|v| v.trim_end_matches("kB").trim().parse::<f64>().ok())
+            .map_or(f64::NAN, |kb| kb / 1024.0)
+    };
     let mut by_name: BTreeMap<&str, (usize, u64)> = BTreeMap::new();
     let mut total = 0;
     for (tid, (name, cs)) in &b.tasks {
@@ -97,6 +111,8 @@ pub fn figures(pid: u32, a: &Snapshot, b: &Snapshot) -> anyhow::Result<Figures> 
             * 100.0,
         cs_per_s: total as f64 / secs,
         peak_rss_mb: hwm_kb / 1024.0,
+        anon_mb: mb("RssAnon:"),
+        file_mb: mb("RssFile:"),
         threads: b.tasks.len(),
         exited: a.tasks.keys().filter(|t| !b.tasks.contains_key(t)).count(),
         started: b.tasks.keys().filter(|t| !a.tasks.contains_key(t)).count(),
