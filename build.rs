@@ -210,9 +210,6 @@ fn web_dependencies(web: &Path) {
     }
 }
 
-/// `NEPTUNUS_BUILD_UNIX_S` for `wallclock::BUILD_UNIX_S`: a vehicle clock
-/// before it is certainly wrong. `SOURCE_DATE_EPOCH` wins (reproducible
-/// builds); otherwise the time this script ran, which is never after the build.
 /// The program's relative relocations packed (DT_RELR): the loader reads
 /// them all at start, and as a plain table (24 bytes each on x86_64) they are
 /// most of a megabyte of the resident set; packed, a few kilobytes. Only
@@ -242,6 +239,9 @@ fn packed_relocations() {
     }
 }
 
+/// `NEPTUNUS_BUILD_UNIX_S` for `wallclock::BUILD_UNIX_S`: a vehicle clock
+/// before it is certainly wrong. `SOURCE_DATE_EPOCH` wins (reproducible
+/// builds); otherwise the time this script ran, which is never after the build.
 fn build_date() {
     println!("cargo:rerun-if-env-changed=SOURCE_DATE_EPOCH");
     let secs = env::var("SOURCE_DATE_EPOCH")
