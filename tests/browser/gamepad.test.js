@@ -233,7 +233,10 @@ test('the owner hands control over with the LB + RB + A chord; no single button 
           break;
         }
         assert.ok(attempt < 3, `the prompt ran out during ${JSON.stringify(few)} three times`);
-        await a.page.waitForTimeout(1000); // what the buttons did without the prompt settles
+        // Without the prompt LB and RB may have tilted the camera: centred
+        // again (L stick click, no chord button), as it was at the start.
+        await tap(a.page, 10);
+        await a.page.waitForTimeout(1000);
       }
     }
     // Hold LB + RB, then press A.
