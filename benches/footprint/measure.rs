@@ -81,14 +81,12 @@ pub fn snapshot(pid: u32) -> anyhow::Result<Snapshot> {
 pub fn figures(pid: u32, a: &Snapshot, b: &Snapshot) -> anyhow::Result<Figures> {
     let secs = b.at.duration_since(a.at).as_secs_f64().max(1e-3);
     let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
-    let hwm_kb: f64 = field(&status, "VmHWM:")
-        .and_then(|v| v.trim_end_matches("kB").trim().parse().ok())
-        .context("no VmHWM in /proc/PID/status")?;
     let mb = |key: &str| {
         field(&status, key)
             .and_then(|v| v.trim_end_matches("kB").trim().parse::<f64>().ok())
-            .map_or(f64::NAN, |kb| kb / 1024.0)
+            .map(|kb| kb / 1024.0)
     };
+    let peak_rss_mb = mb("VmHWM:").context("no VmHWM in /proc/PID/status")?;
     let mut by_name: BTreeMap<&str, (usize, u64)> = BTreeMap::new();
     let mut total = 0;
     for (tid, (name, cs)) in &b.tasks {
@@ -110,9 +108,9 @@ pub fn figures(pid: u32, a: &Snapshot, b: &Snapshot) -> anyhow::Result<Figures> 
             / secs
             * 100.0,
         cs_per_s: total as f64 / secs,
-        peak_rss_mb: hwm_kb / 1024.0,
-        anon_mb: mb("RssAnon:"),
-        file_mb: mb("RssFile:"),
+        peak_rss_mb,
+        anon_mb: mb("RssAnon:").unwrap_or(f64::NAN),
+        file_mb: mb("RssFile:").unwrap_or(f64::NAN),
         threads: b.tasks.len(),
         exited: a.tasks.keys().filter(|t| !b.tasks.contains_key(t)).count(),
         started: b.tasks.keys().filter(|t| !a.tasks.contains_key(t)).count(),
