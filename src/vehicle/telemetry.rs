@@ -154,12 +154,18 @@ pub fn is_streamable(msg_id: u32) -> bool {
 }
 
 /// Messages made from the board's navigation line (heading, depth,
-/// attitude and the estimates they update). They go out when a line
-/// arrives, at most at their rate (a line that comes sooner waits for the
-/// interval), so a ground station and the browser see a reading as soon as
-/// the vehicle has it. Asked for faster than the lines come, the last values
-/// are repeated on the message's own clock to keep the asked rate, as
-/// ArduSub keeps it.
+/// attitude and the estimates they update). At about the lines' rate or
+/// faster they follow the lines: each goes out when a line arrives, at most
+/// at its rate (a line that comes sooner waits for the interval), so a
+/// ground station and the browser see a reading as soon as the vehicle has
+/// it. Asked for faster than the lines come, the last values are repeated
+/// on the message's own clock to keep the asked rate, as ArduSub keeps it.
+/// Slower (two line periods or more, as GLOBAL_POSITION_INT and AHRS2 at
+/// ArduSub's 3 Hz) they keep their own clock like any other message and go
+/// with the last line before they are due: following the lines one for one
+/// would round their interval to whole line periods (3 Hz would become
+/// 3.3 Hz), and waiting for the line after would cost a wake-up of its own
+/// between lines, for values no newer than the line's.
 pub const NAV_FED: &[u32] = &[
     ATTITUDE_DATA::ID,
     GLOBAL_POSITION_INT_DATA::ID,
@@ -178,20 +184,31 @@ fn early(interval: Duration) -> Duration {
     EARLY.min(interval / 4)
 }
 
-/// How far ahead of its time a clocked message may go with a navigation
-/// line: the board's line period (10 Hz), at most half the message's own
-/// interval.
+/// The board's navigation line period (10 Hz).
 pub const LINE_GATHER: Duration = Duration::from_millis(100);
 
-fn gather(interval: Duration) -> Duration {
-    LINE_GATHER.min(interval / 2)
+/// How late a navigation line may come and still be the one that carries
+/// what is due with it: the board's timing jitters by a few milliseconds,
+/// and something due just as the next line comes must not wake the vehicle
+/// a moment before it.
+pub const LINE_SLACK: Duration = Duration::from_millis(25);
+
+/// How far ahead of its time something clocked (a message, the camera's
+/// heartbeat) may go with a navigation line: a line period and its slack,
+/// so one line always comes in time while they come on their beat (for
+/// something faster than the lines, its own interval and the slack). Its
+/// clock keeps its grid, so its average rate is exact, and it goes at most
+/// once per line.
+pub fn gather(interval: Duration) -> Duration {
+    (LINE_GATHER + LINE_SLACK).min(interval + LINE_SLACK)
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Slot {
     interval: Duration,
     next_due: Duration,
-    /// Made from the navigation line ([`NAV_FED`]).
+    /// Made from the navigation line ([`NAV_FED`]) and fast enough to
+    /// follow the lines one for one.
     fed: bool,
     /// A line arrived that has not gone out yet (it came early: it goes
     /// at its deadline, unless a newer line comes first).
@@ -203,7 +220,7 @@ impl Slot {
         Self {
             interval,
             next_due,
-            fed: NAV_FED.contains(&msg_id),
+            fed: NAV_FED.contains(&msg_id) && interval < 2 * LINE_GATHER,
             waiting: false,
         }
     }
@@ -214,7 +231,7 @@ impl Slot {
     /// (a newer line arriving in the margin goes instead).
     fn deadline(&self) -> Duration {
         if self.fed {
-            self.next_due + early(self.interval)
+            self.next_due + LINE_SLACK.min(self.interval / 4)
         } else {
             self.next_due
         }

@@ -26,6 +26,7 @@ use mavlink_core::{Message, MessageData};
 
 use super::{Now, Output, Sender, To, Vehicle, chars, command::ack, given};
 use crate::dialect::neptunus::*;
+use crate::vehicle::telemetry::gather;
 
 /// The camera's MAVLink component id (MAV_COMP_ID_CAMERA, the first of the
 /// 100–105 range QGroundControl listens on).
@@ -125,15 +126,20 @@ impl Vehicle {
         self.camera.spec.as_ref().and(self.camera.next_heartbeat)
     }
 
-    /// The camera's heartbeat, once a second on every endpoint.
+    /// The camera's heartbeat, once a second on every endpoint: with the
+    /// last tick (an idle vehicle's run with the board's lines) before it
+    /// is due, on a grid that keeps the rate.
     pub(super) fn camera_tick(&mut self, now: Now, out: &mut Vec<Output>) {
         if self.camera.spec.is_none() {
             return;
         }
-        if self.camera.next_heartbeat.is_some_and(|t| now.mono < t) {
-            return;
-        }
-        self.camera.next_heartbeat = Some(now.mono + HEARTBEAT_PERIOD);
+        let next = match self.camera.next_heartbeat {
+            None => now.mono + HEARTBEAT_PERIOD,
+            Some(t) if now.mono + gather(HEARTBEAT_PERIOD) < t => return,
+            Some(t) if t + HEARTBEAT_PERIOD <= now.mono => now.mono + HEARTBEAT_PERIOD,
+            Some(t) => t + HEARTBEAT_PERIOD,
+        };
+        self.camera.next_heartbeat = Some(next);
         out.push(camera_out(To::All, camera_heartbeat()));
     }
 

@@ -5,21 +5,24 @@
 //! pilot-input and link failsafes), a camera tilt or gimbal rate, a
 //! parameter list being sent — the core ticks every [`BUSY_TICK`], as it
 //! always did. Otherwise it ticks when a telemetry message or the camera's
-//! heartbeat is due, and at least every [`IDLE_TICK`] for the timers of a
-//! disarmed vehicle (authority and request timeouts, failsafe warnings,
-//! parameter saving, the board's dead-man feed), which a tenth of a second
-//! does not change. Inputs are handled when they arrive, never on a tick.
+//! heartbeat is due, and every [`IDLE_TICK`] for the timers of a disarmed
+//! vehicle (authority and request timeouts, failsafe warnings, parameter
+//! saving, the board's dead-man feed), which a tenth of a second does not
+//! change. Inputs are handled when they arrive, never on a tick.
 //!
 //! The board's navigation lines wake the vehicle ten times a second anyway:
 //! an idle tick due before the next line is run with the line that came
-//! ([`Vehicle::tick_with_line`]), and a clocked telemetry message due before
-//! the next line goes with it (`Schedule::line_arrived`), so while the board
-//! talks an idle vehicle wakes for little but its lines.
+//! ([`Vehicle::tick_with_line`]), and a clocked telemetry message or the
+//! camera's heartbeat due before the next line goes with it
+//! (`Schedule::line_arrived`, `telemetry::gather`). Their own deadlines
+//! give a late line its slack (`LINE_SLACK`), so while the board talks an
+//! idle vehicle wakes for nothing but its lines; when it is silent the idle
+//! tick comes every `IDLE_TICK + LINE_SLACK`.
 
 use std::time::Duration;
 
 use super::{Now, Output, Vehicle};
-use crate::vehicle::telemetry::LINE_GATHER;
+use crate::vehicle::telemetry::{LINE_GATHER, LINE_SLACK};
 
 /// The tick period while something moves or may move.
 pub const BUSY_TICK: Duration = Duration::from_millis(10);
@@ -38,10 +41,13 @@ impl Vehicle {
         if self.ticks_busy() {
             return last + BUSY_TICK;
         }
+        // The idle tick goes with the board's lines (`tick_with_line`): its
+        // own deadline gives a line its slack, so a line a little late is not
+        // preceded by a tick of its own.
         [self.streams.next_deadline(), self.camera_next_heartbeat()]
             .into_iter()
             .flatten()
-            .fold(last + IDLE_TICK, Duration::min)
+            .fold(last + IDLE_TICK + LINE_SLACK, Duration::min)
     }
 
     /// A navigation line was handled at `now`: the idle tick runs with it
