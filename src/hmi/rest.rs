@@ -182,9 +182,13 @@ async fn ws(
         lease,
         watcher,
     };
+    // The read buffer is zero-filled before every read of the socket
+    // (128 KiB by default, a cost on every wake of the session): one
+    // largest message is enough, a longer frame grows it.
     upgrade
         .max_message_size(MAX_MESSAGE_BYTES)
         .max_frame_size(MAX_MESSAGE_BYTES)
+        .read_buffer_size(MAX_MESSAGE_BYTES)
         .on_upgrade(move |socket| session::run(socket, shared, start))
 }
 

@@ -34,6 +34,9 @@ const MAX_CONNECTIONS: usize = 32;
 /// Largest text a client may send: an SDP answer is a few kB.
 const MAX_MESSAGE_BYTES: usize = 64 * 1024;
 
+/// What one read of a viewer's socket takes at most.
+const READ_BUFFER_BYTES: usize = 4096;
+
 /// What every connection shares.
 pub(super) struct Ctx {
     pub commands: mpsc::Sender<Command>,
@@ -144,8 +147,12 @@ async fn upgrade(
             .into_response();
     }
     let slot = Slot(Arc::clone(&ctx));
+    // The read buffer is zero-filled before every read of the socket (128
+    // KiB by default); offers and candidates are small, a longer message
+    // grows it.
     ws.max_message_size(MAX_MESSAGE_BYTES)
         .max_frame_size(MAX_MESSAGE_BYTES)
+        .read_buffer_size(READ_BUFFER_BYTES)
         .on_upgrade(move |socket| run(socket, ctx, client, slot))
 }
 

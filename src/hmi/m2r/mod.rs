@@ -56,6 +56,9 @@ const OUT_CAPACITY: usize = 1024;
 /// Largest client frame or POST body.
 const MAX_FRAME_BYTES: usize = 16 * 1024;
 
+/// What one read of a client's socket takes at most.
+const READ_BUFFER_BYTES: usize = 4096;
+
 fn is_api_path(path: &str) -> bool {
     PREFIXES.iter().any(|p| {
         path.strip_prefix(p).is_some_and(|rest| {
@@ -406,9 +409,13 @@ async fn ws(
         filter,
         slot,
     };
+    // The read buffer is zero-filled before every read of the socket (128
+    // KiB by default); the frames a client sends are small, a longer one
+    // grows it.
     upgrade
         .max_message_size(MAX_FRAME_BYTES)
         .max_frame_size(MAX_FRAME_BYTES)
+        .read_buffer_size(READ_BUFFER_BYTES)
         .on_upgrade(move |socket| station::run(socket, shared, hub, start))
 }
 
