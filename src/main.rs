@@ -91,7 +91,18 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
             init_logging(Some(&settings.data_dir))?;
             tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
             raise_open_file_limit();
-            runtime()?.block_on(neptunus::app::run(settings, shutdown_signal()))?;
+            // The vehicle's loop runs as a task, not as the future the
+            // runtime blocks on: a task that another task on this thread
+            // wakes is queued, while the future blocked on is woken through
+            // the runtime's eventfd — a write and an extra poll of the
+            // descriptors for every board line and datagram that reaches it.
+            runtime()?.block_on(async move {
+                match tokio::spawn(neptunus::app::run(settings, shutdown_signal())).await {
+                    Ok(ran) => ran.map_err(anyhow::Error::from),
+                    Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
+                    Err(e) => Err(anyhow::anyhow!("the vehicle task ended: {e}")),
+                }
+            })?;
         }
     }
     Ok(std::process::ExitCode::SUCCESS)

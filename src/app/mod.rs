@@ -79,10 +79,16 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
     let mut notify = notify::Notify::from_env();
     let stall = notify::StallHook::from_env();
     notify.ready();
+    // One timer, moved only when the next wake-up moves.
+    let mut wake = std::pin::pin!(tokio::time::sleep_until(vehicle.next_wake()));
     loop {
+        let at = vehicle.next_wake();
+        if wake.deadline() != at {
+            wake.as_mut().reset(at);
+        }
         tokio::select! {
             () = &mut shutdown => break,
-            () = tokio::time::sleep_until(vehicle.next_wake()) => vehicle.tick(),
+            () = &mut wake => vehicle.tick(),
             input = t.hmi.recv() => vehicle.handle(input),
             Some(result) = t.saved.recv() => vehicle.handle(Input::ParamsSaved(result)),
             ev = t.link_events.recv() => match ev {
