@@ -11,7 +11,8 @@
 //! - `params`: parameter saving off the vehicle task;
 //! - `storage`: the data directory's problems at start;
 //! - `side`: the browser side's own thread (HMI, camera, emulator);
-//! - `notify`: systemd's READY/WATCHDOG/STOPPING, fed from the vehicle task's loop.
+//! - `notify`: systemd's READY/WATCHDOG/STOPPING, fed from the vehicle task's loop;
+//! - `timer`: the loop's wake-up timer (the kernel's, not the runtime's wheel).
 //!
 //! `docs/ARCHITECTURE.md` follows a stick input and a telemetry line
 //! through these files.
@@ -23,6 +24,7 @@ mod side;
 mod signing;
 mod storage;
 mod tasks;
+mod timer;
 mod vehicle_task;
 
 use std::future::Future;
@@ -54,6 +56,8 @@ pub enum AppError {
     Hmi(#[from] crate::hmi::HmiError),
     #[error("the browser side's thread: {0}")]
     Side(std::io::Error),
+    #[error("the vehicle loop's timer: {0}")]
+    Timer(std::io::Error),
     #[error("the genuine firmware in the loop (--hil): {0}")]
     Hil(String),
     #[error("cannot create the data directory {path}: {source}")]
@@ -65,6 +69,8 @@ pub enum AppError {
 
 /// Runs the vehicle until `shutdown` resolves.
 pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Result<(), AppError> {
+    // The kernel's timer, moved only when the next wake-up moves (see `timer`).
+    let mut wake = timer::WakeTimer::new().map_err(AppError::Timer)?;
     let (mut t, mut vehicle) = tasks::start(settings).await?;
     let mut shutdown = std::pin::pin!(shutdown);
     // The RTP sender says what it sends; the camera component advertises it.
@@ -79,16 +85,23 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
     let mut notify = notify::Notify::from_env();
     let stall = notify::StallHook::from_env();
     notify.ready();
-    // One timer, moved only when the next wake-up moves.
-    let mut wake = std::pin::pin!(tokio::time::sleep_until(vehicle.next_wake()));
+    // A timer that fails (it cannot, short of a kernel refusing its own
+    // clock) ends the run the orderly way: thrusters neutral first.
+    let mut failed = None;
     loop {
-        let at = vehicle.next_wake();
-        if wake.deadline() != at {
-            wake.as_mut().reset(at);
+        if let Err(e) = wake.set(vehicle.next_wake()) {
+            failed = Some(e);
+            break;
         }
         tokio::select! {
             () = &mut shutdown => break,
-            () = &mut wake => vehicle.tick(),
+            expired = wake.expired() => match expired {
+                Ok(()) => vehicle.tick(),
+                Err(e) => {
+                    failed = Some(e);
+                    break;
+                }
+            },
             input = t.hmi.recv() => vehicle.handle(input),
             Some(result) = t.saved.recv() => vehicle.handle(Input::ParamsSaved(result)),
             ev = t.link_events.recv() => match ev {
@@ -113,8 +126,11 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
         stall.check();
         notify.alive();
     }
+    if let Some(e) = &failed {
+        tracing::error!(error = %e, "the vehicle loop's timer failed: shutting down");
+    }
     t.shutdown(vehicle, &mut notify).await;
-    Ok(())
+    failed.map_or(Ok(()), |e| Err(AppError::Timer(e)))
 }
 
 /// The RTP sender's stream as the vehicle core's camera component describes it.
