@@ -226,9 +226,10 @@ impl Slot {
     }
 
     /// When it next goes out without new input: at `next_due`, but a fed
-    /// message gives a late line the same margin as an early one — before
-    /// it repeats the last values, or sends a line that came too early
-    /// (a newer line arriving in the margin goes instead).
+    /// message gives a late line its slack ([`LINE_SLACK`], at most a
+    /// quarter of its interval) before it repeats the last values, or
+    /// sends a line that came too early (a newer line arriving in the
+    /// slack goes instead).
     fn deadline(&self) -> Duration {
         if self.fed {
             self.next_due + LINE_SLACK.min(self.interval / 4)
