@@ -512,9 +512,12 @@ fn dead_man_stops_a_frozen_vehicle(rig: &mut GenuineRig) {
         let p = rig.pins();
         if !p.esc_us.iter().all(|u| neutral(*u) || u.is_none()) {
             std::thread::sleep(Duration::from_millis(300));
-            let traffic = rig.serial_since(resumed_wall);
+            // From the stop on: what the board read and said while the
+            // vehicle stood still tells a stale command from a new one.
+            let traffic = rig.serial_since(stopped_wall);
+            let resumed_s = resumed_wall.duration_since(stopped_wall).as_secs_f64();
             panic!(
-                "the board drove again after the stall without a new arm: {p:?}\nthe serial line since the vehicle resumed:\n{traffic}\n{}",
+                "the board drove again after the stall without a new arm: {p:?}\nthe serial line since the vehicle was stopped (resumed at {resumed_s:.3} s):\n{traffic}\n{}",
                 strip_ansi(&rig.vehicle.stderr_tail())
             );
         }
