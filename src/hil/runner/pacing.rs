@@ -78,7 +78,6 @@ impl Runner {
                 self.anchor_cycle + (due.as_nanos() * u128::from(F_CPU_HZ) / 1_000_000_000) as u64;
             let cycle = self.bench.cycle();
             if cycle >= target {
-                self.publish(now);
                 // Ahead of the wall clock: wait for host bytes or the next slice.
                 let ahead_ns = (cycle - target + SLICE_CYCLES) * 1_000_000_000 / F_CPU_HZ;
                 let ms = (ahead_ns / 1_000_000).clamp(1, 5) as u8;
@@ -108,6 +107,10 @@ impl Runner {
                 continue;
             }
             self.busy += started.elapsed();
+            // After every slice, ahead of the wall clock or behind it: a
+            // runner that cannot keep up (a loaded machine) must not leave
+            // the pins of seconds ago in the snapshot.
+            self.publish(Instant::now());
             if !out.is_empty() {
                 self.send_to_host(&out);
                 out.clear();
