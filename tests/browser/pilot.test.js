@@ -47,17 +47,25 @@ test('the HUD shows the vehicle\'s armed state, mode and battery in the page\'s 
   assert.ok(battery.includes(`${t.voltage_v.toFixed(1)} V`), battery);
   assert.ok(battery.includes(`${t.battery_pct} %`), battery);
   assert.match(await page.textContent('[data-testid=armed-state]'), /^DISARMED$/);
+  // Arm offers only what the vehicle would do: not before control is taken.
+  assert.equal(await page.isDisabled('[data-testid=arm]'), true);
+  assert.match(await page.getAttribute('[data-testid=arm]', 'title'), /Request control first/);
   // One vocabulary: the HUD names the mode as the mode buttons do.
   const label = await page.locator('input[name=mode]:checked').evaluate((r) => r.parentElement.textContent.trim());
   assert.equal((await page.textContent('[data-testid=mode-name]')).trim(), label);
   await takeControlAndArm(page);
   await until(async () => (await page.textContent('[data-testid=armed-state]')) === 'ARMED', 5000, 'ARMED on the HUD');
   assert.equal(await page.getAttribute('[data-testid=state]', 'class'), 'armed');
+  // Armed, the Arm button says so and cannot be pressed again; STOP disarms.
+  await until(async () => (await page.textContent('[data-testid=arm]')) === 'Armed', 5000, 'Arm reading "Armed"');
+  assert.equal(await page.isDisabled('[data-testid=arm]'), true);
   await page.check('input[name=mode][value="0"]');
   await until(async () => (await page.textContent('[data-testid=mode-name]')).trim() === 'Heading hold', 10000, 'the new mode on the HUD');
   // STOP disarms.
   await page.click('[data-testid=disarm]');
   await until(async () => !(await telemetry(page)).armed, 5000, 'disarmed by STOP');
+  await until(async () => !(await page.isDisabled('[data-testid=arm]')), 5000, 'Arm pressable again after STOP');
+  assert.equal(await page.textContent('[data-testid=arm]'), 'Arm');
   await context.close();
 }));
 

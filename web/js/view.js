@@ -157,6 +157,7 @@ export class View {
       this.labelTouchpad();
     }
     this.controlOwner(t.control);
+    this.armButton(t.armed, !!(t.control && t.control.you));
     syncSlider('gain', t.gain, (v) => v.toFixed(2));
     syncSlider('lights', t.lights, (v) => String(v));
     const tiltDeg = Number.isFinite(t.tilt) ? (t.tilt - 0.5) * 180 : null;
@@ -275,6 +276,16 @@ export class View {
     hud.classList.toggle('you', !!c.you);
     $('release').disabled = !c.you;
     $('request').disabled = !!c.you;
+  }
+
+  /** Arm says what it would do: nothing while armed (STOP disarms) and
+   * nothing for a page that is not in control (the vehicle would refuse). */
+  armButton(armed, you) {
+    const b = $('arm');
+    b.textContent = armed ? 'Armed' : 'Arm';
+    b.disabled = armed || !you;
+    b.title = armed ? 'Armed: STOP disarms'
+      : you ? 'Arm the thrusters' : 'Request control first: only the station in control can arm';
   }
 
   /** The server's `control` message: control changed hands. */
