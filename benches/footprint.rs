@@ -347,8 +347,14 @@ fn print_table(rows: &[Row], details: bool) {
     println!("\nload received per second over the window:");
     for r in rows {
         let [s1, others, hmi, m2r, video] = r.load;
+        // With the baseline running, station 1 hears the vehicle through it.
+        let via = if r.mavproxy.is_some() {
+            " (through MAVProxy)"
+        } else {
+            ""
+        };
         println!(
-            "  {:<9} station 1 {s1:.0} datagrams, other stations {others:.0}, HMI {hmi:.0} messages, mavlink2rest {m2r:.0} frames, video {video:.0} kB",
+            "  {:<9} station 1{via} {s1:.0} datagrams, other stations {others:.0}, HMI {hmi:.0} messages, mavlink2rest {m2r:.0} frames, video {video:.0} kB",
             r.scenario.name()
         );
         for n in &r.notes {
