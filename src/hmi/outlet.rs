@@ -182,14 +182,21 @@ impl Outlet {
 
     /// A REST read of a view the endpoint's messages keep (`view`): keeps the
     /// endpoint listened for [`READ_LINGER`]; when nobody listened before,
-    /// waits (at most [`WAKE_WAIT`]) until `view` changed, so the answer is
-    /// live rather than what was there when the last listener left.
-    pub async fn read<T>(&self, view: &mut watch::Receiver<T>) {
+    /// waits (at most [`WAKE_WAIT`]) until `view` changed and `live` says
+    /// it holds what the read is for, so the answer is live rather than what
+    /// was there when the last listener left (or a pass the vehicle made
+    /// before it knew of the reader, which has only what goes to everyone).
+    pub async fn read<T>(&self, view: &mut watch::Receiver<T>, live: impl Fn() -> bool) {
         let was_quiet = *self.listeners.count.borrow() == 0;
         view.borrow_and_update();
         self.linger();
         if was_quiet {
-            let _ = tokio::time::timeout(WAKE_WAIT, view.changed()).await;
+            let deadline = Instant::now() + WAKE_WAIT;
+            while let Ok(Ok(())) = tokio::time::timeout_at(deadline, view.changed()).await {
+                if live() {
+                    break;
+                }
+            }
         }
     }
 

@@ -207,7 +207,10 @@ struct StatusBody {
 
 async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
     // Live telemetry also when no session keeps the endpoint's streams built.
-    shared.outlet.read(&mut shared.status.clone()).await;
+    shared
+        .outlet
+        .read(&mut shared.status.clone(), || true)
+        .await;
     let (lo, hi) = shared.sysid_range;
     let free = shared.free_sysids.lock().map_or(0, |f| f.len());
     Json(StatusBody {

@@ -43,7 +43,7 @@ use tokio::sync::{broadcast, watch};
 
 use super::{Deliveries, Shared, guard};
 use crate::dialect::neptunus::MavMessage;
-use crate::vehicle::machine::{Input, Sender};
+use crate::vehicle::machine::{COMPONENT_ID, Input, Sender};
 use frame::{Header, NOT_CONVERTED};
 use tree::Tree;
 
@@ -133,9 +133,22 @@ impl Hub {
         (self.out.subscribe(), self.outlet.listen())
     }
 
-    /// Before a REST read of the view: see [`Outlet::read`](super::Outlet::read).
-    async fn read(&self) {
-        self.outlet.read(&mut self.passes.subscribe()).await;
+    /// Before a REST read of the view for `wanted` (system, component,
+    /// message): see [`Outlet::read`](super::Outlet::read). A read that
+    /// woke the endpoint answers once `wanted` was heard again (the
+    /// vehicle's first pass for a new listener sends everything overdue),
+    /// or after the outlet's wait.
+    async fn read(&self, wanted: (u8, u8, &str)) {
+        let heard = || {
+            self.tree
+                .lock()
+                .ok()
+                .and_then(|t| t.counter(wanted.0, wanted.1, wanted.2))
+        };
+        let before = heard();
+        self.outlet
+            .read(&mut self.passes.subscribe(), || heard() != before)
+            .await;
     }
 
     fn take_slot(self: &Arc<Self>) -> Option<StationSlot> {
@@ -330,8 +343,23 @@ fn json_response(status: StatusCode, body: String) -> Response {
     (status, [(header::CONTENT_TYPE, "application/json")], body).into_response()
 }
 
+/// What a read of `path` in the view is for: the message it names, or
+/// (for the view as a whole or a vehicle's part) the vehicle's heartbeat.
+fn wanted(path: &str, vehicle_sysid: u8) -> (u8, u8, &str) {
+    let seg: Vec<&str> = path.trim_matches('/').split('/').take(6).collect();
+    let named = match seg[..] {
+        ["vehicles", sys, "components", comp, "messages", name] => sys
+            .parse()
+            .ok()
+            .zip(comp.parse().ok())
+            .map(|(s, c)| (s, c, name)),
+        _ => None,
+    };
+    named.unwrap_or((vehicle_sysid, COMPONENT_ID, "HEARTBEAT"))
+}
+
 async fn view_all(State(shared): State<Arc<Shared>>) -> Response {
-    shared.m2r.read().await;
+    shared.m2r.read(wanted("", shared.vehicle_sysid)).await;
     let v = shared
         .m2r
         .tree
@@ -343,7 +371,7 @@ async fn view_all(State(shared): State<Arc<Shared>>) -> Response {
 
 /// A JSON pointer into the view: `vehicles/1/components/1/messages/ATTITUDE[/message/roll]`.
 async fn view_path(State(shared): State<Arc<Shared>>, Path(path): Path<String>) -> Response {
-    shared.m2r.read().await;
+    shared.m2r.read(wanted(&path, shared.vehicle_sysid)).await;
     let v = shared
         .m2r
         .tree
@@ -524,4 +552,67 @@ async fn info() -> Response {
         },
     });
     json_response(StatusCode::OK, body.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::dialect::neptunus::{HEARTBEAT_DATA, STATUSTEXT_DATA};
+    use crate::hmi::Outlet;
+    use crate::vehicle::machine::To;
+
+    /// A REST read that wakes a quiet endpoint answers from the vehicle's
+    /// first pass for it, not from a pass made before the vehicle knew of
+    /// the reader (which carries only what goes to everyone: a STATUSTEXT).
+    #[tokio::test(start_paused = true)]
+    async fn a_waking_read_waits_for_the_message_it_asks_for() {
+        let outlet = Outlet::every_component(1);
+        let hub = Arc::new(Hub::new(outlet.clone(), 0, frame::Reserved::vehicle(1)));
+        tokio::spawn(fan_out(outlet.subscribe(), Arc::clone(&hub), 1));
+        let mut passes = hub.passes.subscribe();
+        let mut heard = outlet.listeners();
+        let read = tokio::spawn({
+            let hub = Arc::clone(&hub);
+            async move {
+                hub.read(wanted("vehicles/1/components/1/messages/HEARTBEAT", 1))
+                    .await;
+                let t = hub.tree.lock().expect("the view's lock");
+                t.counter(1, COMPONENT_ID, "HEARTBEAT")
+            }
+        });
+        heard.wait_for(|n| *n > 0).await.expect("the read listens");
+        let pass = |msg: MavMessage| {
+            let mut batch: Vec<_> = outlet
+                .delivery(To::All, COMPONENT_ID, &msg, None)
+                .into_iter()
+                .collect();
+            outlet.deliver_all(&mut batch);
+        };
+        pass(MavMessage::STATUSTEXT(STATUSTEXT_DATA::default()));
+        passes
+            .wait_for(|n| *n == 1)
+            .await
+            .expect("the view took in the pass");
+        tokio::task::yield_now().await;
+        assert!(!read.is_finished(), "answered from a pass without it");
+        pass(MavMessage::HEARTBEAT(HEARTBEAT_DATA::default()));
+        assert_eq!(read.await.expect("the read ran"), Some(1));
+    }
+
+    #[test]
+    fn what_a_read_is_for() {
+        assert_eq!(
+            wanted(
+                "vehicles/7/components/100/messages/CAMERA_INFORMATION/message",
+                1
+            ),
+            (7, 100, "CAMERA_INFORMATION")
+        );
+        assert_eq!(wanted("", 1), (1, COMPONENT_ID, "HEARTBEAT"));
+        assert_eq!(wanted("vehicles/1", 1), (1, COMPONENT_ID, "HEARTBEAT"));
+        assert_eq!(
+            wanted("vehicles/x/components/1/messages/ATTITUDE", 1),
+            (1, COMPONENT_ID, "HEARTBEAT")
+        );
+    }
 }

@@ -76,6 +76,16 @@ impl Tree {
         }
     }
 
+    /// How often `name` was heard from `system`/`component`;
+    /// `None` if never.
+    pub fn counter(&self, system: u8, component: u8, name: &str) -> Option<u64> {
+        self.vehicles
+            .get(&system)?
+            .get(&component)?
+            .get(name)
+            .map(|e| e.counter)
+    }
+
     /// The whole view as mavlink2rest writes it:
     /// `{"vehicles":{"1":{"id":1,"components":{"1":{"id":1,"messages":{NAME:{"message":…,"status":{"time":…}}}}}}}}`.
     pub fn to_value(&self) -> Value {
