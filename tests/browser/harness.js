@@ -126,6 +126,39 @@ export async function withVehicle(body, args = [], opts = {}) {
   }
 }
 
+/** The genuine board's runner (`--hil`) reports every 10 s in the
+ * vehicle's log: simavr's share of real time over its last second, its
+ * slips so far (each a fall more than 250 ms behind, let go), and the
+ * longest the coupling of board and plant waited since the report before. */
+export function runnerReports(log) {
+  return [...log.matchAll(/genuine board in simavr.*?realtime_ratio=([\d.]+).*?slips=(\d+).*?widest_gap_ms=(\d+)/g)]
+    .map((m) => ({ ratio: Number(m[1]), slips: Number(m[2]), gapMs: Number(m[3]) }));
+}
+
+/** A control outcome (a hold) is judged only where the board's world kept
+ * pace with the vehicle's clock: with the genuine firmware in simavr on a
+ * busy machine the board and the plant run slower than the vehicle, which
+ * no autopilot tuned for the water can be judged by (the thresholds of
+ * tests/hil_rov.rs). */
+const MIN_REALTIME_RATIO = 0.85;
+const MAX_COUPLING_GAP_MS = 250;
+
+/** Whether the board's world kept pace from `mark` (a length of the
+ * vehicle's log) to now: always under `--sim`; under `--hil`, judged by the
+ * runner's reports from then to its next one (waited for). */
+export async function boardKeptPace(v, mark) {
+  if (!HIL_FIRMWARE) return { kept: true, why: 'the built-in simulator' };
+  const end = v.stderr().length;
+  await until(() => runnerReports(v.stderr().slice(end)).length > 0, 20000, "the board runner's next report");
+  const log = v.stderr();
+  const before = runnerReports(log.slice(0, mark)).at(-1);
+  const during = runnerReports(log.slice(mark));
+  const last = during.at(-1);
+  const kept = during.length > 0 && during.every((r) => r.ratio >= MIN_REALTIME_RATIO && r.gapMs <= MAX_COUPLING_GAP_MS)
+    && last.slips === (before ? before.slips : 0);
+  return { kept, why: JSON.stringify(during) };
+}
+
 /** The latest telemetry the page holds. */
 export const telemetry = (page) => page.evaluate(() => window.neptunus.state.t);
 
