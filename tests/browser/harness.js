@@ -135,11 +135,14 @@ export function runnerReports(log) {
     .map((m) => ({ ratio: Number(m[1]), slips: Number(m[2]), gapMs: Number(m[3]) }));
 }
 
-/** A control outcome (a hold) is judged only where the board's world kept
- * pace with the vehicle's clock: with the genuine firmware in simavr on a
- * busy machine the board and the plant run slower than the vehicle, which
- * no autopilot tuned for the water can be judged by (the thresholds of
- * tests/hil_rov.rs). */
+/** A control outcome is judged only where the board's world kept pace
+ * with the vehicle's clock: with the genuine firmware in simavr on a busy
+ * machine the board and the plant run slower than the vehicle, which no
+ * autopilot tuned for the water can be judged by. The thresholds are
+ * tests/hil_rov.rs's; unlike its tight 30-s hold, a check with a margin of
+ * decimetres is not voided by a slip (a stall of a few hundred ms, seen
+ * with nothing but the test's own browser beside it), only by a slow
+ * world or a long coupling gap. */
 const MIN_REALTIME_RATIO = 0.85;
 const MAX_COUPLING_GAP_MS = 250;
 
@@ -150,12 +153,9 @@ export async function boardKeptPace(v, mark) {
   if (!HIL_FIRMWARE) return { kept: true, why: 'the built-in simulator' };
   const end = v.stderr().length;
   await until(() => runnerReports(v.stderr().slice(end)).length > 0, 20000, "the board runner's next report");
-  const log = v.stderr();
-  const before = runnerReports(log.slice(0, mark)).at(-1);
-  const during = runnerReports(log.slice(mark));
-  const last = during.at(-1);
-  const kept = during.length > 0 && during.every((r) => r.ratio >= MIN_REALTIME_RATIO && r.gapMs <= MAX_COUPLING_GAP_MS)
-    && last.slips === (before ? before.slips : 0);
+  const during = runnerReports(v.stderr().slice(mark));
+  const kept = during.length > 0
+    && during.every((r) => r.ratio >= MIN_REALTIME_RATIO && r.gapMs <= MAX_COUPLING_GAP_MS);
   return { kept, why: JSON.stringify(during) };
 }
 

@@ -178,6 +178,7 @@ test('a run-mode round trip keeps the setpoints and the vehicle at depth; the ra
     const pace = await boardKeptPace(v, mark);
     if (pace.kept) {
       assert.ok(shallowest > 1.2, `rose to ${shallowest} m (${pace.why})`);
+      console.log(`stay judged (${pace.why}): shallowest ${shallowest} m`);
       break;
     }
     console.log(`stay not judged: the board's world did not keep pace (${pace.why}); shallowest ${shallowest} m`);
