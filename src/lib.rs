@@ -10,6 +10,7 @@
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
 //! - [`doctor`]: `neptunus doctor`, the pool-side checks of the machine.
+//! - [`durable`]: the one atomic, synced write of the files that must survive a power cut.
 //! - [`wallclock`]: the logs' clock (set by the station in control when the ROV's is wrong).
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`logfile`]: `neptunus.log`, rotated by size.
@@ -34,6 +35,7 @@ pub mod camera;
 pub mod config;
 pub mod dialect;
 pub mod doctor;
+pub mod durable;
 pub mod eventlog;
 pub mod firmware;
 #[cfg(feature = "hil")]
