@@ -104,7 +104,7 @@ async fn encode_path(fps: f64, soak: Duration) -> anyhow::Result<Row> {
     let (_scene_tx, scene) = watch::channel(Scene::default());
     let camera = Camera::start_on_demand(cfg.clone(), scene);
     let (_station_tx, station) = watch::channel(None);
-    let rtp = RtpVideo::start(&cfg, &camera, station, None);
+    let rtp = RtpVideo::start(&cfg, &camera, station, Vec::new());
     let mut stream = rtp.stream();
     tokio::time::timeout(Duration::from_secs(20), stream.wait_for(|s| s.is_some()))
         .await
@@ -211,7 +211,7 @@ async fn passthrough_path(soak: Duration) -> anyhow::Result<(f64, f64, usize)> {
     let (_scene_tx, scene) = watch::channel(Scene::default());
     let camera = Camera::start_on_demand(cfg.clone(), scene);
     let (_station_tx, station) = watch::channel(None);
-    let rtp = RtpVideo::start(&cfg, &camera, station, None);
+    let rtp = RtpVideo::start(&cfg, &camera, station, Vec::new());
     let mut stream = rtp.stream();
     tokio::time::timeout(Duration::from_secs(20), stream.wait_for(|s| s.is_some()))
         .await

@@ -1,6 +1,7 @@
 //! Carries the core's outputs out: frames to the stations (one send path:
 //! encode → sequence → sign → route), commands to the board link or the
-//! built-in simulator, parameter saves, event-log records, the signing key.
+//! built-in simulator, parameter saves, event-log records, the signing key,
+//! the recorder's controls and telemetry.
 //! Decides nothing about the vehicle.
 
 use std::time::Duration;
@@ -34,6 +35,8 @@ pub(super) struct Io {
     pub(super) simulator_opts: EmulatorOptions,
     /// The wall clock the logs and the core use (set by the station in control).
     pub(super) clock: std::sync::Arc<crate::wallclock::WallClock>,
+    /// Recording on the vehicle (None: the camera cannot record).
+    recorder: Option<crate::camera::record::RecorderHandle>,
     seq: u8,
     last_healthy: Option<Duration>,
     /// Per outlet, what this pass delivers (handed over at its end).
@@ -60,6 +63,7 @@ impl Io {
             simulator: None,
             simulator_opts,
             clock: crate::wallclock::WallClock::system(),
+            recorder: None,
             seq: 0,
             last_healthy: None,
             delivered: Default::default(),
@@ -69,6 +73,15 @@ impl Io {
     /// The wall clock shared with the telemetry log (default: a new one).
     pub(super) fn with_clock(mut self, clock: std::sync::Arc<crate::wallclock::WallClock>) -> Self {
         self.clock = clock;
+        self
+    }
+
+    /// Where the core's recording controls and samples go.
+    pub(super) fn with_recorder(
+        mut self,
+        recorder: Option<crate::camera::record::RecorderHandle>,
+    ) -> Self {
+        self.recorder = recorder;
         self
     }
 
@@ -167,6 +180,16 @@ impl Io {
                     self.clock.set_unix_us(unix_us);
                     // What follows (the event line saying so) carries the new time.
                     now.unix_us = self.clock.unix_us();
+                }
+                Output::Record(c) => {
+                    if let Some(r) = &self.recorder {
+                        r.control(c);
+                    }
+                }
+                Output::RecordSample(sample) => {
+                    if let Some(r) = &self.recorder {
+                        r.sample(sample);
+                    }
                 }
                 Output::Healthy => {
                     // The link only needs to hear this every few hundred ms.

@@ -116,6 +116,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             _ = t.report.tick() => vehicle.report(),
             Ok(()) = hmi_heard.1.changed() => vehicle.listeners(hmi_heard.0, &mut hmi_heard.1),
             Ok(()) = m2r_heard.1.changed() => vehicle.listeners(m2r_heard.0, &mut m2r_heard.1),
+            Some(ev) = t.recorder_events.recv() => vehicle.handle(Input::Recorder(ev)),
             Ok(()) = video_stream.changed() => {
                 let stream = video_stream.borrow_and_update().clone().map(video_stream_info);
                 vehicle.handle(Input::VideoStream(stream));

@@ -38,6 +38,10 @@ pub(super) struct Tasks {
     pub(super) rtp: crate::camera::rtp::RtpVideo,
     /// The WebRTC viewers (Cockpit, the page), fed by the same encode.
     webrtc: Option<crate::camera::webrtc::WebRtc>,
+    /// Recording on the vehicle, fed by the same encode.
+    recorder: Option<crate::camera::record::Recorder>,
+    /// What the recorder tells the core.
+    pub(super) recorder_events: mpsc::UnboundedReceiver<crate::vehicle::machine::RecorderEvent>,
     router: RouterHandle,
     event_log: EventLog,
     board: Option<SimulatedBoard>,
@@ -168,6 +172,9 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         vehicle.set_storage_problem(Some(problem));
     }
     let t0 = Instant::now();
+    let (recorder_tx, recorder_events) = mpsc::unbounded_channel();
+    let recorder = start_recorder(&settings, &clock, t0, recorder_tx);
+    let vehicle = vehicle.with_recording(recorder.is_some());
     // The camera: its picture follows the vehicle (the synthetic source draws it).
     let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
     // It runs only while a browser watches or RTP video has a destination.
@@ -176,8 +183,13 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         let _side = side.handle().enter();
         let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
         let webrtc = start_webrtc(&settings);
-        let feed = webrtc.as_ref().map(crate::camera::webrtc::WebRtc::feed);
-        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx, feed);
+        let taps = webrtc
+            .as_ref()
+            .map(crate::camera::webrtc::WebRtc::feed)
+            .into_iter()
+            .chain(recorder.as_ref().map(crate::camera::record::Recorder::feed))
+            .collect();
+        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx, taps);
         (camera, rtp, webrtc)
     };
     let hmi = {
@@ -221,7 +233,12 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         signing,
         settings.simulator.clone(),
     )
-    .with_clock(clock);
+    .with_clock(clock)
+    .with_recorder(
+        recorder
+            .as_ref()
+            .map(crate::camera::record::Recorder::handle),
+    );
     let report = tokio::time::interval_at(
         Instant::now() + Duration::from_secs(1),
         Duration::from_secs(5),
@@ -239,6 +256,8 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         camera,
         rtp,
         webrtc,
+        recorder,
+        recorder_events,
         router,
         event_log,
         board,
@@ -336,6 +355,10 @@ impl Tasks {
         if let Some(w) = self.webrtc {
             w.shutdown().await;
         }
+        // A recording ends synced, before its video stops.
+        if let Some(r) = self.recorder {
+            let _ = tokio::task::spawn_blocking(move || r.shutdown()).await;
+        }
         self.rtp.shutdown().await;
         self.camera.shutdown().await;
         self.router.shutdown().await;
@@ -394,6 +417,32 @@ fn start_webrtc(settings: &Settings) -> Option<crate::camera::webrtc::WebRtc> {
         Ok(w) => Some(w),
         Err(e) => {
             tracing::error!("WebRTC video off: cannot bind its loopback port: {e}");
+            None
+        }
+    }
+}
+
+/// Recording on the vehicle, when there is a camera: its own thread, fed
+/// by the one encode; None (and the camera cannot record) when its
+/// loopback port cannot be bound.
+fn start_recorder(
+    settings: &Settings,
+    clock: &std::sync::Arc<crate::wallclock::WallClock>,
+    t0: Instant,
+    events: mpsc::UnboundedSender<crate::vehicle::machine::RecorderEvent>,
+) -> Option<crate::camera::record::Recorder> {
+    use crate::camera::record::{RecordConfig, Recorder};
+    camera_spec(&settings.camera)?;
+    let cfg = RecordConfig {
+        data_dir: settings.data_dir.clone(),
+        storage: settings.storage,
+        clock: clock.clone(),
+        vehicle_t0: t0.into_std(),
+    };
+    match Recorder::start(cfg, events) {
+        Ok(r) => Some(r),
+        Err(e) => {
+            tracing::error!("recording on the vehicle is off: {e}");
             None
         }
     }

@@ -32,6 +32,7 @@ mod http;
 mod meter;
 mod process;
 mod publisher;
+pub mod record;
 mod render;
 pub mod rtp;
 mod shared;

@@ -17,12 +17,14 @@
 //! must never send to an address nobody configured or heard from, nor panic
 //! on what the child does.
 //!
-//! The WebRTC viewers ([`super::webrtc`]) get the same encode: while one
-//! watches, or whenever the encoder runs anyway, the loopback port the
-//! WebRTC side reads is one more destination. So the encoder runs while a
-//! ground station has a destination *or* a WebRTC viewer watches —
-//! `--video-rtp off` stops the RTP to ground stations, not WebRTC — and the
-//! RTP stream announced to ground stations never names the loopback one.
+//! The WebRTC viewers ([`super::webrtc`]) and the recorder
+//! ([`super::record`]) get the same encode: while one of them wants it, or
+//! whenever the encoder runs anyway, each one's loopback port is one more
+//! destination ([`LoopbackFeed`]). So the encoder runs while a ground
+//! station has a destination, a WebRTC viewer watches *or* a recording
+//! runs — `--video-rtp off` stops the RTP to ground stations, not WebRTC
+//! nor recording — and the RTP stream announced to ground stations never
+//! names a loopback one.
 
 pub(super) mod config;
 mod encoder;
@@ -43,9 +45,17 @@ pub use stations::{GroundStations, STATION_TIMEOUT};
 use super::Camera;
 use super::backoff::Backoff;
 use super::config::CameraConfig;
-use super::webrtc::WebRtcFeed;
 use encoder::{Encode, destinations};
 use passthrough::Copy;
+
+/// One more destination on loopback that reads the encoder's packets back
+/// in this process (the WebRTC viewers', the recorder's): its port, and
+/// whether it wants the encoder to run now.
+#[derive(Debug, Clone)]
+pub struct LoopbackFeed {
+    pub port: u16,
+    pub wanted: watch::Receiver<bool>,
+}
 
 /// The RTP stream being sent, for the MAVLink camera component
 /// (VIDEO_STREAM_INFORMATION).
@@ -70,9 +80,9 @@ pub struct RtpVideo {
 
 impl RtpVideo {
     /// Starts sending `camera`'s frames to `cfg.rtp`; `auto` destinations
-    /// take their address from `station`. With `webrtc`, its loopback port
-    /// is a destination too whenever the encoder runs, and the encoder
-    /// runs while a WebRTC viewer wants it.
+    /// take their address from `station`. Each of `taps` (the WebRTC
+    /// viewers', the recorder's) is a destination too whenever the encoder
+    /// runs, and the encoder runs while any of them wants it.
     ///
     /// # Panics
     /// Outside a tokio runtime.
@@ -80,15 +90,15 @@ impl RtpVideo {
         cfg: &CameraConfig,
         camera: &Camera,
         station: watch::Receiver<Option<IpAddr>>,
-        webrtc: Option<WebRtcFeed>,
+        taps: Vec<LoopbackFeed>,
     ) -> RtpVideo {
         let (stream_tx, stream) = watch::channel(None);
         let (pid_tx, pid) = watch::channel(None);
         let off = cfg.rtp.iter().all(|d| *d == RtpDest::Off);
-        let task = (!off || webrtc.is_some()).then(|| {
+        let task = (!off || !taps.is_empty()).then(|| {
             let sup = Supervisor {
                 dests: cfg.rtp.clone(),
-                webrtc: webrtc.as_ref().map(|w| w.port),
+                taps: taps.iter().map(|w| w.port).collect(),
                 h264: cfg.h264.clone(),
                 camera_fps: cfg.fps,
                 stall: cfg.stall_timeout(),
@@ -96,7 +106,7 @@ impl RtpVideo {
                 stream: stream_tx,
                 pid: pid_tx,
             };
-            let wanted = webrtc.map(|w| w.wanted);
+            let wanted = taps.into_iter().map(|w| w.wanted).collect();
             tokio::spawn(sup.run(camera.clone_handle(), Wants { station, wanted }))
         });
         RtpVideo { stream, pid, task }
@@ -129,23 +139,30 @@ impl Drop for RtpVideo {
 }
 
 /// What the destinations follow: the ground station's address, and
-/// whether a WebRTC viewer wants the stream.
+/// whether a loopback tap (a WebRTC viewer, a recording) wants the stream.
 struct Wants {
     station: watch::Receiver<Option<IpAddr>>,
-    wanted: Option<watch::Receiver<bool>>,
+    wanted: Vec<watch::Receiver<bool>>,
 }
 
 impl Wants {
-    /// The next change of either (pending forever once both are gone).
+    /// The next change of any (pending forever once all are gone).
     async fn changed(&mut self) {
         let Wants { station, wanted } = self;
         let viewers = async {
-            if let Some(w) = wanted.as_mut()
-                && w.changed().await.is_ok()
-            {
-                return;
+            if wanted.is_empty() {
+                std::future::pending::<()>().await;
             }
-            std::future::pending::<()>().await;
+            // The first tap that changes; one whose sender is gone waits
+            // forever (the others may still change).
+            let each = wanted.iter_mut().map(|w| {
+                Box::pin(async move {
+                    if w.changed().await.is_err() {
+                        std::future::pending::<()>().await;
+                    }
+                })
+            });
+            futures_util::future::select_all(each).await;
         };
         let moved = async {
             if station.changed().await.is_err() {
@@ -160,27 +177,23 @@ impl Wants {
 }
 
 /// Where one run sends: the ground stations' destinations (announced)
-/// and, for the WebRTC viewers, the loopback port.
+/// and the loopback taps (the WebRTC viewers', the recorder's).
 #[derive(Debug, Clone, PartialEq)]
 struct Dests {
     stations: Vec<(String, u16)>,
-    webrtc: Option<(String, u16)>,
+    taps: Vec<(String, u16)>,
 }
 
 impl Dests {
     fn all(&self) -> Vec<(String, u16)> {
-        self.stations
-            .iter()
-            .cloned()
-            .chain(self.webrtc.clone())
-            .collect()
+        self.stations.iter().chain(&self.taps).cloned().collect()
     }
 }
 
 struct Supervisor {
     dests: Vec<RtpDest>,
-    /// The WebRTC side's loopback port.
-    webrtc: Option<u16>,
+    /// The loopback taps' ports (the WebRTC side's, the recorder's).
+    taps: Vec<u16>,
     h264: H264Config,
     camera_fps: f64,
     stall: std::time::Duration,
@@ -190,24 +203,29 @@ struct Supervisor {
 }
 
 impl Supervisor {
-    /// The destinations now: the ground stations', and the WebRTC
-    /// loopback while a viewer wants it or the encoder runs anyway (so a
-    /// viewer coming or going never restarts a ground station's stream).
+    /// The destinations now: the ground stations', and every loopback tap
+    /// while any tap wants the stream or the encoder runs anyway (so a
+    /// viewer or a recording coming or going never restarts another's
+    /// stream).
     fn current(&self, wants: &Wants) -> Dests {
         let auto = *wants.station.borrow();
         let stations = destinations(&self.dests, auto, self.h264.auto_port);
-        let wanted = wants.wanted.as_ref().is_some_and(|w| *w.borrow());
-        let webrtc = self
-            .webrtc
-            .filter(|_| wanted || !stations.is_empty())
-            .map(|port| ("127.0.0.1".to_owned(), port));
-        Dests { stations, webrtc }
+        let wanted = wants.wanted.iter().any(|w| *w.borrow());
+        let taps = if wanted || !stations.is_empty() {
+            self.taps
+                .iter()
+                .map(|port| ("127.0.0.1".to_owned(), *port))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Dests { stations, taps }
     }
 
     /// One run encoding the camera's pictures.
     async fn encode(&self, camera: &super::CameraHandle, dests: &Dests) -> RtpError {
         let enc = Encode::new(&self.h264, self.camera_fps, dests.all());
-        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), fps = enc.fps, "RTP video: starting the H.264 encoder");
+        tracing::info!(to = ?dests.stations, taps = dests.taps.len(), fps = enc.fps, "RTP video: starting the H.264 encoder");
         // Frames are wanted while the encoder runs.
         let _demand = camera.demand();
         let mut frames = camera.subscribe();
@@ -225,7 +243,7 @@ impl Supervisor {
             dests: dests.all(),
             stall: self.stall,
         };
-        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), "RTP video: passing the camera's H.264 through");
+        tracing::info!(to = ?dests.stations, taps = dests.taps.len(), "RTP video: passing the camera's H.264 through");
         let (w, h, fps) = self.h264.passthrough_shape();
         passthrough::run(&self.h264.program, &copy, |p| {
             self.announce(p, &dests.stations, (w, h), fps);
@@ -256,7 +274,7 @@ impl Supervisor {
         let mut logged_not_found = false;
         loop {
             let dests = self.current(&wants);
-            if dests.stations.is_empty() && dests.webrtc.is_none() {
+            if dests.stations.is_empty() && dests.taps.is_empty() {
                 self.stream.send_replace(None);
                 self.pid.send_replace(None);
                 tracing::info!("RTP video: no destination, not sending");

@@ -47,11 +47,7 @@ use protocol::Stream;
 
 /// What the RTP supervisor needs: the loopback port to add as a
 /// destination, and whether any viewer wants it now.
-#[derive(Debug, Clone)]
-pub struct WebRtcFeed {
-    pub port: u16,
-    pub wanted: watch::Receiver<bool>,
-}
+pub type WebRtcFeed = super::rtp::LoopbackFeed;
 
 /// The running WebRTC side. Dropping it (or [`shutdown`](WebRtc::shutdown))
 /// ends every session.

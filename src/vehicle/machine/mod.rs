@@ -25,6 +25,7 @@
 //! | `payload.rs` | lights, laser, camera tilt, servo outputs |
 //! | `gimbal.rs` | the camera tilt as a MAVLink gimbal (protocol v2, manager on component 1) |
 //! | `camera.rs` | the MAVLink camera component (id 100): heartbeat, camera and video-stream information |
+//! | `recording.rs` | recording on the vehicle: the capture commands (after the authority check), capture status, storage information, the telemetry beside the video |
 //! | `modes.rs` | flight mode changes, AVAILABLE_MODES |
 //! | `run_mode.rs` | real board or built-in simulator |
 //! | `driving.rs` | sticks, buttons, motor test → one `go()` |
@@ -63,6 +64,7 @@ mod modes;
 mod param_proto;
 mod payload;
 mod persist;
+mod recording;
 mod run_mode;
 mod signing;
 mod stubs;
@@ -74,6 +76,10 @@ mod wall_time;
 pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
 pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
+pub use recording::{
+    RecordControl, RecordSample, RecorderEvent, SAMPLE_PERIOD as RECORD_SAMPLE_PERIOD,
+    StorageReport,
+};
 pub use run_mode::RunMode;
 pub use texts::{FailsafeKind, Topic, ascii_text};
 pub use wake::{BUSY_TICK, IDLE_TICK};
@@ -205,6 +211,8 @@ pub enum Input {
         endpoint: usize,
         listened: bool,
     },
+    /// The recorder's news: a recording started or stopped, the storage.
+    Recorder(RecorderEvent),
 }
 
 /// Events of a browser HMI session that matter for safety.
@@ -301,6 +309,11 @@ pub enum Output {
     SetWallClock {
         unix_us: u64,
     },
+    /// Start or stop recording on the vehicle (the recorder answers with
+    /// [`Input::Recorder`]).
+    Record(RecordControl),
+    /// A row of the telemetry written beside the recording.
+    RecordSample(RecordSample),
 }
 
 impl Output {
@@ -364,6 +377,7 @@ pub struct Vehicle {
     board: board::BoardState,
     payload: payload::Payload,
     camera: camera::Camera,
+    recording: recording::Recording,
     gimbal: gimbal::Gimbal,
     pilot: driving::Pilot,
     auth: authority::Authority,
@@ -441,6 +455,7 @@ impl Vehicle {
             board: board::BoardState::default(),
             payload: payload::Payload::default(),
             camera: camera::Camera::default(),
+            recording: recording::Recording::default(),
             gimbal: gimbal::Gimbal::default(),
             pilot,
             auth: authority::Authority::default(),
@@ -584,6 +599,7 @@ impl Vehicle {
             Input::Listeners { endpoint, listened } => {
                 self.streams.set_listened(endpoint, listened)
             }
+            Input::Recorder(ev) => self.on_recorder(ev, now, out),
         }
     }
 
@@ -632,6 +648,7 @@ impl Vehicle {
         }
         self.stream_tick(now, out);
         self.camera_tick(now, out);
+        self.recording_tick(now, out);
         self.param_stream_tick(out);
     }
 }
