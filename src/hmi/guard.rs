@@ -206,10 +206,13 @@ async fn guard(shared: &Shared, page_port: Option<u16>, req: Request, next: Next
 /// `/api/params`, `/api/video`, mavlink2rest's GET and WebSocket) — is open
 /// to every client the Host and Origin checks admit, as it is to any
 /// MAVLink station that listens; the vehicle's records (`/api/logs`: tlogs,
-/// the event log with its client addresses, `neptunus.log`) are for those
-/// who may pilot ([`may_pilot`]), like every request that acts.
+/// the event log with its client addresses, `neptunus.log`;
+/// `/api/recordings`: the video recorded on the vehicle) are for those who
+/// may pilot ([`may_pilot`]), like every request that acts.
 pub(crate) fn is_record(path: &str) -> bool {
-    path == "/api/logs" || path.starts_with("/api/logs/")
+    ["/api/logs", "/api/recordings"]
+        .iter()
+        .any(|p| path == *p || path.strip_prefix(p).is_some_and(|r| r.starts_with('/')))
 }
 
 /// The outcome of one pilot login attempt.

@@ -36,6 +36,7 @@ pub mod m2r;
 pub mod model;
 pub mod outlet;
 pub mod protocol;
+mod recordings;
 pub mod rest;
 pub mod server;
 pub mod session;

@@ -1,6 +1,7 @@
 //! HTTP routes: the page and its assets, the WebSocket upgrade and the REST
 //! API (`/api/status`, `/api/params`, `/api/logs`, `/api/logs/{kind}/{name}`,
-//! `/api/login`, `/api/logout`). Who may use which is decided in front of
+//! `/api/recordings` and its files (`recordings.rs`), `/api/login`,
+//! `/api/logout`). Who may use which is decided in front of
 //! them by [`guard`].
 //!
 //! The server's own view of the vehicle ([`ServerView`]) is built like a
@@ -119,6 +120,8 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/api/video", get(video))
         .route("/api/logs", get(logs))
         .route("/api/logs/{kind}/{name}", get(log_file))
+        .route("/api/recordings", get(super::recordings::list))
+        .route("/api/recordings/{name}", get(super::recordings::file))
         .route("/api/login", post(guard::login))
         .route("/api/logout", post(guard::logout))
         // Compression around the page's files only (see `assets`).

@@ -79,10 +79,12 @@ session.on('welcome', (m) => {
   controls.welcomed();
   gamepad.welcomed();
   recording.listLogs();
+  recording.listRecordings();
 });
 session.on('telemetry', (t, prev) => {
   recorder.add(t, controls.lastCmd);
   view.telemetry(t, prev);
+  recording.telemetry(t);
 });
 session.on('statustext', (m) => {
   view.message(m.severity, m.text, { failsafe: m.category === 'failsafe' });
@@ -93,7 +95,7 @@ session.on('ack', (m) => view.ack(m));
 session.on('control', (m) => view.control(m));
 session.on('control_request', (m) => view.controlRequest(m));
 session.on('request_pending', (m) => view.setPending(m));
-session.on('identity', () => { view.showRights(); recording.listLogs(); });
+session.on('identity', () => { view.showRights(); recording.listLogs(); recording.listRecordings(); });
 session.on('login_result', (m) => view.message(m.ok ? 6 : 4, m.message));
 session.on('error', (m) => view.message(4, `server: ${m.message}`));
 

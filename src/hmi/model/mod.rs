@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 
 use super::Delivery;
 use super::protocol::{
-    AgesView, AutopilotView, ControlView, EstimateView, HealthView, ServerMsg, SimView, Telemetry,
-    ThrustersUs,
+    AgesView, AutopilotView, ControlView, EstimateView, HealthView, RecordingView, ServerMsg,
+    SimView, Telemetry, ThrustersUs,
 };
 use crate::dialect::neptunus::*;
 use crate::vehicle::machine::Topic;
@@ -307,6 +307,13 @@ impl Model {
                     t.control = view;
                     events.push(ServerMsg::Control(view));
                 }
+            }
+            MavMessage::CAMERA_CAPTURE_STATUS(c) => {
+                t.recording = Some(RecordingView {
+                    on: c.video_status == 1,
+                    time_ms: c.recording_time_ms,
+                    available_mib: c.available_capacity,
+                });
             }
             MavMessage::STATUSTEXT(s) => self.on_statustext(s, events),
             // Our own telemetry-rate requests are plumbing, not news.

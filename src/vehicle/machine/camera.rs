@@ -186,15 +186,18 @@ impl Vehicle {
         if component == Some(0) && !is_camera_request(cmd, &p) {
             return false;
         }
+        // What a capture command tells everyone goes after the ack.
+        let mut after = Vec::new();
         let (result, replies) = match cmd {
             MavCmd::MAV_CMD_VIDEO_START_CAPTURE | MavCmd::MAV_CMD_VIDEO_STOP_CAPTURE => {
-                self.capture_command(from, cmd, p, now, out)
+                self.capture_command(from, cmd, p, now, &mut after)
             }
             _ => self.camera_command(cmd, p, now),
         };
         let to = from.reply();
         out.push(camera_out(to, ack(cmd, result, from)));
         out.extend(replies.into_iter().map(|m| camera_out(to, m)));
+        out.append(&mut after);
         true
     }
 

@@ -25,7 +25,7 @@ use super::camera::VIDEO_STREAM_ID;
 use super::texts::{ReplyKind, Topic};
 use super::{Now, Output, Sender, To, Vehicle, given};
 use crate::dialect::neptunus::*;
-use crate::vehicle::telemetry::gather;
+use crate::vehicle::telemetry::{LINE_SLACK, gather};
 
 /// CAMERA_CAPTURE_STATUS while recording.
 const STATUS_PERIOD: Duration = Duration::from_secs(1);
@@ -265,8 +265,10 @@ impl Vehicle {
         if !self.recording() {
             return;
         }
+        // The rows keep their beat (the vehicle wakes for them): a line
+        // a hair before one carries it, no earlier.
         if let Some(due) = self.recording.next_sample
-            && now.mono + gather(SAMPLE_PERIOD) >= due
+            && now.mono + LINE_SLACK >= due
         {
             out.push(Output::RecordSample(self.record_sample(now)));
             self.recording.next_sample = Some(next_on_grid(due, SAMPLE_PERIOD, now.mono));
