@@ -231,14 +231,16 @@ impl Outlet {
     }
 }
 
-/// What the browser sessions hear from the camera (component 100): its
-/// answer to their record button and whether it records — nothing that
-/// could pass for the autopilot's state.
+/// What the browser sessions hear from the camera (component 100):
+/// whether it can record and does, and its answers to their requests —
+/// nothing that could pass for the autopilot's state.
 fn for_sessions(compid: u8, msg: &MavMessage) -> bool {
     compid == CAMERA_COMPONENT_ID
         && matches!(
             msg,
-            MavMessage::CAMERA_CAPTURE_STATUS(_) | MavMessage::COMMAND_ACK(_)
+            MavMessage::CAMERA_INFORMATION(_)
+                | MavMessage::CAMERA_CAPTURE_STATUS(_)
+                | MavMessage::COMMAND_ACK(_)
         )
 }
 

@@ -34,7 +34,7 @@
 //! |---|---|---|
 //! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version`, `modes` (the modes to offer: `mode`, `name`, `label`, `thrusters`, `button`), `boot_mode` |
 //! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
-//! | `telemetry` | as the vehicle sends (one per pass of its loop), at least every 0.5 s | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, `failsafes`: the plain-word reason of every active failsafe (empty: none), and `recording` (null: the camera has not said): the camera's CAMERA_CAPTURE_STATUS — `on`, `time_ms`, `available_mib` |
+//! | `telemetry` | as the vehicle sends (one per pass of its loop), at least every 0.5 s | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, `failsafes`: the plain-word reason of every active failsafe (empty: none), and `recording` (null: the camera has not said): the camera's CAMERA_INFORMATION and CAMERA_CAPTURE_STATUS (each session asks for them at start) — `can` (it records), `on`, `time_ms`, `available_mib` |
 //! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text`, `category` (what it is about, chosen where the text is written: `stop`, `control`, `gain`, `ap_depth`, `ap_heading`, `failsafe`, `board_link` — the developer logger's categories — or `general`) |
 //! | `ack` | this session's command answered | `command`, `command_name`, `result`, `result_name`, `text` (plain words: "Arm/disarm: refused", "Lights: done") |
 //! | `request_pending` | this session's control request was passed to the owner (instead of its `ack`: MAVLink answers a forwarded request with FAILED, which is no failure) | `owner` (sysid asked), `timeout_s` (how long the owner has to answer) |
@@ -428,9 +428,12 @@ pub struct Telemetry {
     pub recording: Option<RecordingView>,
 }
 
-/// The camera's CAMERA_CAPTURE_STATUS.
+/// Recording on the vehicle: what its camera said (CAMERA_INFORMATION,
+/// CAMERA_CAPTURE_STATUS).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 pub struct RecordingView {
+    /// The camera can record (CAMERA_CAP_FLAGS_CAPTURE_VIDEO).
+    pub can: bool,
     /// A recording runs (or is starting).
     pub on: bool,
     /// How long it has recorded.

@@ -195,10 +195,10 @@ export class Recording {
     const on = !!(r && r.on);
     const b = $('vehicle-record');
     const may = this.mayRecordOnVehicle(t);
-    b.disabled = !r || !may;
+    b.disabled = !r || !r.can || !may;
     b.classList.toggle('recording', on);
     b.setAttribute('aria-pressed', String(on));
-    b.title = !r ? 'Recording on the vehicle: the vehicle has no camera that records'
+    b.title = !(r && r.can) ? 'Recording on the vehicle: the vehicle has no camera that records'
       : !this.session.mayPilot() ? 'Recording on the vehicle is for the pilot: log in first'
         : !may ? 'Recording on the vehicle: only the station in control may start or stop it'
           : on ? 'Stop recording on the vehicle'

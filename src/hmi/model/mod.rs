@@ -308,17 +308,25 @@ impl Model {
                     events.push(ServerMsg::Control(view));
                 }
             }
+            MavMessage::CAMERA_INFORMATION(c) => {
+                let r = t.recording.get_or_insert_with(RecordingView::default);
+                r.can = c
+                    .flags
+                    .contains(CameraCapFlags::CAMERA_CAP_FLAGS_CAPTURE_VIDEO);
+            }
             MavMessage::CAMERA_CAPTURE_STATUS(c) => {
-                t.recording = Some(RecordingView {
-                    on: c.video_status == 1,
-                    time_ms: c.recording_time_ms,
-                    available_mib: c.available_capacity,
-                });
+                let r = t.recording.get_or_insert_with(RecordingView::default);
+                r.on = c.video_status == 1;
+                r.time_ms = c.recording_time_ms;
+                r.available_mib = c.available_capacity;
             }
             MavMessage::STATUSTEXT(s) => self.on_statustext(s, events),
-            // Our own telemetry-rate requests are plumbing, not news.
+            // Our own telemetry-rate and message requests are plumbing, not news.
             MavMessage::COMMAND_ACK(a)
-                if a.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
+                if !matches!(
+                    a.command,
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL | MavCmd::MAV_CMD_REQUEST_MESSAGE
+                )
                     && self
                         .me
                         .is_none_or(|me| a.target_system == me || a.target_system == 0) =>

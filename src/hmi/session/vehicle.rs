@@ -12,7 +12,7 @@ use mavlink_core::MessageData;
 use super::{BROWSER_LIFE, Session};
 use crate::dialect::neptunus::*;
 use crate::hmi::Shared;
-use crate::vehicle::machine::{COMPONENT_ID, HmiEvent, Input};
+use crate::vehicle::machine::{CAMERA_COMPONENT_ID, COMPONENT_ID, HmiEvent, Input};
 
 /// Telemetry rates this HMI asks the vehicle for on its endpoint (msg id, Hz),
 /// once, from the server's own peer (see [`request_rates`]). What the
@@ -87,6 +87,23 @@ impl Session {
             .shared
             .sender(self.id, sysid, self.may_pilot(), self.logged_in);
         let _ = self.shared.inputs.send(Input::Mavlink { from, msg }).await;
+    }
+
+    /// Asks the camera (component 100) for CAMERA_INFORMATION (can it
+    /// record?) and CAMERA_CAPTURE_STATUS (does it now?); the answers come
+    /// to this session alone. A vehicle without a camera does not answer.
+    pub(super) async fn ask_camera(&self) {
+        for id in [
+            CAMERA_INFORMATION_DATA::ID,
+            CAMERA_CAPTURE_STATUS_DATA::ID,
+        ] {
+            self.command_to(
+                CAMERA_COMPONENT_ID,
+                MavCmd::MAV_CMD_REQUEST_MESSAGE,
+                [id as f32],
+            )
+            .await;
+        }
     }
 
     pub(super) async fn hmi_event(&self, event: HmiEvent) {
