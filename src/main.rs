@@ -275,6 +275,13 @@ fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result
             w.ice_servers.len()
         )?,
     }
+    writeln!(
+        out,
+        "storage:   recordings in {} stop below {} MiB free or at {} MiB of logs and recordings",
+        neptunus::camera::record::recordings_dir(&s.data_dir).display(),
+        s.storage.min_free_mb,
+        s.storage.total_mb
+    )?;
     Ok(())
 }
 

@@ -86,8 +86,9 @@ impl Io {
     }
 
     /// A message from component `compid` to the in-process stations it is
-    /// for (the browser sessions hear the autopilot alone, mavlink2rest
-    /// every component), and on the wire to the endpoints it is for.
+    /// for (the browser sessions hear the autopilot and the camera's
+    /// recording, mavlink2rest every component), and on the wire to the
+    /// endpoints it is for.
     fn send_message(
         &mut self,
         to: To,

@@ -326,10 +326,9 @@ impl Model {
                 if !matches!(
                     a.command,
                     MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL | MavCmd::MAV_CMD_REQUEST_MESSAGE
-                )
-                    && self
-                        .me
-                        .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
+                ) && self
+                    .me
+                    .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
             {
                 events.push(self.on_ack(a));
             }

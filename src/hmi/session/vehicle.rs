@@ -93,10 +93,7 @@ impl Session {
     /// record?) and CAMERA_CAPTURE_STATUS (does it now?); the answers come
     /// to this session alone. A vehicle without a camera does not answer.
     pub(super) async fn ask_camera(&self) {
-        for id in [
-            CAMERA_INFORMATION_DATA::ID,
-            CAMERA_CAPTURE_STATUS_DATA::ID,
-        ] {
+        for id in [CAMERA_INFORMATION_DATA::ID, CAMERA_CAPTURE_STATUS_DATA::ID] {
             self.command_to(
                 CAMERA_COMPONENT_ID,
                 MavCmd::MAV_CMD_REQUEST_MESSAGE,

@@ -253,8 +253,9 @@ pub enum Output {
         msg: MavMessage,
     },
     /// A message sent like [`Output::Send`] but from another component of
-    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire only
-    /// (the browser HMI talks to the autopilot alone).
+    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire and
+    /// to mavlink2rest (the browser HMI hears of the camera only its
+    /// recording).
     SendAs {
         to: To,
         compid: u8,
