@@ -76,10 +76,7 @@ mod wall_time;
 pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
 pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
-pub use recording::{
-    RecordControl, RecordSample, RecorderEvent, SAMPLE_PERIOD as RECORD_SAMPLE_PERIOD,
-    StorageReport,
-};
+pub use recording::{RecordControl, RecordSample, RecorderEvent, StorageReport};
 pub use run_mode::RunMode;
 pub use texts::{FailsafeKind, Topic, ascii_text};
 pub use wake::{BUSY_TICK, IDLE_TICK};
@@ -253,9 +250,8 @@ pub enum Output {
         msg: MavMessage,
     },
     /// A message sent like [`Output::Send`] but from another component of
-    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire and
-    /// to mavlink2rest (the browser HMI hears of the camera only its
-    /// recording).
+    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire and to
+    /// mavlink2rest (the browser HMI hears only the camera's recording).
     SendAs {
         to: To,
         compid: u8,
@@ -310,8 +306,7 @@ pub enum Output {
     SetWallClock {
         unix_us: u64,
     },
-    /// Start or stop recording on the vehicle (the recorder answers with
-    /// [`Input::Recorder`]).
+    /// Start or stop recording on the vehicle (answered: [`Input::Recorder`]).
     Record(RecordControl),
     /// A row of the telemetry written beside the recording.
     RecordSample(RecordSample),
