@@ -599,7 +599,7 @@ mod tests {
         assert!(t.starts_with(r#"{"type":"telemetry","t_ms":0"#), "{t}");
         assert!(
             t.ends_with(
-                r#""ages_ms":{"heartbeat":null,"attitude":null,"depth":null,"battery":null,"estimate":null},"failsafes":[]}"#
+                r#""ages_ms":{"heartbeat":null,"attitude":null,"depth":null,"battery":null,"estimate":null},"failsafes":[],"recording":null}"#
             ),
             "{t}"
         );
