@@ -220,3 +220,62 @@ def hold_depth(pilot, depth_m: float, what: str) -> None:
         else:
             inside_since = None
     raise AssertionError(f"{what}: the depth never held within {TOLERANCE_M} m of {depth_m} m for 3 s")
+
+
+def ffmpeg_children(pid: int) -> list[str]:
+    """The command lines of the vehicle's ffmpeg children."""
+    out = []
+    for child in Path(f"/proc/{pid}/task").glob("*/children"):
+        for c in child.read_text().split():
+            try:
+                line = Path(f"/proc/{c}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+            except OSError:
+                continue
+            if "ffmpeg" in line.split(" ", 1)[0]:
+                out.append(line)
+    return out
+
+
+def test_a_camera_giving_h264_is_recorded_as_it_gives_it(make_vehicle, stations, tmp_path):
+    """`[camera.h264] passthrough`: the camera's own H.264 (here an MP4 clip
+    played in real time, the SPS/PPS only in its header) is what the
+    recording holds — one ffmpeg copying it, no encoder anywhere."""
+    clip = tmp_path / "camera.mp4"
+    subprocess.run(
+        ["ffmpeg", "-hide_banner", "-loglevel", "error", "-y", "-f", "lavfi", "-i", "testsrc2=size=320x240:rate=15",
+         "-t", "60", "-c:v", "libx264", "-preset", "veryfast", "-profile:v", "main", "-bf", "0", "-g", "15", "-pix_fmt", "yuv420p",
+         str(clip)],
+        check=True,
+        timeout=120,
+    )
+    v = start_vehicle(make_vehicle, {}, start=False)
+    config = tmp_path / "passthrough.toml"
+    config.write_text(f'[camera]\nsource = "synthetic"\nrtp = ["off"]\n[camera.h264]\npassthrough = ["-re", "-i", "{clip}"]\n')
+    v.extra_args = ["--config", str(config)]
+    v.start()
+    gcs = stations.gcs(v.udp_port, 255, name="pilot").connect()
+    mark = gcs.inbox.mark()
+    record(gcs, True)
+    started = statustext(gcs.inbox, r"Recording on the vehicle: rec-", mark, START_DEADLINE_S)
+    name = started.text.split(": ", 1)[1].strip()
+    recorded_ms(gcs, 3000, started._idx, 30)
+    children = ffmpeg_children(v.proc.pid)
+    assert len(children) == 1 and "-c:v copy" in children[0] and "libx264" not in children[0], children
+    mark = gcs.inbox.mark()
+    record(gcs, False)
+    statustext(gcs.inbox, r"^Recording stopped: rec-", mark, 15)
+    ts = sorted((v.data_dir / "recordings").glob(f"{name}-*.ts"))[0]
+    times = frame_times(ts)
+    assert len(times) >= 15 and times[-1] - times[0] >= 2.0, f"{len(times)} pictures over {times[-1] - times[0]:.2f} s"
+    # The camera's Main profile (CABAC), which the vehicle's own encoder
+    # (constrained baseline) never makes.
+    assert stream_of(ts) == stream_of(clip) == "h264,Main,320,240", f"the recording {stream_of(ts)!r}, the camera {stream_of(clip)!r}"
+
+
+def stream_of(path: Path) -> str:
+    probe = subprocess.run(
+        ["ffprobe", "-v", "error", "-select_streams", "v:0", "-show_entries", "stream=codec_name,profile,width,height",
+         "-of", "csv=p=0", str(path)],
+        capture_output=True, text=True, timeout=60, check=True,
+    )
+    return next(line.strip() for line in probe.stdout.splitlines() if line.strip())

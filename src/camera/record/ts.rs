@@ -8,7 +8,8 @@
 //!
 //! One program, one H.264 stream (PID 0x100, also the PCR's), each access
 //! unit one PES packet with its PTS (the pictures come in decoding order
-//! with no B-frames from the encoder; the PTS is the DTS) and an access
+//! with no B-frames — the encoder makes none, UVC cameras neither; RTP
+//! carries no DTS — so the PTS is the DTS) and an access
 //! unit delimiter in front when the picture has none, as H.264 in MPEG-TS
 //! wants. The packets themselves are `mpeg2ts`'s.
 
