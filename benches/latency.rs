@@ -41,8 +41,10 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
-use common::stick::{Outcome, Sent, collect_frames, line_busy, paced_send, watch_go_frames};
-use common::{Gcs, Vehicle, free_udp_port, manual_control, pct_ms};
+use common::stick::{
+    Outcome, Sent, collect_frames, go_text, line_busy, paced_send, watch_go_frames,
+};
+use common::{Gcs, Vehicle, free_udp_port, gcs_heartbeat, manual_control, pct_ms};
 use neptunus::firmware::codec::{self, Framing};
 
 const TARGET_ADDED_P99_MS: f64 = 0.2;

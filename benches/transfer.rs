@@ -267,11 +267,10 @@ fn client(python: &Path, port: u16, args: &[String], out: &Path) -> anyhow::Resu
     } else {
         cmd.arg(out);
     }
-    Ok(cmd
-        .stdout(Stdio::piped())
+    cmd.stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .context("cannot start the pymavlink client")?)
+        .context("cannot start the pymavlink client")
 }
 
 /// The vehicle's CPU since `ticks0` at `t0`, in % of one core.

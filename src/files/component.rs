@@ -67,6 +67,7 @@ pub fn file(which: MemFile) -> &'static ComponentFile {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used)]
 mod tests {
     use super::*;
 

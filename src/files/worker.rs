@@ -336,6 +336,7 @@ fn erase_logs(cfg: &WorkerConfig) -> FileAnswer {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used)]
 mod tests {
     use super::*;
 

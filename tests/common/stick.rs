@@ -191,6 +191,7 @@ impl Outcome {
         pct_ms(&self.latencies, q)
     }
 
+    #[allow(clippy::print_stdout, reason = "the benches print their figures")]
     pub fn print(&self, name: &str) {
         println!(
             "  {name}: {} of {} matched, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms; coalesced {}, lost {}",

@@ -463,6 +463,7 @@ fn empty_list() -> MavMessage {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used)]
 mod tests {
     use super::*;
 
