@@ -735,3 +735,33 @@ fn component_metadata_names_the_general_file_with_its_crc() {
         }
     }
 }
+
+#[test]
+fn with_signing_on_an_unsigned_frame_with_the_pilots_ids_reads_nothing() {
+    let bytes = tlog_bytes(5000, 1_767_261_600);
+    let mut b = Bench::new(&[(LOG_A, bytes)]);
+    b.r.v.set_signing_active(true);
+    let pilot = Sender {
+        signed: true,
+        ..GCS
+    };
+    // The same ids, unsigned, from another port.
+    let spoofer = Sender::new(0, 7, 255, 190);
+    let (session, _) = open(&mut b, pilot, &format!("/logs/tlogs/{LOG_A}"));
+    for opcode in [op::READ_FILE, op::BURST_READ_FILE] {
+        let out = b.ftp(spoofer, req(1, opcode, session, 100, 0, &[]));
+        assert_eq!(nak_code(&out), vec![2, 13]);
+    }
+    assert_eq!(
+        nak_code(&b.ftp(spoofer, path_req(2, op::OPEN_FILE_RO, &format!("/logs/tlogs/{LOG_A}")))),
+        vec![2, 13]
+    );
+    let mut out = b.msg(spoofer, list_request(0, 0xffff));
+    out.extend(b.run(Duration::from_millis(10)));
+    let entries = log_entries(&out);
+    assert_eq!(entries.len(), 1);
+    assert_eq!(entries[0].num_logs, 0);
+    // The pilot's own reads go on.
+    let (h, _) = one_reply(&b.ftp(pilot, req(3, op::READ_FILE, session, 100, 0, &[])));
+    assert_eq!(h.opcode, op::ACK);
+}

@@ -246,6 +246,13 @@ impl Vehicle {
                 }
                 _ => wire::nak(&h, Nak::FileNotFound),
             },
+            // A record's session is read only by a station that still may
+            // control (with signing on: signed; its ids alone are not enough).
+            Request::ReadFile { session, .. } | Request::BurstReadFile { session, .. }
+                if self.session_is_record(&station, session) && !self.may_control(from) =>
+            {
+                wire::nak(&h, Nak::FailErrno(errno::EACCES))
+            }
             Request::ReadFile {
                 session,
                 offset,
@@ -427,6 +434,13 @@ impl Vehicle {
         st.spans.push_back(Span::new(offset, offset + len, s.size));
         streams.push(st);
         None
+    }
+
+    /// Whether the station's session `id` reads a record (a disk file).
+    fn session_is_record(&self, station: &Station, id: u8) -> bool {
+        self.transfers.ftp.sessions.iter().any(|s| {
+            s.id == id && s.station.is(station) && matches!(s.source, Source::Disk(_))
+        })
     }
 
     fn close_session(&mut self, id: u8) {

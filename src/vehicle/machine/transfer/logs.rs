@@ -181,8 +181,12 @@ impl Vehicle {
         }
     }
 
-    /// LOG_REQUEST_END: the station's download stops.
+    /// LOG_REQUEST_END: the station's download stops (only a station that
+    /// may control has one; its ids alone do not stop it).
     pub(in crate::vehicle::machine) fn log_request_end(&mut self, from: Sender) {
+        if !self.may_control(from) {
+            return;
+        }
         let station = Station::of(from);
         self.transfers
             .streams
