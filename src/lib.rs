@@ -14,6 +14,8 @@
 //! - [`wallclock`]: the logs' clock (set by the station in control when the ROV's is wrong).
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`logfile`]: `neptunus.log`, rotated by size.
+//! - [`files`]: the files served over MAVLink (log download, FTP): the
+//!   virtual tree, the component metadata, the disk worker thread.
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`hmi`]: the browser HMI (HTTP, WebSocket sessions as in-process ground stations).
 //! - [`vehicle`]: the vehicle core (state machine, modes, driving, authority,
@@ -37,6 +39,7 @@ pub mod dialect;
 pub mod doctor;
 pub mod durable;
 pub mod eventlog;
+pub mod files;
 pub mod firmware;
 #[cfg(feature = "hil")]
 pub mod hil;

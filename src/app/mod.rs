@@ -96,7 +96,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
         tokio::select! {
             () = &mut shutdown => break,
             expired = wake.expired() => match expired {
-                Ok(()) => vehicle.tick(),
+                Ok(()) => vehicle.wake(),
                 Err(e) => {
                     failed = Some(e);
                     break;
@@ -104,6 +104,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             },
             input = t.hmi.recv() => vehicle.handle(input),
             Some(result) = t.saved.recv() => vehicle.handle(Input::ParamsSaved(result)),
+            Some(reply) = t.file_replies.recv() => vehicle.handle(Input::Files(reply)),
             ev = t.link_events.recv() => match ev {
                 None => break,
                 Some(ev) => vehicle.link_event(ev),

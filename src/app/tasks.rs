@@ -28,6 +28,8 @@ pub(super) struct Tasks {
     pub(super) saved: mpsc::UnboundedReceiver<Result<(), String>>,
     pub(super) link_events: mpsc::Receiver<LinkEvent>,
     pub(super) inbound: mpsc::Receiver<Inbound>,
+    /// The disk worker's answers to the file transfers.
+    pub(super) file_replies: mpsc::UnboundedReceiver<crate::files::FileReply>,
     /// The simulated vehicle's ground truth (`--sim`, `--hil`); None on a
     /// real board.
     pub(super) truth: Option<TruthFeed>,
@@ -151,6 +153,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let hmi_ep = endpoints.len();
     let z_centered = crate::hmi::z_centered_by(profiles.clone());
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 2)
+        .with_transfer_rates(transfer_rates(endpoints))
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
         .with_camera(camera_spec(&settings.camera))
@@ -224,6 +227,15 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         w.set_signalling_addr(hmi.beside_addr());
     }
     let (saved_tx, saved) = mpsc::unbounded_channel();
+    let (files_tx, file_replies) = mpsc::unbounded_channel();
+    let files = crate::files::FileWorker::spawn(
+        crate::files::WorkerConfig {
+            data_dir: settings.data_dir.clone(),
+            running: router.tlog_run(),
+        },
+        files_tx,
+    )
+    .map_err(AppError::Side)?;
     let io = Io::new(
         [hmi.outlet(), hmi.m2r_outlet()],
         router.clone(),
@@ -231,6 +243,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         ParamSaver::spawn(param_file, saved_tx),
         event_log.clone(),
         signing,
+        files,
         settings.simulator.clone(),
     )
     .with_clock(clock)
@@ -252,6 +265,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         saved,
         link_events,
         inbound,
+        file_replies,
         truth,
         camera,
         rtp,
@@ -265,6 +279,24 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     };
     let vt = VehicleTask::new(vehicle, io, t0, scene_tx, watched, trusted, video_to);
     Ok((tasks, vt))
+}
+
+/// Bytes per second file transfers may use over each endpoint: the
+/// network's rate over UDP and TCP, half the line over a serial port (the
+/// rest stays for telemetry and control), none over the two in-process
+/// endpoints after them (the browser sessions have `/api/logs`).
+fn transfer_rates(endpoints: &[crate::mavlink::endpoint::EndpointUrl]) -> Vec<u32> {
+    use crate::mavlink::EndpointSpec as E;
+    use crate::vehicle::machine::NETWORK_RATE;
+    let mut rates: Vec<u32> = endpoints
+        .iter()
+        .map(|e| match &e.spec {
+            E::Serial { baud, .. } => baud / 10 / 2,
+            E::UdpIn(_) | E::UdpOut(_) | E::TcpIn(_) | E::TcpOut(_) => NETWORK_RATE,
+        })
+        .collect();
+    rates.extend([0, 0]);
+    rates
 }
 
 /// The simulated vehicle's next ground truth; never, on a real board (or
@@ -362,6 +394,8 @@ impl Tasks {
         self.rtp.shutdown().await;
         self.camera.shutdown().await;
         self.router.shutdown().await;
+        let mut files = vehicle_task.io.files;
+        let _ = tokio::task::spawn_blocking(move || files.stop()).await;
         vehicle_task.io.signing.persist();
         let event_log = self.event_log;
         let _ = tokio::task::spawn_blocking(move || event_log.shutdown()).await;

@@ -35,7 +35,8 @@
 //! | `failsafe.rs` | GCS, pilot-input, board-link and battery failsafes |
 //! | `persist.rs` | parameter saving (asked of the app) |
 //! | `signing.rs` | SETUP_SIGNING |
-//! | `stubs.rs` | missions, FTP, TIMESYNC, PING answered without implementing them |
+//! | `stubs.rs` | missions, TIMESYNC, PING answered without implementing them |
+//! | `transfer/` | onboard log download (LOG_*) and MAVLink FTP's read side: sessions, paced streams, who may read what |
 //! | `texts.rs` | STATUSTEXT to all or to one asker, with a topic |
 //! | `wall_time.rs` | SYSTEM_TIME from the station in control sets a wrong clock |
 
@@ -70,6 +71,7 @@ mod signing;
 mod stubs;
 mod telemetry;
 mod texts;
+mod transfer;
 mod wake;
 mod wall_time;
 
@@ -79,6 +81,7 @@ pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
 pub use recording::{RecordControl, RecordSample, RecorderEvent, StorageReport};
 pub use run_mode::RunMode;
 pub use texts::{FailsafeKind, Topic, ascii_text};
+pub use transfer::{NETWORK_RATE, START_RATE};
 pub use wake::{BUSY_TICK, IDLE_TICK};
 pub use wall_time::ClockSync;
 
@@ -210,6 +213,11 @@ pub enum Input {
     },
     /// The recorder's news: a recording started or stopped, the storage.
     Recorder(RecorderEvent),
+    /// The disk worker's answer to an [`Output::Files`].
+    Files(crate::files::FileReply),
+    /// The file transfers may send what their pacing allows (due at
+    /// [`Vehicle::next_transfer`]).
+    Transfer,
 }
 
 /// Events of a browser HMI session that matter for safety.
@@ -310,6 +318,16 @@ pub enum Output {
     Record(RecordControl),
     /// A row of the telemetry written beside the recording.
     RecordSample(RecordSample),
+    /// File data for one station (LOG_DATA, FTP replies), sent like
+    /// [`Output::Send`] on the wire only: never into the telemetry log
+    /// (it is a copy of what is on the disk) nor to the in-process stations.
+    Bulk {
+        to: To,
+        msg: MavMessage,
+    },
+    /// A request for the disk worker; its answer comes back as
+    /// [`Input::Files`].
+    Files(crate::files::FileRequest),
 }
 
 impl Output {
@@ -382,6 +400,7 @@ pub struct Vehicle {
     streams: telemetry::Streams,
     texts: texts::Texts,
     persist: persist::Persist,
+    transfers: transfer::Transfers,
     signing_active: bool,
     wall_time: wall_time::WallTime,
     counters: Counters,
@@ -460,6 +479,7 @@ impl Vehicle {
             streams: telemetry::Streams::new(endpoints),
             texts: texts::Texts::default(),
             persist: persist::Persist::default(),
+            transfers: transfer::Transfers::default(),
             signing_active: false,
             wall_time: wall_time::WallTime::default(),
             counters: Counters::default(),
@@ -596,6 +616,8 @@ impl Vehicle {
                 self.streams.set_listened(endpoint, listened)
             }
             Input::Recorder(ev) => self.on_recorder(ev, now, out),
+            Input::Files(reply) => self.on_file_reply(reply, now, out),
+            Input::Transfer => self.transfer_pass(now, out),
         }
     }
 
@@ -634,6 +656,7 @@ impl Vehicle {
         self.authority_tick(now, out);
         self.persist_tick(now, out);
         self.wall_time_tick(now, out);
+        self.transfers_tick(now);
         // The board's dead-man is fed by the owner's life, not by ours alone:
         // a dead owner link reaches the board even if this loop runs on.
         if !self.armed

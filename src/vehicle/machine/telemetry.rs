@@ -520,7 +520,9 @@ impl Vehicle {
         let param_float = C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT;
         caps |= param_float
             | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
-            | C::MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL;
+            | C::MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL
+            // MAVLink FTP (read side): the logs and the component metadata.
+            | C::MAV_PROTOCOL_CAPABILITY_FTP;
         let mut custom = [0u8; 8];
         let v = env!("CARGO_PKG_VERSION").as_bytes();
         let tag = b"nept";
