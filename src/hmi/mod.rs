@@ -30,6 +30,8 @@
 pub mod assets;
 pub mod auth;
 mod beside;
+pub mod blueos;
+mod cors;
 pub mod guard;
 pub mod headers;
 pub mod m2r;
@@ -222,6 +224,8 @@ pub(crate) struct Shared {
     pub status: watch::Receiver<rest::ServerView>,
     /// The mavlink2rest API's clients and REST view.
     pub m2r: Arc<m2r::Hub>,
+    /// Cockpit's settings bag (`/bag/v1.0/`).
+    pub bag: blueos::bag::BagService,
 }
 
 /// A system id lent to one session; back in the pool when dropped, whatever
@@ -305,6 +309,14 @@ pub async fn serve(
     );
     let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
     let hostname = auth::machine_hostname();
+    let bag = {
+        let dir = ctx.data_dir.clone();
+        tokio::task::spawn_blocking(move || {
+            blueos::bag::BagService::load(&dir, blueos::bag::Limits::default())
+        })
+        .await
+        .map_err(std::io::Error::other)?
+    };
     // Peer ids: sessions and mavlink2rest clients count from 2; 1 is REST POSTs.
     let m2r_hub = Arc::new(m2r::Hub::new(
         ctx.m2r_outlet.clone(),
@@ -341,6 +353,7 @@ pub async fn serve(
         last_bad_report: Mutex::new(None),
         status: status_rx,
         m2r: Arc::clone(&m2r_hub),
+        bag,
     });
     let fan_out = tokio::spawn(m2r::fan_out(
         ctx.m2r_outlet.subscribe(),
@@ -352,7 +365,9 @@ pub async fn serve(
     // longer ask (a watcher may not change rates).
     session::request_rates(&shared).await;
     let sweeper = tokio::spawn(guard::sweep(Arc::clone(&shared)));
-    let mut app = rest::routes(Arc::clone(&shared)).merge(m2r::routes(Arc::clone(&shared)));
+    let mut app = rest::routes(Arc::clone(&shared))
+        .merge(m2r::routes(Arc::clone(&shared)))
+        .merge(blueos::routes(Arc::clone(&shared)));
     if let Some(extra) = ctx.extra_routes {
         app = app.merge(extra);
     }

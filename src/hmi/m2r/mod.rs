@@ -34,8 +34,7 @@ use std::time::{Duration, Instant, SystemTime};
 use axum::Router;
 use axum::body::Bytes;
 use axum::extract::{Path, Query, Request, State, WebSocketUpgrade};
-use axum::http::{HeaderValue, Method, StatusCode, header};
-use axum::middleware::Next;
+use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use mavlink_core::Message as _;
@@ -290,53 +289,7 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
             .route(&format!("{p}/helper/mavlink"), get(helper))
             .route(&format!("{p}/info"), get(info));
     }
-    r.layer(axum::middleware::from_fn_with_state(
-        Arc::clone(&shared),
-        cors,
-    ))
-    .with_state(shared)
-}
-
-/// CORS for the pages the Origin rule admits (Cockpit served from an origin
-/// in `[hmi] allowed_origins`): their answers are readable, preflights pass.
-async fn cors(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> Response {
-    let origin = req
-        .headers()
-        .get(header::ORIGIN)
-        .and_then(|o| o.to_str().ok())
-        .map(str::to_owned);
-    let host = req
-        .headers()
-        .get(header::HOST)
-        .and_then(|h| h.to_str().ok())
-        .map(str::to_owned);
-    let allowed = origin
-        .as_deref()
-        .filter(|o| {
-            shared
-                .gate
-                .origin_ok(o, host.as_deref(), guard::is_tls(req.extensions()))
-        })
-        .and_then(|o| HeaderValue::from_str(o).ok());
-    let mut resp = if req.method() == Method::OPTIONS && is_api_path(req.uri().path()) {
-        StatusCode::NO_CONTENT.into_response()
-    } else {
-        next.run(req).await
-    };
-    if let Some(o) = allowed {
-        let h = resp.headers_mut();
-        h.insert(header::ACCESS_CONTROL_ALLOW_ORIGIN, o);
-        h.insert(
-            header::ACCESS_CONTROL_ALLOW_METHODS,
-            HeaderValue::from_static("GET, POST, OPTIONS"),
-        );
-        h.insert(
-            header::ACCESS_CONTROL_ALLOW_HEADERS,
-            HeaderValue::from_static("content-type"),
-        );
-        h.insert(header::VARY, HeaderValue::from_static("Origin"));
-    }
-    resp
+    super::cors::layer(r, Arc::clone(&shared), is_api_path, None).with_state(shared)
 }
 
 fn json_response(status: StatusCode, body: String) -> Response {
