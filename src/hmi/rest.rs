@@ -121,6 +121,7 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/api/logs/{kind}/{name}", get(log_file))
         .route("/api/login", post(guard::login))
         .route("/api/logout", post(guard::logout))
+        .route("/api/cockpit-link", post(guard::cockpit_link))
         // Compression around the page's files only (see `assets`).
         .fallback(asset.layer(assets::compression()))
         .with_state(shared)
