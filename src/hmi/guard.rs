@@ -429,7 +429,11 @@ pub(crate) async fn cockpit_link(State(shared): State<Arc<Shared>>, req: Request
         .filter(|h| super::headers::plain_host(h))
         .unwrap_or("localhost")
         .to_owned();
-    let scheme = if is_tls(req.extensions()) { "wss" } else { "ws" };
+    let scheme = if is_tls(req.extensions()) {
+        "wss"
+    } else {
+        "ws"
+    };
     tracing::info!(
         "browser HMI: a Cockpit link made for {} (good for its first use within {} s)",
         client_ip(req.extensions()).map_or_else(|| "an unknown address".into(), |i| i.to_string()),

@@ -45,9 +45,9 @@ mod start;
 pub mod tls;
 
 pub use beside::{Beside, BesideKind, VideoRoutes};
-pub use start::Hmi;
 pub(crate) use outlet::queued;
 pub use outlet::{Deliveries, Delivery, Outlet};
+pub use start::Hmi;
 
 use std::collections::BTreeSet;
 use std::future::Future;

@@ -100,10 +100,7 @@ impl Hmi {
         let listener = match TcpListener::bind(addr).await {
             Ok(l) => l,
             Err(source) if !settings.http_explicit => {
-                tracing::warn!(
-                    "{} — the browser HMI is off",
-                    HmiError::bind(addr, source)
-                );
+                tracing::warn!("{} — the browser HMI is off", HmiError::bind(addr, source));
                 return Ok(off);
             }
             Err(source) => return Err(HmiError::bind(addr, source)),
@@ -221,7 +218,10 @@ impl Hmi {
     /// Where a port beside the HMI's listens (the WebRTC signalling, the
     /// camera's streams).
     pub fn beside_addr(&self, kind: BesideKind) -> Option<SocketAddr> {
-        self.beside.iter().find(|(k, _)| *k == kind).map(|(_, a)| *a)
+        self.beside
+            .iter()
+            .find(|(k, _)| *k == kind)
+            .map(|(_, a)| *a)
     }
 
     /// The vehicle task's side of the hub.

@@ -42,8 +42,7 @@ use tokio::task::JoinHandle;
 
 pub use config::{
     DEFAULT_MAX_VIEWERS, IceServer, IceServerError, MCM_REST_PORT, MCM_SIGNALLING_PORT,
-    SignallingAddr,
-    SignallingAddrError, WebRtcConfig, WebRtcConfigError,
+    SignallingAddr, SignallingAddrError, WebRtcConfig, WebRtcConfigError,
 };
 pub use ws::PATH;
 

@@ -126,10 +126,26 @@ mod tests {
         let vs = &v["video_and_stream"];
         assert_eq!(vs["name"], "Neptunus camera");
         let c = &vs["stream_information"]["configuration"];
-        assert_eq!((c["encode"].as_str(), c["width"].as_u64(), c["height"].as_u64()), (Some("H264"), Some(640), Some(480)));
-        assert_eq!(c["frame_interval"], json!({"numerator": 1, "denominator": 30}));
-        assert_eq!((v["running"].as_bool(), v["state"].as_str()), (Some(false), Some("idle")));
-        assert_eq!(vs["video_source"]["Neptunus"]["name"], "Neptunus synthetic camera");
+        assert_eq!(
+            (
+                c["encode"].as_str(),
+                c["width"].as_u64(),
+                c["height"].as_u64()
+            ),
+            (Some("H264"), Some(640), Some(480))
+        );
+        assert_eq!(
+            c["frame_interval"],
+            json!({"numerator": 1, "denominator": 30})
+        );
+        assert_eq!(
+            (v["running"].as_bool(), v["state"].as_str()),
+            (Some(false), Some("idle"))
+        );
+        assert_eq!(
+            vs["video_source"]["Neptunus"]["name"],
+            "Neptunus synthetic camera"
+        );
         let rtp = RtpStream {
             uri: "udp://192.168.254.2:5600".into(),
             width: 800,
@@ -139,9 +155,15 @@ mod tests {
         };
         let v = describe(&stream(), true, Some(&rtp));
         let c = &v["video_and_stream"]["stream_information"]["configuration"];
-        assert_eq!((c["width"].as_u64(), c["height"].as_u64()), (Some(800), Some(600)));
+        assert_eq!(
+            (c["width"].as_u64(), c["height"].as_u64()),
+            (Some(800), Some(600))
+        );
         assert_eq!(c["frame_interval"]["denominator"], 15);
         assert_eq!(v["state"], "running");
-        assert_eq!(v["video_and_stream"]["stream_information"]["endpoints"][0], "udp://192.168.254.2:5600");
+        assert_eq!(
+            v["video_and_stream"]["stream_information"]["endpoints"][0],
+            "udp://192.168.254.2:5600"
+        );
     }
 }
