@@ -139,19 +139,12 @@ pub(crate) async fn set(State(shared): State<Arc<Shared>>, req: Request<Body>) -
     };
     let what = format!("a write of {}", auth::loggable(&path.to_string()));
     let max = service.bag.lock().await.limits().value_bytes;
-    // One byte more than allowed tells "too large" without reading it all.
-    let body: Bytes = match axum::body::to_bytes(req.into_body(), max + 1).await {
+    let body = match read_body(req.into_body(), max).await {
         Ok(b) => b,
-        Err(_) => {
-            let e = BagError::ValueTooLarge {
-                bytes: max + 1,
-                max,
-            };
+        Err(bytes) => {
+            let e = BagError::ValueTooLarge { bytes, max };
             service.refused("size", &what, &client, &e.to_string());
-            return detail(
-                StatusCode::PAYLOAD_TOO_LARGE,
-                format!("the value is over {max} bytes: one value may have at most {max} bytes"),
-            );
+            return detail(StatusCode::PAYLOAD_TOO_LARGE, e.to_string());
         }
     };
     let mut bag = service.bag.lock().await;
@@ -191,6 +184,31 @@ pub(crate) async fn set(State(shared): State<Arc<Shared>>, req: Request<Body>) -
         }
     }
 }
+
+/// The body, at most `max` bytes; `Err(bytes read)` when it is longer. A
+/// longer body is still read (and dropped) up to [`DRAIN_BYTES`], so that
+/// the client, still sending, gets the answer rather than a reset
+/// connection; beyond that the connection is closed.
+async fn read_body(body: Body, max: usize) -> Result<Bytes, usize> {
+    use http_body_util::BodyExt as _;
+    let mut body = body;
+    let mut kept = Vec::new();
+    let mut read = 0usize;
+    while let Some(frame) = body.frame().await {
+        let Ok(frame) = frame else { break };
+        let Some(data) = frame.data_ref() else { continue };
+        read += data.len();
+        if read <= max {
+            kept.extend_from_slice(data);
+        } else if read > DRAIN_BYTES {
+            break;
+        }
+    }
+    if read > max { Err(read) } else { Ok(Bytes::from(kept)) }
+}
+
+/// How much of a body over the limit is read to answer it cleanly.
+const DRAIN_BYTES: usize = 4 * 1024 * 1024;
 
 fn stored() -> Response {
     (
