@@ -196,7 +196,9 @@ async fn read_body(body: Body, max: usize) -> Result<Bytes, usize> {
     let mut read = 0usize;
     while let Some(frame) = body.frame().await {
         let Ok(frame) = frame else { break };
-        let Some(data) = frame.data_ref() else { continue };
+        let Some(data) = frame.data_ref() else {
+            continue;
+        };
         read += data.len();
         if read <= max {
             kept.extend_from_slice(data);
@@ -204,7 +206,11 @@ async fn read_body(body: Body, max: usize) -> Result<Bytes, usize> {
             break;
         }
     }
-    if read > max { Err(read) } else { Ok(Bytes::from(kept)) }
+    if read > max {
+        Err(read)
+    } else {
+        Ok(Bytes::from(kept))
+    }
 }
 
 /// How much of a body over the limit is read to answer it cleanly.
