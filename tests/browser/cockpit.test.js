@@ -206,7 +206,7 @@ async function slideToConfirm(page) {
   await page.mouse.up();
 }
 
-test('Cockpit given only the vehicle address shows its ROV views, live video and the numbers with no dialog, and arms after the pilot logs in', async () => {
+test('Cockpit given only the vehicle address shows its ROV views, live video and the numbers with no dialog, and arms after the pilot logs in', async (t) => {
   const data = mkdtempSync(join(tmpdir(), 'neptunus-cockpit-'));
   const v = await rovAt(data);
   const context = await cockpitContext(v.ip, { width: 1366, height: 768 });
@@ -214,8 +214,10 @@ test('Cockpit given only the vehicle address shows its ROV views, live video and
     // A new user: Cockpit, with the ROV's address in its settings.
     const page = await context.newPage();
     const seen = watch(page, v.ip);
+    const t0 = Date.now();
     await page.goto(`${origin}/`);
     const ready = await cockpitReady(page);
+    t.diagnostic(`Cockpit showed its views, the video and the numbers ${((Date.now() - t0) / 1000).toFixed(1)} s after it was opened`);
     assert.deepEqual([ready.video.width, ready.video.height], [640, 480], 'the synthetic camera over WebRTC');
     assert.equal(ready.indicators.gain, 50, 'Pilot Gain starts at 50 %');
     assert.equal(ready.indicators.lights, 0);
@@ -276,7 +278,7 @@ test('Cockpit given only the vehicle address shows its ROV views, live video and
   }
 });
 
-test('the vehicle id Cockpit stores in the bag is the same after a vehicle restart; bad and oversized bag writes are refused and logged', async () => {
+test('the vehicle id Cockpit stores in the bag is the same after a vehicle restart; bad and oversized bag writes are refused and logged', async (t) => {
   const data = mkdtempSync(join(tmpdir(), 'neptunus-cockpit-'));
   let v = await rovAt(data);
   const ip = v.ip;
@@ -293,6 +295,7 @@ test('the vehicle id Cockpit stores in the bag is the same after a vehicle resta
     const id = await until(() => bag('cockpit/cockpit-vehicle-id'), 30000, "Cockpit's vehicle id in the bag");
     assert.match(id, /^[0-9a-f-]{36}$/);
     assert.ok(readdirSync(data).includes('bag.json'), 'the bag is in the data directory');
+    t.diagnostic(`Cockpit's settings in the bag: ${statSync(join(data, 'bag.json')).size} bytes`);
     await page.close();
 
     // The vehicle restarts (same address, same data directory).

@@ -14,6 +14,7 @@
 
 pub mod file;
 pub mod path;
+mod raw;
 pub mod store;
 
 use std::collections::HashMap;
@@ -112,7 +113,7 @@ pub(crate) async fn get(State(shared): State<Arc<Shared>>, req: Request) -> Resp
         }
     };
     match shared.bag.bag.lock().await.get(&path) {
-        Some(v) => axum::Json(v).into_response(),
+        Some(text) => ([(header::CONTENT_TYPE, "application/json")], text).into_response(),
         None => detail(StatusCode::NOT_FOUND, "Invalid path"),
     }
 }

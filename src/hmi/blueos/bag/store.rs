@@ -17,6 +17,10 @@
 //! vehicle id Cockpit keeps in the bag may be set once by anyone and then
 //! changed by a pilot alone.
 //!
+//! Every value is kept as the JSON text its writer sent, its keys in their
+//! order ([`super::raw`]): Cockpit compares what it reads back with what it
+//! wrote, text for text.
+//!
 //! Never reads a file or a clock; the caller persists [`Bag::to_file`] and
 //! undoes a set ([`Bag::undo`]) when that fails.
 
@@ -24,8 +28,10 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
+use serde_json::value::RawValue;
 
 use super::path::BagPath;
+use super::raw;
 
 /// The path where Cockpit keeps the vehicle's id.
 pub const VEHICLE_ID_PATH: [&str; 2] = ["cockpit", "cockpit-vehicle-id"];
@@ -120,8 +126,9 @@ pub struct Undo {
 
 #[derive(Debug, Clone, PartialEq)]
 struct Record {
-    value: Value,
-    /// The value's compact JSON and the path: what the record costs.
+    /// The JSON text as its writer sent it.
+    value: String,
+    /// The value's text and the path: what the record costs.
     bytes: usize,
     /// The watcher address that wrote it; `None`: the pilots'.
     owner: Option<String>,
@@ -146,7 +153,7 @@ struct FileRecord {
     path: Vec<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     owner: Option<String>,
-    value: Value,
+    value: Box<RawValue>,
 }
 
 const FILE_VERSION: u32 = 1;
@@ -168,26 +175,20 @@ impl Bag {
         self.records.values().map(|r| r.bytes).sum()
     }
 
-    /// The value at `path`, as a read of the whole document would find it.
-    pub fn get(&self, path: &BagPath) -> Option<Value> {
+    /// The JSON text at `path`, as a read of the whole document would find
+    /// it (each record's text as written; the objects that hold records, by
+    /// key).
+    pub fn get(&self, path: &BagPath) -> Option<String> {
         if let Some((at, r)) = self.holder(path) {
-            let mut v = &r.value;
-            for key in &path.segments()[at.segments().len()..] {
-                v = v.as_object()?.get(key)?;
-            }
-            return Some(v.clone());
+            return raw::at(&r.value, &path.segments()[at.segments().len()..]);
         }
-        let mut out = Value::Object(serde_json::Map::new());
+        let mut tree = Node::Branch(BTreeMap::new());
         let mut any = false;
         for (p, r) in self.under(path) {
-            put(
-                &mut out,
-                &p.segments()[path.segments().len()..],
-                r.value.clone(),
-            );
+            tree.put(&p.segments()[path.segments().len()..], &r.value);
             any = true;
         }
-        any.then_some(out)
+        any.then(|| tree.text())
     }
 
     /// Sets `path` to the JSON `body` as `writer`.
@@ -204,11 +205,12 @@ impl Bag {
                 max,
             });
         }
-        let value: Value =
+        let parsed: Value =
             serde_json::from_slice(body).map_err(|e| BagError::NotJson(e.to_string()))?;
-        if depth(&value) > MAX_VALUE_DEPTH {
+        if depth(&parsed) > MAX_VALUE_DEPTH {
             return Err(BagError::TooDeep);
         }
+        let value = raw::text_of(body).ok_or_else(|| BagError::NotJson("not one value".into()))?;
         match self.holder(path).map(|(p, _)| p.clone()) {
             Some(at) if at != *path => self.set_inside(&at, path, value, writer),
             _ => self.replace(path, value, writer),
@@ -243,7 +245,7 @@ impl Bag {
         &mut self,
         at: &BagPath,
         path: &BagPath,
-        value: Value,
+        value: String,
         writer: &Writer,
     ) -> Result<Written, BagError> {
         let Some(old) = self.records.get(at).cloned() else {
@@ -254,11 +256,10 @@ impl Bag {
         {
             return Err(BagError::NotYours(at.to_string()));
         }
-        let mut new_value = old.value.clone();
-        put(
-            &mut new_value,
+        let new_value = raw::put(
+            Some(&old.value),
             &path.segments()[at.segments().len()..],
-            value,
+            &value,
         );
         if new_value == old.value {
             return Ok(Written::Unchanged);
@@ -282,7 +283,7 @@ impl Bag {
     fn replace(
         &mut self,
         path: &BagPath,
-        value: Value,
+        value: String,
         writer: &Writer,
     ) -> Result<Written, BagError> {
         let replaced: Vec<(BagPath, Record)> = self
@@ -368,10 +369,12 @@ impl Bag {
             records: self
                 .records
                 .iter()
-                .map(|(p, r)| FileRecord {
-                    path: p.segments().to_vec(),
-                    owner: r.owner.clone(),
-                    value: r.value.clone(),
+                .filter_map(|(p, r)| {
+                    Some(FileRecord {
+                        path: p.segments().to_vec(),
+                        owner: r.owner.clone(),
+                        value: RawValue::from_string(r.value.clone()).ok()?,
+                    })
                 })
                 .collect(),
         };
@@ -405,15 +408,15 @@ impl Bag {
                 warnings.push(format!("record {shown:?} left out: it overlaps another"));
                 continue;
             }
-            let rec = record(r.value, &path, r.owner);
+            let rec = record(r.value.get().to_owned(), &path, r.owner);
             bag.records.insert(path, rec);
         }
         Ok((bag, warnings))
     }
 }
 
-fn record(value: Value, path: &BagPath, owner: Option<String>) -> Record {
-    let bytes = serde_json::to_string(&value).map_or(0, |s| s.len()) + path.byte_len();
+fn record(value: String, path: &BagPath, owner: Option<String>) -> Record {
+    let bytes = value.len() + path.byte_len();
     Record {
         value,
         bytes,
@@ -421,19 +424,37 @@ fn record(value: Value, path: &BagPath, owner: Option<String>) -> Record {
     }
 }
 
-/// Puts `value` at `rest` inside `target`, making objects on the way (a
-/// value that is not an object is replaced by one, as a set of a path does).
-fn put(target: &mut Value, rest: &[String], value: Value) {
-    let Some((first, more)) = rest.split_first() else {
-        *target = value;
-        return;
-    };
-    if !target.is_object() {
-        *target = Value::Object(serde_json::Map::new());
+/// The objects a read builds from the records under its path.
+enum Node {
+    Leaf(String),
+    Branch(BTreeMap<String, Node>),
+}
+
+impl Node {
+    fn put(&mut self, rest: &[String], text: &str) {
+        let Some((first, more)) = rest.split_first() else {
+            *self = Node::Leaf(text.to_owned());
+            return;
+        };
+        if let Node::Leaf(_) = self {
+            *self = Node::Branch(BTreeMap::new());
+        }
+        if let Node::Branch(map) = self {
+            map.entry(first.clone())
+                .or_insert_with(|| Node::Branch(BTreeMap::new()))
+                .put(more, text);
+        }
     }
-    if let Value::Object(map) = target {
-        let slot = map.entry(first.clone()).or_insert(Value::Null);
-        put(slot, more, value);
+
+    fn text(&self) -> String {
+        match self {
+            Node::Leaf(t) => t.clone(),
+            Node::Branch(map) => {
+                let texts: Vec<(&str, String)> =
+                    map.iter().map(|(k, n)| (k.as_str(), n.text())).collect();
+                raw::object(texts.iter().map(|(k, t)| (*k, t.as_str())))
+            }
+        }
     }
 }
 
@@ -467,10 +488,49 @@ mod tests {
         Writer::Watcher(a.into())
     }
 
+    /// The value read at `path`, parsed.
+    fn val(bag: &Bag, path: &str) -> Option<Value> {
+        bag.get(&p(path))
+            .map(|t| serde_json::from_str(&t).expect("the bag answers JSON"))
+    }
+
+    #[test]
+    fn values_read_back_as_written_keys_in_their_order() {
+        let mut bag = Bag::new(Limits::default());
+        let action = r#"{"protocol":"cockpit-action","id":"no_function","name":"No function"}"#;
+        let mapping = format!(
+            r#"{{"value":{{"shift":{{"3":{{"action":{action}}}}}}},"epochLastChangedLocally":5}}"#
+        );
+        let at = "cockpit/settings-v2/pilot/cockpit-joystick-functions-mapping-v1";
+        bag.set(&p(at), mapping.as_bytes(), &w("10.0.0.2")).unwrap();
+        assert_eq!(bag.get(&p(at)).unwrap(), mapping);
+        assert_eq!(
+            bag.get(&p(&format!("{at}/value/shift/3/action"))).unwrap(),
+            action
+        );
+        assert_eq!(
+            bag.get(&p("cockpit/settings-v2")).unwrap(),
+            format!(r#"{{"pilot":{{"cockpit-joystick-functions-mapping-v1":{mapping}}}}}"#)
+        );
+        bag.set(
+            &p(&format!("{at}/epochLastChangedLocally")),
+            b"6",
+            &w("10.0.0.2"),
+        )
+        .unwrap();
+        assert_eq!(
+            bag.get(&p(at)).unwrap(),
+            mapping.replace(":5}", ":6}"),
+            "written into: every other key keeps its place"
+        );
+        let (again, _) = Bag::from_file(&bag.to_file(), Limits::default()).unwrap();
+        assert_eq!(again.get(&p(at)), bag.get(&p(at)));
+    }
+
     #[test]
     fn reads_see_one_document() {
         let mut bag = Bag::new(Limits::default());
-        assert_eq!(bag.get(&p("cockpit")), None);
+        assert_eq!(val(&bag, "cockpit"), None);
         bag.set(
             &p("cockpit/cockpit-vehicle-id"),
             br#""abc""#,
@@ -483,34 +543,28 @@ mod tests {
             &w("10.0.0.2"),
         )
         .unwrap();
+        assert_eq!(val(&bag, "cockpit/cockpit-vehicle-id"), Some(json!("abc")));
         assert_eq!(
-            bag.get(&p("cockpit/cockpit-vehicle-id")),
-            Some(json!("abc"))
-        );
-        assert_eq!(
-            bag.get(&p("cockpit/settings-v2")),
+            val(&bag, "cockpit/settings-v2"),
             Some(
                 json!({"pilot": {"cockpit-views": {"epochLastChangedLocally": 1, "value": [1, 2]}}})
             )
         );
         assert_eq!(
-            bag.get(&p("cockpit/settings-v2/pilot/cockpit-views/value")),
+            val(&bag, "cockpit/settings-v2/pilot/cockpit-views/value"),
             Some(json!([1, 2]))
         );
-        assert_eq!(bag.get(&p("cockpit/settings-v2/nobody")), None);
+        assert_eq!(val(&bag, "cockpit/settings-v2/nobody"), None);
         // A set over records replaces them; a set under one changes it.
         bag.set(&p("a"), br#"{"x":1}"#, &Writer::Pilot).unwrap();
         bag.set(&p("a/y/z"), b"2", &Writer::Pilot).unwrap();
-        assert_eq!(bag.get(&p("a")), Some(json!({"x": 1, "y": {"z": 2}})));
+        assert_eq!(val(&bag, "a"), Some(json!({"x": 1, "y": {"z": 2}})));
         bag.set(&p("a/x/deeper"), b"3", &Writer::Pilot).unwrap();
-        assert_eq!(bag.get(&p("a/x")), Some(json!({"deeper": 3})));
+        assert_eq!(val(&bag, "a/x"), Some(json!({"deeper": 3})));
         bag.set(&p("cockpit/settings-v2"), b"{}", &Writer::Pilot)
             .unwrap();
-        assert_eq!(bag.get(&p("cockpit/settings-v2")), Some(json!({})));
-        assert_eq!(
-            bag.get(&p("cockpit/cockpit-vehicle-id")),
-            Some(json!("abc"))
-        );
+        assert_eq!(val(&bag, "cockpit/settings-v2"), Some(json!({})));
+        assert_eq!(val(&bag, "cockpit/cockpit-vehicle-id"), Some(json!("abc")));
     }
 
     #[test]
@@ -586,7 +640,7 @@ mod tests {
             .unwrap();
         bag.set(&p("cockpit/settings-v2/guest"), br#"{"k":5}"#, &w("a"))
             .unwrap();
-        assert_eq!(bag.get(&p("cockpit/settings-v2/guest/k")), Some(json!(5)));
+        assert_eq!(val(&bag, "cockpit/settings-v2/guest/k"), Some(json!(5)));
         // The pilot may change anything; what it writes into is the pilots'.
         bag.set(&p("cockpit/settings-v2/guest/k"), b"6", &Writer::Pilot)
             .unwrap();
@@ -600,10 +654,7 @@ mod tests {
             &Writer::Pilot,
         )
         .unwrap();
-        assert_eq!(
-            bag.get(&p("cockpit/cockpit-vehicle-id")),
-            Some(json!("two"))
-        );
+        assert_eq!(val(&bag, "cockpit/cockpit-vehicle-id"), Some(json!("two")));
     }
 
     #[test]
@@ -666,6 +717,6 @@ mod tests {
         let odd = br#"{"version":1,"records":[{"path":["a"],"value":1},{"path":["a","b"],"value":2},{"path":[".."],"value":3}]}"#;
         let (bag, warnings) = Bag::from_file(odd, Limits::default()).unwrap();
         assert_eq!(warnings.len(), 2, "{warnings:?}");
-        assert_eq!(bag.get(&p("a")), Some(json!(1)));
+        assert_eq!(val(&bag, "a"), Some(json!(1)));
     }
 }
