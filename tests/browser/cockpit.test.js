@@ -255,12 +255,21 @@ test('Cockpit given only the vehicle address shows its ROV views, live video and
     await cockpitReady(pilot);
     await noDialogFor(pilot, 3000);
     // Cockpit's own Armer and its slide-to-confirm (once its notes at the
-    // bottom, such as "Vehicle connected", are gone from over the slider).
-    await until(async () => (await snackbars(pilot)).length === 0, 30000, 'no note over the slider');
+    // bottom, such as "Vehicle connected", are gone from over the slider) —
+    // again, as a pilot would, while the vehicle refuses: its pre-arm checks
+    // fail for a moment when the simulated board, slowed by a busy machine,
+    // reports late.
     const mark = v.stderr().length;
-    await armer(pilot, 'Disarmed').first().click();
-    await slideToConfirm(pilot);
-    await until(() => /pre-arm checks passed event="armed" sysid=Some\(255\)/.test(v.stderr().slice(mark)), 20000, 'the vehicle armed by Cockpit (255)');
+    const armed = () => /pre-arm checks passed event="armed" sysid=Some\(255\)/.test(v.stderr().slice(mark));
+    const end = Date.now() + 90000;
+    while (!armed()) {
+      assert.ok(Date.now() < end, 'Cockpit could not arm the vehicle within 90 s');
+      await until(async () => (await (await fetch(`http://${v.ip}/api/status`)).json()).telemetry?.health?.prearm, 30000, 'pre-arm checks');
+      await until(async () => (await snackbars(pilot)).length === 0 && (await armer(pilot, 'Disarmed').count()) > 0, 30000, 'the Armer, no note over the slider');
+      await armer(pilot, 'Disarmed').first().click();
+      await slideToConfirm(pilot);
+      await until(armed, 10000, 'the vehicle armed by Cockpit (255)').catch(() => null);
+    }
     // Cockpit sends no stick without a gamepad: the vehicle disarms itself
     // (lost manual control), as it must.
     await until(() => /lost manual control \(action Disarm\)/.test(v.stderr().slice(mark)), 20000, 'the pilot-input failsafe');
