@@ -142,8 +142,10 @@ addr="127.0.0.$(( (RANDOM % 200) + 20 ))"
 data80="$work/data80"
 mkdir "$data80"
 chown nobody "$data80"
+# exec: in the background (&) the function's subshell becomes the vehicle,
+# so $! is the vehicle's own process id.
 as_service() {
-    setpriv --reuid=nobody --regid="$(id -g nobody)" --clear-groups --no-new-privs "$@" -- \
+    exec setpriv --reuid=nobody --regid="$(id -g nobody)" --clear-groups --no-new-privs "$@" -- \
         "$bin" --config "$conf" --sim --data-dir "$data80" --mavlink udpin:127.0.0.1:0 \
         --http "$addr:80" --video-rtp off --webrtc off
 }
@@ -167,9 +169,10 @@ exec 3<&-
 grep -q '"Invalid path"' <<<"$reply" || fail "port 80 does not answer the settings bag: $reply"
 kill -TERM "$child"
 wait "$child" || true
+kill -0 "$child" 2>/dev/null && fail "the vehicle on port 80 did not stop on SIGTERM"
 child=""
 status=0
-as_service --inh-caps=-all --ambient-caps=-all --bounding-set=-all >/dev/null 2>"$work/stderr80" || status=$?
+(as_service --inh-caps=-all --ambient-caps=-all --bounding-set=-all) >/dev/null 2>"$work/stderr80" || status=$?
 [ "$status" != 0 ] || fail "the binary bound port 80 without the capability"
 grep -q 'CAP_NET_BIND_SERVICE' "$work/stderr80" || { cat "$work/stderr80" >&2; fail "refused port 80 without saying which capability it needs"; }
 echo "port 80: bound with CAP_NET_BIND_SERVICE as nobody, refused without it (and the error names the capability)"
