@@ -68,7 +68,9 @@ fn config(dir: &Path, serial: &Path, framing: &str, extra: &str) -> PathBuf {
             .and_then(|l| l.local_addr())
             .map(|a| a.port())
             .expect("a free port");
-        format!("{text}\n[camera.webrtc]\nsignalling = \"127.0.0.1:{free}\"\n")
+        format!(
+            "{text}\n[camera.webrtc]\nsignalling = \"127.0.0.1:{free}\"\nstreams = \"127.0.0.1:0\"\n"
+        )
     };
     let path = dir.join("neptunus.toml");
     std::fs::write(&path, text).expect("config written");
@@ -308,7 +310,7 @@ fn a_signalling_port_in_use_is_a_warning_the_vehicle_starts_without_it() {
         &board.path,
         "crc8",
         &format!(
-            "[camera]\nsource = \"synthetic\"\n[camera.webrtc]\nsignalling = \"127.0.0.1:{port}\"\n"
+            "[camera]\nsource = \"synthetic\"\n[camera.webrtc]\nsignalling = \"127.0.0.1:{port}\"\nstreams = \"127.0.0.1:0\"\n"
         ),
     );
     let o = doctor(&cfg, false);
@@ -336,5 +338,62 @@ fn a_signalling_port_in_use_is_a_warning_the_vehicle_starts_without_it() {
         (true.into(), true.into()),
         "{v}"
     );
+    drop(held);
+}
+
+/// The service binds port 80 with a capability `sudo -u neptunus … doctor`
+/// does not have: there, the port is free when nothing answers on it, and
+/// taken when something does — never "in use" for want of the capability.
+#[test]
+fn port_80_is_judged_by_who_answers_there_not_by_this_users_rights() {
+    use std::os::unix::fs::PermissionsExt as _;
+    if !nix::unistd::geteuid().is_root() {
+        // Only root can make an unprivileged user here (and bind port 80
+        // for the second half); the test command runs as root.
+        panic!("this test starts doctor as nobody: run it as root, as the test command does");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o777)).unwrap();
+    let board = Board::start("crc8");
+    std::fs::set_permissions(&board.path, std::fs::Permissions::from_mode(0o666)).unwrap();
+    let ip = format!("127.0.{}.9", rand::random::<u8>() % 200 + 20);
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        "[camera]\nsource = \"none\"\n",
+    );
+    // The HMI on port 80 of an address of its own.
+    let text = std::fs::read_to_string(&cfg)
+        .unwrap()
+        .replace("http = \"127.0.0.1:0\"", &format!("http = \"{ip}:80\""));
+    std::fs::write(&cfg, text).unwrap();
+    std::fs::set_permissions(&cfg, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let as_nobody = || {
+        let o = Command::new("setpriv")
+            .args([
+                "--reuid=65534",
+                "--regid=65534",
+                "--clear-groups",
+                BIN,
+                "--config",
+            ])
+            .arg(&cfg)
+            .args(["doctor", "--json"])
+            .output()
+            .unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| panic!("--json does not parse ({e}): {}", stdout(&o)));
+        check(&v, "ports").clone()
+    };
+    let free = as_nobody();
+    assert_eq!(free["ok"], true, "port 80 with nothing there: {free}");
+    let held = std::net::TcpListener::bind(format!("{ip}:80")).unwrap();
+    let taken = as_nobody();
+    assert_eq!(
+        taken["ok"], false,
+        "port 80 with something answering: {taken}"
+    );
+    assert!(taken.to_string().contains(&format!("{ip}:80")), "{taken}");
     drop(held);
 }

@@ -202,11 +202,15 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             routes: camera.routes(),
             webrtc: webrtc.is_some(),
             signalling: None,
+            streams: None,
         };
         if let Some(w) = &webrtc {
             video.routes = video.routes.merge(w.routes());
             let at = SignallingAddr::resolve(settings.camera.webrtc.signalling, settings.hmi.http);
             video.signalling = at.map(|addr| (addr, w.signalling_routes()));
+            let streams = SignallingAddr::resolve_streams(settings.camera.webrtc.streams, at);
+            video.streams =
+                streams.map(|addr| (addr, w.streams_routes(rtp.stream(), rtp.encoder())));
         }
         side.handle()
             .spawn(async move {
@@ -224,7 +228,10 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             .map_err(|e| AppError::Side(std::io::Error::other(e.to_string())))??
     };
     if let Some(w) = &webrtc {
-        w.set_signalling_addr(hmi.beside_addr());
+        w.set_beside_addrs(
+            hmi.beside_addr(crate::hmi::BesideKind::Signalling),
+            hmi.beside_addr(crate::hmi::BesideKind::Streams),
+        );
     }
     let (saved_tx, saved) = mpsc::unbounded_channel();
     let (files_tx, file_replies) = mpsc::unbounded_channel();

@@ -222,7 +222,7 @@ pub fn ports(settings: &Settings) -> Check {
     let name = "ports";
     let mut listens: Vec<(String, Result<(), std::io::Error>)> = Vec::new();
     let udp = |a: SocketAddr| UdpSocket::bind(a).map(drop);
-    let tcp = |a: SocketAddr| TcpListener::bind(a).map(drop);
+    let tcp = tcp_free;
     for url in &settings.mavlink.endpoints {
         match &url.spec {
             EndpointSpec::UdpIn(a) => listens.push((format!("udpin:{a}"), udp(*a))),
@@ -233,13 +233,18 @@ pub fn ports(settings: &Settings) -> Check {
     if let Some(a) = settings.hmi.http {
         listens.push((format!("HMI http {a}"), tcp(a)));
     }
-    // The signalling port beside the HMI is optional: the vehicle starts
-    // without it (a warning), and viewers still have /webrtc on the HMI.
-    let mut optional: Option<(String, Result<(), std::io::Error>)> = None;
+    // The camera manager's ports beside the HMI are optional: the vehicle
+    // starts without them (a warning), and viewers still have /webrtc on
+    // the HMI.
+    let mut optional: Vec<(String, Result<(), std::io::Error>)> = Vec::new();
     let w = &settings.camera.webrtc;
     if w.enabled {
-        if let Some(a) = SignallingAddr::resolve(w.signalling, settings.hmi.http) {
-            optional = Some((format!("WebRTC signalling {a}"), tcp(a)));
+        let signalling = SignallingAddr::resolve(w.signalling, settings.hmi.http);
+        if let Some(a) = signalling {
+            optional.push((format!("WebRTC signalling {a}"), tcp(a)));
+        }
+        if let Some(a) = SignallingAddr::resolve_streams(w.streams, signalling) {
+            optional.push((format!("camera streams {a}"), tcp(a)));
         }
         if w.udp_port != 0 {
             let a = SocketAddr::from(([0, 0, 0, 0], w.udp_port));
@@ -250,14 +255,15 @@ pub fn ports(settings: &Settings) -> Check {
         r.as_ref().err().map(|e| format!("{what}: {e}"))
     };
     let mut taken: Vec<String> = listens.iter().filter_map(in_use).collect();
-    let signalling_taken = optional.as_ref().and_then(in_use);
-    if taken.is_empty()
-        && let Some(busy) = &signalling_taken
-    {
+    let signalling_taken: Vec<String> = optional.iter().filter_map(in_use).collect();
+    if taken.is_empty() && !signalling_taken.is_empty() {
         return Check::warn(
             name,
-            format!("in use: {busy}; the vehicle starts without it, and Cockpit then finds no video there (or another program's)"),
-            "stop the program listening there (mavlink-camera-manager, or another neptunus: `systemctl status neptunus`), or set [camera.webrtc] signalling to another address or off".to_owned(),
+            format!(
+                "in use: {}; the vehicle starts without it, and Cockpit then finds no video there (or another program's)",
+                signalling_taken.join("; ")
+            ),
+            "stop the program listening there (mavlink-camera-manager, or another neptunus: `systemctl status neptunus`), or set [camera.webrtc] signalling / streams to another address or off".to_owned(),
         );
     }
     // With a required address taken too, the signalling's is named with it.
@@ -282,6 +288,38 @@ pub fn ports(settings: &Settings) -> Check {
             format!("in use: {}", taken.join("; ")),
             "another program listens there — is neptunus (or mavlink-camera-manager, on 6021) already running (`systemctl status neptunus`; stop it to run doctor)? Otherwise change [mavlink] endpoints, [hmi] http or [camera.webrtc] signalling and udp_port".to_owned(),
         )
+    }
+}
+
+/// Whether a TCP address is free. A port below 1024 this user may not bind
+/// (the service binds port 80 with CAP_NET_BIND_SERVICE, which `sudo -u
+/// neptunus … doctor` does not have) is free when nothing answers there.
+fn tcp_free(a: SocketAddr) -> Result<(), std::io::Error> {
+    match TcpListener::bind(a) {
+        Ok(_) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied && a.port() < 1024 => {
+            let ip = match a.ip() {
+                std::net::IpAddr::V4(v4) if v4.is_unspecified() => {
+                    std::net::Ipv4Addr::LOCALHOST.into()
+                }
+                std::net::IpAddr::V6(v6) if v6.is_unspecified() => {
+                    std::net::Ipv6Addr::LOCALHOST.into()
+                }
+                ip => ip,
+            };
+            let probe = SocketAddr::new(ip, a.port());
+            match std::net::TcpStream::connect_timeout(
+                &probe,
+                std::time::Duration::from_millis(500),
+            ) {
+                Ok(_) => Err(std::io::Error::new(
+                    std::io::ErrorKind::AddrInUse,
+                    "Address already in use (something answers there)",
+                )),
+                Err(_) => Ok(()),
+            }
+        }
+        Err(e) => Err(e),
     }
 }
 

@@ -407,6 +407,52 @@ pub(crate) async fn login(State(shared): State<Arc<Shared>>, req: Request<Body>)
     }
 }
 
+/// `POST /api/cockpit-link`: for a logged-in page, a Cockpit link (see
+/// [`auth::Tokens::issue_link`]) and the mavlink2rest URL that carries it,
+/// on the address and port the page itself reached.
+pub(crate) async fn cockpit_link(State(shared): State<Arc<Shared>>, req: Request) -> Response {
+    let link = login_token(req.headers()).and_then(|login| {
+        shared
+            .tokens
+            .lock()
+            .ok()
+            .and_then(|mut t| t.issue_link(login, Instant::now()))
+    });
+    let Some(token) = link else {
+        return json(
+            StatusCode::UNAUTHORIZED,
+            false,
+            "log in with the pilot password first: the link opens Cockpit with this login".into(),
+        );
+    };
+    let host = req
+        .headers()
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .filter(|h| super::headers::plain_host(h))
+        .unwrap_or("localhost")
+        .to_owned();
+    let scheme = if is_tls(req.extensions()) {
+        "wss"
+    } else {
+        "ws"
+    };
+    tracing::info!(
+        "browser HMI: a Cockpit link made for {} (good for its first use within {} s)",
+        client_ip(req.extensions()).map_or_else(|| "an unknown address".into(), |i| i.to_string()),
+        auth::LINK_FIRST_USE.as_secs()
+    );
+    (
+        StatusCode::OK,
+        axum::Json(serde_json::json!({
+            "ok": true,
+            "mavlink": format!("{scheme}://{host}/mavlink2rest/ws/mavlink?token={token}"),
+            "first_use_within_s": auth::LINK_FIRST_USE.as_secs(),
+        })),
+    )
+        .into_response()
+}
+
 /// `POST /api/logout`: forgets the token and clears the cookie.
 pub(crate) async fn logout(State(shared): State<Arc<Shared>>, headers: HeaderMap) -> Response {
     if let Some(t) = login_token(&headers)

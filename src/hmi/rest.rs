@@ -124,6 +124,7 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/api/recordings/{name}", get(super::recordings::file))
         .route("/api/login", post(guard::login))
         .route("/api/logout", post(guard::logout))
+        .route("/api/cockpit-link", post(guard::cockpit_link))
         // Compression around the page's files only (see `assets`).
         .fallback(asset.layer(assets::compression()))
         .with_state(shared)

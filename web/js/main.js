@@ -2,7 +2,8 @@
 // the WebSocket, no DOM), the view (view.js: renders what the server says)
 // and the controls (controls.js: what the operator does, sent at 20 Hz),
 // with the input devices (input.js; the gamepad's buttons: gamepad.js),
-// snapshot, recording and the logs list (recording.js) and the developer interface (the
+// snapshot, recording and the logs list (recording.js), opening Cockpit as
+// the pilot (cockpit.js) and the developer interface (the
 // recorder and logger of recorder.js from connection on; the plots of
 // dev.js loaded when the view first opens), and routes each server message
 // to whoever shows it. Read this file first; docs/ARCHITECTURE.md is the
@@ -15,6 +16,7 @@ import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
 import { Video } from '/js/video.js';
 import { Gamepad } from '/js/gamepad.js';
 import { Recording } from '/js/recording.js';
+import { CockpitLink } from '/js/cockpit.js';
 
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
@@ -36,6 +38,7 @@ const view = new View({ session, video, logger, recorder });
 const controls = new Controls({ session, view, input, logger });
 const gamepad = new Gamepad({ session, view, controls, input });
 const recording = new Recording({ session, view, video });
+const cockpit = new CockpitLink(view);
 // Exposed for the browser tests and for poking around in the console
 // (`plots` once the developer view has been opened).
 window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots: null, logger, gamepad, recording };
@@ -110,6 +113,7 @@ function frame() {
 controls.bind();
 gamepad.bind();
 recording.bind();
+cockpit.bind();
 view.labelTouchpad();
 video.start();
 session.connect();

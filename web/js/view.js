@@ -79,6 +79,7 @@ export class View {
     $('watch-only').textContent = w.watch_only_reason ? `Watch only: ${w.watch_only_reason}` : '';
     $('login').hidden = !(w.password_set && !w.logged_in && !w.pilot);
     $('logout').hidden = !w.logged_in;
+    $('cockpit').hidden = !w.logged_in;
     $('pilot-box').hidden = $('login').hidden && $('logout').hidden && !$('login-note').textContent;
     const who = w.sysid != null ? `you are GCS ${w.sysid}` : w.pilot ? 'you may pilot' : 'watching';
     $('me').textContent = `${who}${w.logged_in ? ' (logged in)' : ''}`;

@@ -117,6 +117,11 @@ impl RtpVideo {
         self.stream.clone()
     }
 
+    /// The encoder child's process id while it runs, as it changes.
+    pub fn encoder(&self) -> watch::Receiver<Option<u32>> {
+        self.pid.clone()
+    }
+
     /// The encoder child's process id while it runs.
     pub fn pid(&self) -> Option<u32> {
         *self.pid.borrow()

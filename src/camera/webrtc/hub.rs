@@ -10,6 +10,7 @@
 //! in front of the signalling) or panics on what arrives.
 
 use std::collections::BTreeMap;
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -29,6 +30,10 @@ pub(super) enum Command {
     Start {
         bind: Bind,
         events: mpsc::UnboundedSender<PeerEvent>,
+        /// The vehicle's address the viewer's signalling connection
+        /// reached: the one host candidate it is offered (`None`: every
+        /// address of the vehicle).
+        reached: Option<IpAddr>,
     },
     Answer {
         session_id: String,
@@ -152,7 +157,11 @@ impl Hub {
     fn command(&mut self, c: Command, viewers: &mut BTreeMap<String, Viewer>) {
         let now = Instant::now();
         match c {
-            Command::Start { bind, events } => {
+            Command::Start {
+                bind,
+                events,
+                reached,
+            } => {
                 let session_id = bind.session_id.clone();
                 let refuse = |reason: String| PeerEvent::Ended {
                     session_id: session_id.clone(),
@@ -165,9 +174,13 @@ impl Hub {
                     )));
                     return;
                 }
-                let mut locals: Vec<str0m::Candidate> = self
-                    .sockets
-                    .refresh()
+                // The address the viewer reached is one it can reach: offer
+                // it alone (one route, no guessing for the viewer), else all.
+                let hosts = match reached.and_then(|ip| self.sockets.ensure(ip)) {
+                    Some(local) => vec![local],
+                    None => self.sockets.refresh(),
+                };
+                let mut locals: Vec<str0m::Candidate> = hosts
                     .into_iter()
                     .filter_map(|a| str0m::Candidate::host(a, "udp").ok())
                     .collect();

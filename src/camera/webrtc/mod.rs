@@ -13,7 +13,10 @@
 //! protocol (`protocol`, `signalling`), on a WebSocket at `/webrtc` on the
 //! HMI's port and at `/` on a port of its own (6021, where Cockpit looks):
 //! [`WebRtc::routes`] and [`WebRtc::signalling_routes`], served by the HMI
-//! behind its Host and Origin rules (`ws`).
+//! behind its Host and Origin rules (`ws`); and read its source, size and
+//! rate from mavlink-camera-manager's `/streams` on the port beside it
+//! (6020, [`WebRtc::streams_routes`]). A viewer is offered the vehicle's
+//! address its signalling connection reached, where the vehicle knows it.
 //!
 //! This module must never run a second encoder, send to an address no
 //! viewer's ICE checks came from, or panic on what a client or the network
@@ -26,6 +29,7 @@ mod net;
 pub mod peer;
 pub mod protocol;
 pub mod signalling;
+pub mod streams;
 mod stun;
 mod ws;
 
@@ -37,8 +41,8 @@ use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 
 pub use config::{
-    DEFAULT_MAX_VIEWERS, IceServer, IceServerError, MCM_SIGNALLING_PORT, SignallingAddr,
-    SignallingAddrError, WebRtcConfig, WebRtcConfigError,
+    DEFAULT_MAX_VIEWERS, IceServer, IceServerError, MCM_REST_PORT, MCM_SIGNALLING_PORT,
+    SignallingAddr, SignallingAddrError, WebRtcConfig, WebRtcConfigError,
 };
 pub use ws::PATH;
 
@@ -129,10 +133,27 @@ impl WebRtc {
         ws::signalling_routes(Arc::clone(&self.ctx))
     }
 
-    /// Where the dedicated port listens (for `GET /api/webrtc`).
-    pub fn set_signalling_addr(&self, addr: Option<SocketAddr>) {
+    /// mavlink-camera-manager's `GET /streams`, for its REST port: the
+    /// stream, with the encoder's state and the RTP stream's shape.
+    pub fn streams_routes(
+        &self,
+        rtp: watch::Receiver<Option<crate::camera::rtp::RtpStream>>,
+        encoder: watch::Receiver<Option<u32>>,
+    ) -> axum::Router {
+        streams::routes(streams::StreamsState {
+            stream: self.ctx.stream.clone(),
+            rtp,
+            encoder,
+        })
+    }
+
+    /// Where the dedicated ports listen (for `GET /api/webrtc`).
+    pub fn set_beside_addrs(&self, signalling: Option<SocketAddr>, streams: Option<SocketAddr>) {
         if let Ok(mut a) = self.ctx.signalling.lock() {
-            *a = addr;
+            *a = signalling;
+        }
+        if let Ok(mut a) = self.ctx.streams.lock() {
+            *a = streams;
         }
     }
 

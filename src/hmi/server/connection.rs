@@ -37,10 +37,12 @@ pub(super) async fn connection(
     mut stop: watch::Receiver<bool>,
     slot: Slot,
 ) {
+    let local = stream.local_addr().ok();
     let Some(acceptor) = tls else {
         http(
             Held::new(stream, slot),
             peer,
+            local,
             false,
             app,
             header_timeout,
@@ -71,7 +73,7 @@ pub(super) async fn connection(
         () = stopped(&mut stop) => return,
     };
     match handshake {
-        Ok(Ok(stream)) => http(stream, peer, true, app, header_timeout, stop).await,
+        Ok(Ok(stream)) => http(stream, peer, local, true, app, header_timeout, stop).await,
         // A plain-HTTP request, a scanner or a browser that distrusts the
         // certificate: the client's business, not the vehicle's.
         Ok(Err(e)) => tracing::debug!("browser HMI: TLS handshake with {peer} failed: {e}"),
@@ -137,6 +139,7 @@ const HTTPS_ONLY: &str =
 async fn http<S>(
     stream: S,
     peer: SocketAddr,
+    local: Option<SocketAddr>,
     tls: bool,
     app: Router,
     header_timeout: Duration,
@@ -146,7 +149,7 @@ async fn http<S>(
 {
     let service = hyper::service::service_fn(move |mut req: hyper::Request<Incoming>| {
         req.extensions_mut().insert(ConnectInfo(peer));
-        req.extensions_mut().insert(ConnInfo { tls });
+        req.extensions_mut().insert(ConnInfo { tls, local });
         app.clone().oneshot(req)
     });
     let conn = http1::Builder::new()

@@ -1,0 +1,141 @@
+//! The settings bag's file: `DATA_DIR/bag.json`, every record with its
+//! path and writer, replaced whole at every change that changes something
+//! ([`write_atomic`]: a temporary file, synced, renamed, the folder synced),
+//! so a power cut leaves the old bag or the new one, never half of one.
+//!
+//! A file that cannot be read is set aside (`bag.json.bad`) and the bag
+//! starts empty, loudly: Cockpit then makes a new vehicle id, which costs
+//! its settings' link to this vehicle, never the vehicle's start.
+
+use std::fs;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use super::store::{Bag, Limits};
+
+/// The bag's file in the data directory.
+pub const BAG_FILE: &str = "bag.json";
+
+/// Where the bag is kept.
+#[derive(Debug, Clone)]
+pub struct BagFile {
+    path: PathBuf,
+}
+
+impl BagFile {
+    pub fn new(data_dir: &Path) -> BagFile {
+        BagFile {
+            path: data_dir.join(BAG_FILE),
+        }
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The bag as the file holds it; an empty one when there is no file,
+    /// and when it cannot be read (then set aside, and said why).
+    pub fn load(&self, limits: Limits) -> Bag {
+        let _ = fs::remove_file(tmp_path(&self.path));
+        let bytes = match fs::read(&self.path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Bag::new(limits),
+            Err(e) => {
+                tracing::error!(
+                    "settings bag {}: cannot read it ({e}) — Cockpit's settings start empty; check the data directory",
+                    self.path.display()
+                );
+                return Bag::new(limits);
+            }
+        };
+        match Bag::from_file(&bytes, limits) {
+            Ok((bag, warnings)) => {
+                for w in warnings {
+                    tracing::warn!("settings bag {}: {w}", self.path.display());
+                }
+                bag
+            }
+            Err(why) => {
+                let aside = self.path.with_extension("json.bad");
+                let moved = fs::rename(&self.path, &aside);
+                tracing::error!(
+                    "settings bag {} is not a bag ({why}) — {}; Cockpit's settings start empty (it makes a new vehicle id)",
+                    self.path.display(),
+                    match moved {
+                        Ok(()) => format!("set aside as {}", aside.display()),
+                        Err(e) => format!("could not set it aside: {e}"),
+                    }
+                );
+                Bag::new(limits)
+            }
+        }
+    }
+
+    /// Stores the bag (blocking: off the async threads).
+    pub fn save(&self, bag: &Bag) -> std::io::Result<()> {
+        write_atomic(&self.path, &bag.to_file())
+    }
+}
+
+fn tmp_path(path: &Path) -> PathBuf {
+    path.with_extension("json.tmp")
+}
+
+/// Writes `contents` to `path` so that a crash or a power cut leaves the
+/// old file or the new one: a temporary file beside it (0600), synced,
+/// renamed over `path`, then the folder synced. The one place the bag
+/// writes its file.
+pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    fs::create_dir_all(dir)?;
+    let tmp = tmp_path(path);
+    let result = (|| {
+        let mut opts = fs::OpenOptions::new();
+        opts.write(true).create(true).truncate(true);
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::OpenOptionsExt as _;
+            opts.mode(0o600);
+        }
+        let mut f = opts.open(&tmp)?;
+        f.write_all(contents)?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+        return result;
+    }
+    // Best effort: the rename is durable once the folder is synced.
+    if let Ok(d) = fs::File::open(dir) {
+        let _ = d.sync_all();
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::super::path::BagPath;
+    use super::super::store::Writer;
+    use super::*;
+
+    #[test]
+    fn kept_across_a_restart_and_a_bad_file_is_set_aside() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = BagFile::new(dir.path());
+        let mut bag = file.load(Limits::default());
+        let id = BagPath::parse("cockpit/cockpit-vehicle-id").unwrap();
+        bag.set(&id, br#""6f1c""#, &Writer::Watcher("10.0.0.2".into()))
+            .unwrap();
+        file.save(&bag).unwrap();
+        assert!(!tmp_path(file.path()).exists());
+        let again = BagFile::new(dir.path()).load(Limits::default());
+        assert_eq!(again, bag);
+        fs::write(file.path(), b"{\"version\":1,").unwrap();
+        let empty = file.load(Limits::default());
+        assert_eq!(empty.get(&id), None);
+        assert!(dir.path().join("bag.json.bad").exists());
+    }
+}
