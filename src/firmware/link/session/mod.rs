@@ -34,8 +34,14 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use super::{LinkConfig, LinkEvent, LinkState, LinkStats};
+use super::{LinkConfig, LinkEvent, LinkQuality, LinkState, LinkStats};
 use crate::firmware::codec::{Command, Event, Framing, LineDecoder, encode};
+
+mod confirm;
+pub(crate) mod quality;
+
+use confirm::Confirm;
+use quality::Quality;
 
 /// The bytes a `rawcmd:` echo lists (`9E,70,69,6E,67,28,30,29,3B,`: each
 /// received byte in hex, each followed by a comma).
@@ -64,16 +70,39 @@ struct InFlight {
     frame: Vec<u8>,
     at: Instant,
     thrust: bool,
+    /// The frame's number, in the order written.
+    serial: u64,
 }
 
-/// Removes the oldest in-flight frame that `is_it` recognises, and every
-/// older one (frames the board lost: it echoes in order); returns how many
-/// of them were thrust commands. An echo of nothing in flight (another
-/// writer's frame, a garbled one) changes nothing.
-fn acknowledge(in_flight: &mut VecDeque<InFlight>, is_it: impl Fn(&[u8]) -> bool) -> u64 {
-    match in_flight.iter().position(|f| is_it(&f.frame)) {
-        Some(i) => in_flight.drain(..=i).filter(|f| f.thrust).count() as u64,
-        None => 0,
+/// The oldest in-flight frame that `is_it` recognises, and every older one
+/// (frames the board lost: it echoes in order), taken out: the echoed one
+/// is reported to `confirm`, the older ones as lost and counted. An echo
+/// of nothing in flight (another writer's frame, a garbled one) changes
+/// nothing.
+fn acknowledge(
+    in_flight: &mut VecDeque<InFlight>,
+    stats: &mut LinkStats,
+    confirm: &mut Confirm,
+    is_it: impl Fn(&[u8]) -> bool,
+) {
+    let Some(i) = in_flight.iter().position(|f| is_it(&f.frame)) else {
+        return;
+    };
+    let newest_alike = in_flight
+        .iter()
+        .skip(i + 1)
+        .filter(|g| g.thrust)
+        .all(|g| g.frame == in_flight[i].frame);
+    for (n, f) in in_flight.drain(..=i).enumerate() {
+        if n < i {
+            stats.echoes_missed += 1;
+            if f.thrust {
+                confirm.lost(f.serial);
+            }
+        } else if f.thrust {
+            stats.thrust_echoed += 1;
+            confirm.echoed(f.serial, newest_alike);
+        }
     }
 }
 
@@ -96,16 +125,26 @@ pub(crate) enum Output {
     Event(LinkEvent),
 }
 
+/// The neutral pulse width.
+const NEUTRAL_US: u16 = crate::vehicle::mixer::NEUTRAL_US;
+
 /// `go()` with every thruster stopped.
 const NEUTRAL_GO: Command = Command::Go {
-    port_us: 1500,
-    vertical_us: 1500,
-    starboard_us: 1500,
+    port_us: NEUTRAL_US,
+    vertical_us: NEUTRAL_US,
+    starboard_us: NEUTRAL_US,
 };
+
+/// The board's motor mapping, as the firmware ships it (`Motor.cpp`): what
+/// its `motors:` reports are compared with.
+fn cfg_motors() -> crate::vehicle::mixer::BoardMotors {
+    crate::vehicle::mixer::BoardMotors::default()
+}
 
 /// Pending writes: control commands in order (a level replacing a pending
 /// one of its kind in place, the keep-alive ping ahead of the levels), plus
-/// the newest thrust command.
+/// the newest thrust command — which goes first when it is neutral (a stop
+/// waits for nothing but the handshake).
 #[derive(Debug, Default)]
 struct Outbox {
     control: VecDeque<Command>,
@@ -129,10 +168,23 @@ impl Outbox {
             self.control.push_back(cmd);
         }
     }
+    fn neutral_first(&self) -> bool {
+        self.thrust == Some(NEUTRAL_GO)
+            && !self
+                .control
+                .front()
+                .is_some_and(|c| matches!(c, Command::DeadMan(_) | Command::Start))
+    }
     fn pop(&mut self) -> Option<Command> {
+        if self.neutral_first() {
+            return self.thrust.take();
+        }
         self.control.pop_front().or_else(|| self.thrust.take())
     }
     fn peek(&self) -> Option<Command> {
+        if self.neutral_first() {
+            return self.thrust;
+        }
         self.control.front().copied().or(self.thrust)
     }
     fn is_empty(&self) -> bool {
@@ -189,8 +241,8 @@ impl Connection {
 }
 
 /// How close to the board's dead-man timeout a gap in the pings counts as
-/// one that may have tripped it. Pings go every second while the vehicle is
-/// healthy, so only a vehicle that stood still comes this near.
+/// one that may have tripped it. Pings go every 400 ms while the vehicle
+/// is healthy, so only a vehicle that stood still comes this near.
 const DEAD_MAN_DOUBT: Duration = Duration::from_millis(500);
 
 /// The link's state machine (see the module docs).
@@ -208,6 +260,13 @@ pub(crate) struct Session {
     last_line: Option<Instant>,
     conn: Option<Connection>,
     outputs: VecDeque<Output>,
+    /// Whether the board holds the thrust the vehicle wants.
+    confirm: Confirm,
+    quality: Quality,
+    /// The line quality last reported to the vehicle task.
+    quality_reported: Option<LinkQuality>,
+    /// The next frame's number.
+    next_serial: u64,
 }
 
 impl Session {
@@ -223,6 +282,10 @@ impl Session {
             last_line: None,
             conn: None,
             outputs: VecDeque::new(),
+            confirm: Confirm::new(cfg_motors()),
+            quality: Quality::default(),
+            quality_reported: None,
+            next_serial: 0,
         };
         session.report(LinkState::Down, Some("not opened yet".into()));
         session
@@ -250,6 +313,9 @@ impl Session {
     /// only the newest pending one is written. Taken while the device is
     /// down too, so the newest one is what goes out once the board is back.
     pub(crate) fn command(&mut self, cmd: Command) {
+        if cmd.is_thrust() {
+            self.confirm.wanted(&cmd);
+        }
         self.outbox.push(cmd, &mut self.stats);
     }
 
@@ -297,6 +363,7 @@ impl Session {
         if self.outbox.thrust.take().is_some() {
             self.stats.thrust_coalesced += 1;
         }
+        self.confirm.forget();
         self.report(LinkState::Down, Some(reason));
         self.publish();
         self.retry_at(now)
@@ -318,27 +385,72 @@ impl Session {
                     tracing::info!("board booted; handshaking");
                     conn.handshake_due = Some(now);
                     conn.booted = true;
-                    // Whatever it had not taken is gone with its old state.
+                    // Whatever it had not taken is gone with its old state;
+                    // it holds neutral, and the vehicle decides again.
                     conn.in_flight.clear();
+                    self.confirm.forget();
                     reboot = conn.handshaken && conn.board_talked;
                 }
                 Event::RawCmd(hex) if self.cfg.framing == Framing::Crc8 => {
                     if let Some(frame) = raw_frame(hex) {
-                        self.stats.thrust_echoed +=
-                            acknowledge(&mut conn.in_flight, |f| *f == frame);
+                        acknowledge(
+                            &mut conn.in_flight,
+                            &mut self.stats,
+                            &mut self.confirm,
+                            |f| *f == frame,
+                        );
+                    }
+                }
+                // After `crc:pass`: the oldest frame's text, its `rawcmd:`
+                // echo damaged on the way back (an identical frame behind
+                // it taken for it holds the same command).
+                Event::CmdEcho(text) if self.cfg.framing == Framing::Crc8 => {
+                    let front = conn.in_flight.front().map(|f| f.frame.clone());
+                    if let Some(front) = front {
+                        acknowledge(
+                            &mut conn.in_flight,
+                            &mut self.stats,
+                            &mut self.confirm,
+                            |f| f == front.as_slice() && echo_matches(&f[1..], text),
+                        );
                     }
                 }
                 Event::CmdEcho(text) if self.cfg.framing == Framing::Plain => {
-                    self.stats.thrust_echoed +=
-                        acknowledge(&mut conn.in_flight, |f| echo_matches(f, text));
+                    acknowledge(
+                        &mut conn.in_flight,
+                        &mut self.stats,
+                        &mut self.confirm,
+                        |f| echo_matches(f, text),
+                    );
                 }
                 Event::CrcFail { calc, got } => {
                     self.stats.crc_failures_echoed += 1;
                     tracing::debug!(calc, got, "board dropped a frame: CRC mismatch");
+                    // It reads frames in order: the one it rejected is the
+                    // oldest not echoed yet.
+                    if let Some(f) = conn.in_flight.pop_front()
+                        && f.thrust
+                    {
+                        self.confirm.lost(f.serial);
+                    }
                 }
-                Event::Nav(_) | Event::Status(_) => {
+                Event::Nav(_) => {
                     self.last_line = Some(now);
                     conn.board_talked = true;
+                }
+                Event::Status(status) => {
+                    self.last_line = Some(now);
+                    conn.board_talked = true;
+                    if let Some(target) = status.mtarg_us {
+                        self.confirm.target_reported(target);
+                    }
+                    if let Some(esc) = status.motors_us {
+                        self.confirm.outputs_reported(esc);
+                    }
+                }
+                // The dead-man's stop: the board holds neutral now.
+                Event::InternalCommand(cmd) if cmd.starts_with("stop") => {
+                    self.confirm.target_reported([NEUTRAL_US; 3]);
                 }
                 _ => {}
             }
@@ -411,6 +523,15 @@ impl Session {
                 }
             }
         }
+        // A thrust the board did not take (or says it does not hold) goes
+        // again, unless a newer one waits already.
+        if conn.handshaken
+            && let Some(again) = self.confirm.due(now)
+            && self.outbox.thrust.is_none()
+        {
+            self.outbox.thrust = Some(again);
+            self.stats.thrust_resent += 1;
+        }
         // The board's dead-man has (or may have) stopped it since the last
         // ping; it still obeys `go()`, so no thrust but neutral is written
         // until a ping is (the ping then goes behind a neutral, above).
@@ -420,13 +541,14 @@ impl Session {
         }
         // Echoes that never came: the board lost those frames (or is busy
         // and will not take them soon); they no longer hold the budget.
-        while conn
+        while let Some(f) = conn
             .in_flight
-            .front()
-            .is_some_and(|f| now.duration_since(f.at) > self.cfg.echo_timeout)
+            .pop_front_if(|f| now.duration_since(f.at) > self.cfg.echo_timeout)
         {
-            conn.in_flight.pop_front();
             self.stats.echoes_missed += 1;
+            if f.thrust {
+                self.confirm.lost(f.serial);
+            }
         }
         let in_flight: usize = conn.in_flight.iter().map(|f| f.frame.len()).sum();
         if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
@@ -440,10 +562,16 @@ impl Session {
                 return None;
             }
             self.outbox.pop();
+            let serial = self.next_serial;
+            self.next_serial += 1;
+            if cmd.is_thrust() {
+                self.confirm.written(&cmd, serial, now);
+            }
             conn.in_flight.push_back(InFlight {
                 frame: frame.clone(),
                 at: now,
                 thrust: cmd.is_thrust(),
+                serial,
             });
             if cmd == Command::Ping(0) {
                 conn.last_ping = Some(now);
@@ -500,7 +628,18 @@ impl Session {
             self.stats.telemetry_age_ms = self
                 .last_line
                 .map(|t| now.duration_since(t).as_millis() as u64);
+            self.stats.drop_rate_cpct = self.quality.drop_rate_cpct(&self.stats, now);
+            let q = LinkQuality {
+                drop_rate_cpct: self.stats.drop_rate_cpct,
+                errors: quality::errors(&self.stats),
+            };
             self.publish();
+            // The vehicle task hears of a change only (an idle, clean line
+            // wakes it for nothing).
+            if self.quality_reported != Some(q) {
+                self.quality_reported = Some(q);
+                self.outputs.push_back(Output::Event(LinkEvent::Quality(q)));
+            }
         }
     }
 
@@ -587,6 +726,11 @@ impl Session {
                 wake = wake.min(f.at + self.cfg.echo_timeout);
             }
         }
+        if conn.handshaken
+            && let Some(t) = self.confirm.next_due(now)
+        {
+            wake = wake.min(t);
+        }
         // While the vehicle is not healthy no ping is due (a due-but-withheld
         // ping must not make the loop spin); its next `healthy` wakes the loop.
         if conn.handshaken && self.vehicle_healthy(now) {
@@ -645,3 +789,5 @@ impl Session {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_confirm;
