@@ -25,8 +25,21 @@ fn armed_rig() -> CoreRig {
         .started();
     rig.run(Duration::from_secs(20));
     rig.arm(OWNER);
+    drive(&mut rig, Duration::from_millis(500));
     assert!(rig.v.armed());
     rig
+}
+
+/// `d` of the rig's beats with the owner's sticks centred at 10 Hz (the
+/// pilot-input failsafe would disarm a vehicle without them).
+fn drive(rig: &mut CoreRig, d: Duration) -> Vec<neptunus::vehicle::machine::Output> {
+    let mut out = Vec::new();
+    let end = rig.t + d;
+    while rig.t < end {
+        out.extend(rig.stick(OWNER, 0));
+        out.extend(rig.run(Duration::from_millis(100)));
+    }
+    out
 }
 
 fn uptime(rig: &mut CoreRig, ms: u64) -> Vec<neptunus::vehicle::machine::Output> {
@@ -45,7 +58,7 @@ fn a_damaged_uptime_is_no_reboot_and_a_clock_that_stays_back_is() {
     for damaged in [now_ms - 20_000, now_ms + 900_000] {
         rig.t += Duration::from_millis(300);
         let out = uptime(&mut rig, damaged);
-        let out2 = rig.run(Duration::from_secs(2));
+        let out2 = drive(&mut rig, Duration::from_secs(2));
         assert!(
             rig.v.armed() && !has_text(&out, "rebooted") && !has_text(&out2, "rebooted"),
             "a damaged uptime {damaged} ms disarmed the vehicle"
@@ -57,7 +70,7 @@ fn a_damaged_uptime_is_no_reboot_and_a_clock_that_stays_back_is() {
     rig.t += Duration::from_millis(300);
     let first = uptime(&mut rig, 400);
     assert!(rig.v.armed() && !has_text(&first, "rebooted"));
-    rig.run(Duration::from_secs(1));
+    drive(&mut rig, Duration::from_secs(1));
     let second = uptime(&mut rig, 1_400);
     assert!(!rig.v.armed(), "a board whose clock went back stayed armed");
     assert!(has_text(&second, "Board rebooted"));
@@ -70,7 +83,7 @@ fn the_links_quality_is_in_sys_status() {
         drop_rate_cpct: 327,
         errors: 87,
     }));
-    let out = rig.run(Duration::from_secs(1));
+    let out = drive(&mut rig, Duration::from_secs(1));
     let status = sent(&out)
         .into_iter()
         .find_map(|(_, m)| match m {
