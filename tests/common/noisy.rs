@@ -71,15 +71,6 @@ pub struct Run {
     pub comm: Option<(u16, u16)>,
 }
 
-impl Run {
-    pub fn pushes(&self) -> impl Iterator<Item = &Step> {
-        self.steps.iter().filter(|s| s.push)
-    }
-    pub fn releases(&self) -> impl Iterator<Item = &Step> {
-        self.steps.iter().filter(|s| !s.push)
-    }
-}
-
 /// The genuine board, the relay and the vehicle, armed.
 pub struct NoisyRig {
     pub vehicle: Vehicle,
@@ -89,7 +80,7 @@ pub struct NoisyRig {
     serial: Receiver<SerialChunk>,
     changes: Receiver<TimedChange>,
     from_board: Vec<u8>,
-    pub board: GenuineBoard,
+    _board: GenuineBoard,
     _dir: tempfile::TempDir,
 }
 
@@ -155,7 +146,7 @@ impl NoisyRig {
             serial,
             changes,
             from_board: Vec::new(),
-            board,
+            _board: board,
             _dir: dir,
         })
     }
