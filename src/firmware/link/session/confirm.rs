@@ -26,12 +26,23 @@
 //! [`RESEND_INTERVAL`]; a doubted neutral goes ahead of the keep-alive and
 //! the lights (see the outbox). Reports heard while a frame is still on
 //! its way say nothing about it and are not judged. A damaged report can
-//! only cost a write of what the vehicle wants anyway.
+//! only cost a write of what the vehicle wants anyway — or, one that
+//! agrees by accident, delay a re-send until the frame's rejection, its
+//! missing echo or the board's next report: a thrust held by a report
+//! is doubted again when its frame turns out lost.
+//!
+//! What is written again is only ever the vehicle's newest thrust
+//! decision: a newer one replaces it ([`Confirm::wanted`]), a device that
+//! closed or a board that rebooted forgets it ([`Confirm::forget`]), and
+//! after a gap in the keep-alive the link wants neutral until the vehicle
+//! decides again. A thrust that is not neutral is written again only
+//! while the vehicle is alive (the keep-alive's own condition): a stalled
+//! vehicle's last push is never renewed — the board's dead-man stops it.
 
 use std::time::{Duration, Instant};
 
 use crate::firmware::codec::Command;
-use crate::vehicle::mixer::BoardMotors;
+use crate::vehicle::mixer::{BoardMotors, NEUTRAL_US};
 
 /// A thrust frame not heard of this long after it was written is taken as
 /// lost: the genuine board echoes a frame within a few milliseconds (its
@@ -133,9 +144,13 @@ impl Confirm {
         }
     }
 
-    /// Thrust frame `serial` never reached the board whole.
+    /// Thrust frame `serial` never reached the board whole. The newest
+    /// one lost is doubted even if a report seemed to agree (a damaged
+    /// report, or one the board printed before it read the frame).
     pub(super) fn lost(&mut self, serial: u64) {
-        if self.newest_frame == Some(serial) && matches!(self.standing, Standing::Written(_)) {
+        if self.newest_frame == Some(serial)
+            && matches!(self.standing, Standing::Written(_) | Standing::Held)
+        {
             self.standing = Standing::Doubted;
         }
     }
@@ -166,9 +181,17 @@ impl Confirm {
         }
     }
 
+    /// Whether what the vehicle wants may be written again now: a stop
+    /// always; a push only while `alive` (the vehicle task is healthy and
+    /// the keep-alive had no gap).
+    fn may_resend(&self, alive: bool) -> bool {
+        alive || self.wanted == Some([NEUTRAL_US; 3])
+    }
+
     /// At `now`: the thrust to write again, if it is doubted (or its frame
-    /// unheard of too long) and the last re-send is old enough.
-    pub(super) fn due(&mut self, now: Instant) -> Option<Command> {
+    /// unheard of too long), the last re-send is old enough and, for a
+    /// push, the vehicle is `alive`.
+    pub(super) fn due(&mut self, now: Instant, alive: bool) -> Option<Command> {
         if let Standing::Written(at) = self.standing
             && now.duration_since(at) > CONFIRM_TIMEOUT
         {
@@ -176,6 +199,7 @@ impl Confirm {
         }
         let [port_us, vertical_us, starboard_us] = self.wanted?;
         if self.standing != Standing::Doubted
+            || !self.may_resend(alive)
             || self
                 .last_resend
                 .is_some_and(|t| now.duration_since(t) < RESEND_INTERVAL)
@@ -191,17 +215,21 @@ impl Confirm {
         })
     }
 
-    /// When [`Confirm::due`] may next have something, looking at `now`.
-    pub(super) fn next_due(&self, now: Instant) -> Option<Instant> {
+    /// When [`Confirm::due`] may next have something, looking at `now`
+    /// (a push held back while the vehicle is not `alive` is no reason to
+    /// wake: its next sign of life is).
+    pub(super) fn next_due(&self, now: Instant, alive: bool) -> Option<Instant> {
         let after_last = |t: Instant| {
             self.last_resend
                 .map_or(t, |last| t.max(last + RESEND_INTERVAL))
         };
+        self.wanted?;
         match self.standing {
             Standing::Written(at) => {
                 Some(after_last(at + CONFIRM_TIMEOUT + Duration::from_millis(1)))
             }
-            Standing::Doubted => Some(after_last(now)),
+            Standing::Doubted if self.may_resend(alive) => Some(after_last(now)),
+            Standing::Doubted => None,
             Standing::Queued | Standing::Held => None,
         }
     }

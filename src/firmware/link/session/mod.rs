@@ -230,7 +230,32 @@ struct Connection {
     last_heard: Option<Instant>,
 }
 
+/// A frame not echoed this long after it was written is given up while
+/// the board keeps talking: its loop reads a frame within milliseconds of
+/// its arrival and echoes it at once, so the frame or its echo was lost on
+/// a noisy line — and a lost echo must not hold the budget (and the stop
+/// or the keep-alive behind it) for the whole echo timeout.
+const ECHO_LOST_WHILE_TALKING: Duration = Duration::from_millis(120);
+
+/// Bytes from the board this long after a frame was written were printed
+/// by its loop after the frame arrived (its own transmit buffer drains in
+/// a few milliseconds): the board was not busy elsewhere.
+const TALKED_AFTER: Duration = Duration::from_millis(50);
+
 impl Connection {
+    /// When the frame `f` stops holding the budget unechoed: after
+    /// [`ECHO_LOST_WHILE_TALKING`] if the board has talked since, else
+    /// after `echo_timeout` (a busy board reads nothing, and what it has
+    /// not read still fills its receive buffer).
+    fn echo_given_up_at(&self, f: &InFlight, echo_timeout: Duration) -> Instant {
+        let talked = self.last_heard.is_some_and(|h| h >= f.at + TALKED_AFTER);
+        f.at + if talked {
+            ECHO_LOST_WHILE_TALKING.min(echo_timeout)
+        } else {
+            echo_timeout
+        }
+    }
+
     /// The board is still in its set-up: heard, but neither `boot` nor
     /// telemetry yet. A command written now would wait in its receive
     /// buffer through the set-up and its echo time out, and more would
@@ -386,8 +411,13 @@ impl Session {
                     conn.handshake_due = Some(now);
                     conn.booted = true;
                     // Whatever it had not taken is gone with its old state;
-                    // it holds neutral, and the vehicle decides again.
+                    // it holds neutral, and the vehicle decides again: a
+                    // thrust still pending was decided for the board
+                    // before, and is not written to the new one.
                     conn.in_flight.clear();
+                    if self.outbox.thrust.take().is_some() {
+                        self.stats.thrust_coalesced += 1;
+                    }
                     self.confirm.forget();
                     reboot = conn.handshaken && conn.board_talked;
                 }
@@ -416,12 +446,24 @@ impl Session {
                     }
                 }
                 Event::CmdEcho(text) if self.cfg.framing == Framing::Plain => {
-                    acknowledge(
-                        &mut conn.in_flight,
-                        &mut self.stats,
-                        &mut self.confirm,
-                        |f| echo_matches(f, text),
-                    );
+                    let ours = conn.in_flight.iter().any(|f| echo_matches(&f.frame, text));
+                    if ours {
+                        acknowledge(
+                            &mut conn.in_flight,
+                            &mut self.stats,
+                            &mut self.confirm,
+                            |f| echo_matches(f, text),
+                        );
+                    } else if let Some(f) = conn.in_flight.pop_front() {
+                        // No CRC in this framing: the board read the oldest
+                        // frame damaged (and may have taken what it read),
+                        // or the echo was damaged on its way back. Either
+                        // way that frame is not known taken.
+                        self.stats.echoes_missed += 1;
+                        if f.thrust {
+                            self.confirm.lost(f.serial);
+                        }
+                    }
                 }
                 Event::CrcFail { calc, got } => {
                     self.stats.crc_failures_echoed += 1;
@@ -494,9 +536,7 @@ impl Session {
         // is not ours (a crystal's error, a simulator catching up) and a
         // thrust written to a board that did trip is resumed by the ping
         // that follows.
-        let gap = conn
-            .last_ping
-            .is_some_and(|t| now.duration_since(t) + DEAD_MAN_DOUBT > self.cfg.dead_man_timeout);
+        let gap = Self::gap_since(conn.last_ping, now, self.cfg.dead_man_timeout);
         if conn.handshaken && now >= conn.next_ping && healthy {
             conn.next_ping = now + self.cfg.ping_period;
             if !self.outbox.control.contains(&Command::Ping(0)) {
@@ -520,13 +560,18 @@ impl Session {
                     if self.outbox.thrust.take().is_some() {
                         self.stats.thrust_coalesced += 1;
                     }
+                    // And neutral is what the link confirms (and writes
+                    // again) until the vehicle's next decision: the push
+                    // it wanted before the gap is not renewed.
+                    self.confirm.wanted(&NEUTRAL_GO);
                 }
             }
         }
         // A thrust the board did not take (or says it does not hold) goes
-        // again, unless a newer one waits already.
+        // again, unless a newer one waits already; a push only while the
+        // keep-alive would go (the vehicle healthy, no gap).
         if conn.handshaken
-            && let Some(again) = self.confirm.due(now)
+            && let Some(again) = self.confirm.due(now, healthy && !gap)
             && self.outbox.thrust.is_none()
         {
             self.outbox.thrust = Some(again);
@@ -543,7 +588,10 @@ impl Session {
         // and will not take them soon); they no longer hold the budget.
         while let Some(f) = conn
             .in_flight
-            .pop_front_if(|f| now.duration_since(f.at) > self.cfg.echo_timeout)
+            .front()
+            .is_some_and(|f| now > conn.echo_given_up_at(f, self.cfg.echo_timeout))
+            .then(|| conn.in_flight.pop_front())
+            .flatten()
         {
             self.stats.echoes_missed += 1;
             if f.thrust {
@@ -721,13 +769,17 @@ impl Session {
                     .checked_sub(self.cfg.max_ahead)
                     .unwrap_or(now),
             );
-            // Waiting for an echo: its timeout is the latest the budget frees.
+            // Waiting for an echo: its timeout is the latest the budget
+            // frees (just past it: the check is "later than").
             if let Some(f) = conn.in_flight.front() {
-                wake = wake.min(f.at + self.cfg.echo_timeout);
+                wake = wake.min(
+                    conn.echo_given_up_at(f, self.cfg.echo_timeout) + Duration::from_millis(1),
+                );
             }
         }
+        let alive = self.vehicle_healthy(now) && !self.ping_gap(conn, now);
         if conn.handshaken
-            && let Some(t) = self.confirm.next_due(now)
+            && let Some(t) = self.confirm.next_due(now, alive)
         {
             wake = wake.min(t);
         }
@@ -737,6 +789,16 @@ impl Session {
             wake = wake.min(conn.next_ping);
         }
         wake
+    }
+
+    /// Whether the pings have had a gap at `now` that may have tripped the
+    /// board's dead-man (within [`DEAD_MAN_DOUBT`] of its timeout).
+    fn gap_since(last_ping: Option<Instant>, now: Instant, dead_man: Duration) -> bool {
+        last_ping.is_some_and(|t| now.duration_since(t) + DEAD_MAN_DOUBT > dead_man)
+    }
+
+    fn ping_gap(&self, conn: &Connection, now: Instant) -> bool {
+        Self::gap_since(conn.last_ping, now, self.cfg.dead_man_timeout)
     }
 
     /// The vehicle task said it is alive within the healthy window.
@@ -791,3 +853,7 @@ impl Session {
 mod tests;
 #[cfg(test)]
 mod tests_confirm;
+#[cfg(test)]
+mod tests_hazards;
+#[cfg(test)]
+mod tests_keepalive;

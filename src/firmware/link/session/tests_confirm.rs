@@ -96,15 +96,23 @@ fn the_plain_cmd_echo_after_crc_pass_confirms_when_rawcmd_was_damaged() {
 #[test]
 fn a_report_that_disagrees_is_answered_with_what_the_vehicle_wants() {
     let (mut s, t) = holding(1600);
-    // The board says it holds neutral (a `go` it lost, a stop of its own).
+    // The board says it holds neutral (a `go` it lost, a stop of its own);
+    // the vehicle is alive (a push is written again only then).
+    s.healthy(t + 500 * MS);
+    let thrust = |s: &mut Session, now| -> Vec<Command> {
+        drain_writes(s, now)
+            .into_iter()
+            .filter(Command::is_thrust)
+            .collect()
+    };
     s.received(b"mtarg:1500,1500,1500;\r\n", t + 500 * MS);
-    assert_eq!(drain_writes(&mut s, t + 501 * MS), [go(1600)]);
-    s.received(b"mtarg:1600,1500,1500;\r\n", t + 1500 * MS);
-    assert!(drain_writes(&mut s, t + 1600 * MS).is_empty());
+    assert_eq!(thrust(&mut s, t + 501 * MS), [go(1600)]);
+    s.received(b"mtarg:1600,1500,1500;\r\n", t + 550 * MS);
+    assert!(thrust(&mut s, t + 600 * MS).is_empty());
     assert_eq!(s.stats().thrust_resent, 1);
     // Its ESCs say otherwise too: again.
-    s.received(b"motors:1500,1500,1500;\r\n", t + 1700 * MS);
-    assert_eq!(drain_writes(&mut s, t + 1701 * MS), [go(1600)]);
+    s.received(b"motors:1500,1500,1500;\r\n", t + 700 * MS);
+    assert_eq!(thrust(&mut s, t + 701 * MS), [go(1600)]);
 }
 
 #[test]
@@ -126,8 +134,12 @@ fn writes_again_at_most_ten_a_second_to_a_board_that_keeps_disagreeing() {
     let mut writes = 0;
     for ms in 1..=1000u64 {
         let now = t + Duration::from_millis(ms);
+        s.healthy(now);
         s.received(b"mtarg:1500,1500,1500;\r\n", now);
-        writes += drain_writes(&mut s, now).len();
+        writes += drain_writes(&mut s, now)
+            .iter()
+            .filter(|c| c.is_thrust())
+            .count();
     }
     assert!((9..=10).contains(&writes), "{writes} writes in a second");
 }

@@ -1,0 +1,88 @@
+// The board pill tells the pilot how the serial line to the board fares:
+// "board: link up" on a clean line, "… · line X % damaged" beside it when
+// frames or lines are damaged or lost, amber from 1 %. The damage is real:
+// the board emulator behind the vehicle's pseudo-terminal tears some of
+// its telemetry lines ([emulator.faults], seeded), the vehicle's link
+// rejects them, SYS_STATUS carries the share, and the page shows it. The
+// pill is read at laptop and tablet sizes; their screenshots go to
+// target/browser-screenshots/ for a person to look at.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import { mkdirSync } from 'node:fs';
+import { join } from 'node:path';
+import { launchBrowser, openPage, telemetry, until, withVehicle, REPO } from './harness.js';
+
+let browser;
+before(async () => { browser = await launchBrowser(); });
+after(async () => { await browser?.close(); });
+
+const shots = join(REPO, 'target', 'browser-screenshots');
+mkdirSync(shots, { recursive: true });
+
+// One telemetry line in eight torn on its way to the vehicle.
+const DAMAGING = '[emulator.faults]\ntorn = 0.125\nseed = 37\n';
+const DAMAGED = /^board: link up · line (\d+(?:\.\d)?) % damaged$/;
+
+/** The pill's text, class and tooltip, and whether it shows all of its
+ * text inside the viewport. */
+async function pill(page, vp) {
+  const el = page.locator('[data-testid=link]');
+  const box = await el.boundingBox();
+  return {
+    text: (await el.textContent()).trim(),
+    cls: await el.getAttribute('class'),
+    title: await el.getAttribute('title'),
+    clipped: await el.evaluate((e) => e.scrollWidth > e.clientWidth + 0.5),
+    inside: !!box && box.x >= 0 && box.y >= 0 && box.x + box.width <= vp.width + 0.5 && box.y + box.height <= vp.height + 0.5,
+    box,
+  };
+}
+
+test('a damaged line shows on the board pill, amber, readable at laptop and tablet sizes', () => withVehicle(async (v) => {
+  for (const vp of [{ width: 1366, height: 768 }, { width: 1024, height: 768 }, { width: 768, height: 1024 }]) {
+    const { page, context, problems } = await openPage(browser, v.url, vp);
+    // The link's share over its 10-s window, from SYS_STATUS drop_rate_comm.
+    const t = await until(async () => {
+      const x = await telemetry(page);
+      return x.health?.board_link && x.health.board_line_drop_pct >= 1 && x;
+    }, 30000, 'the vehicle reporting a damaged board line');
+    assert.ok(t.health.board_line_errors > 0, JSON.stringify(t.health));
+    const p = await until(async () => {
+      const x = await pill(page, vp);
+      return DAMAGED.test(x.text) && x;
+    }, 10000, 'the pill saying the line is damaged');
+    const shown = Number(DAMAGED.exec(p.text)[1]);
+    assert.ok(shown >= 1 && shown < 50, `${p.text}: torn lines are one in eight`);
+    assert.match(p.cls, /\bwarn\b/, `amber from 1 %: ${p.cls}`);
+    assert.match(p.title, /board serial line: [\d.]+ % of frames and lines damaged or lost over the last 10 s, \d+ since the start/);
+    assert.ok(p.inside, `the pill inside ${vp.width}x${vp.height}: ${JSON.stringify(p.box)}`);
+    assert.equal(p.clipped, false, `the pill's text cut at ${vp.width}x${vp.height}`);
+    // The bar does not push the page wider than the screen.
+    const overflow = await page.evaluate(() => document.documentElement.scrollWidth - innerWidth);
+    assert.ok(overflow <= 0, `horizontal overflow of ${overflow} px at ${vp.width}x${vp.height}`);
+    await page.screenshot({ path: join(shots, `board-line-damaged-${vp.width}x${vp.height}.png`) });
+    await page.locator('#bar').screenshot({ path: join(shots, `board-line-damaged-bar-${vp.width}x${vp.height}.png`) });
+    assert.deepEqual(problems, []);
+    await context.close();
+  }
+}, [], { toml: DAMAGING }));
+
+test('a clean line shows only "link up", green, and no share', () => withVehicle(async (v) => {
+  const vp = { width: 1366, height: 768 };
+  const { page, context, problems } = await openPage(browser, v.url, vp);
+  // Once the link's 10-s window holds nothing damaged (the board's first
+  // line, read from its middle when the device opened, may be torn).
+  await until(async () => {
+    const x = await telemetry(page);
+    return x.health?.board_link && x.health.board_line_drop_pct === 0 && x;
+  }, 30000, 'a clean board line');
+  const p = await until(async () => {
+    const x = await pill(page, vp);
+    return x.text === 'board: link up' && x;
+  }, 10000, 'the pill saying only "link up"');
+  assert.match(p.cls, /\bok\b/);
+  assert.match(p.title, /board serial line: 0\.00 % of frames and lines damaged or lost/);
+  await page.locator('#bar').screenshot({ path: join(shots, `board-line-clean-bar-${vp.width}x${vp.height}.png`) });
+  assert.deepEqual(problems, []);
+  await context.close();
+}));
