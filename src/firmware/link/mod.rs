@@ -79,8 +79,8 @@ impl LinkConfig {
             device: device.into(),
             baud: 115_200,
             framing: Framing::Crc8,
-            // Five pings in the board's 2-s dead-man window: four lost in
-            // a row on a noisy line still leave it fed.
+            // Five pings in the board's 2-s dead-man window: three lost
+            // in a row on a noisy line still leave it fed.
             ping_period: Duration::from_millis(400),
             healthy_window: Duration::from_millis(500),
             stale_after: Duration::from_millis(1500),

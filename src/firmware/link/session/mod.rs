@@ -38,73 +38,12 @@ use super::{LinkConfig, LinkEvent, LinkQuality, LinkState, LinkStats};
 use crate::firmware::codec::{Command, Event, Framing, LineDecoder, encode};
 
 mod confirm;
+mod outbox;
 pub(crate) mod quality;
 
 use confirm::Confirm;
+use outbox::{Budget, ECHO_OVERDUE, InFlight, Outbox, acknowledge, echo_matches, raw_frame};
 use quality::Quality;
-
-/// The bytes a `rawcmd:` echo lists (`9E,70,69,6E,67,28,30,29,3B,`: each
-/// received byte in hex, each followed by a comma).
-fn raw_frame(hex: &str) -> Option<Vec<u8>> {
-    hex.split(',')
-        .filter(|h| !h.is_empty())
-        .map(|h| u8::from_str_radix(h, 16).ok())
-        .collect()
-}
-
-/// Whether the board's `cmd:` echo (`go(1500,1500,1500)`, tokens re-joined
-/// with commas) is of `frame` (`go(1500,1500,1500);`, plain framing).
-fn echo_matches(frame: &[u8], echo: &str) -> bool {
-    let canon = |t: &[u8]| -> Vec<u8> {
-        t.iter()
-            .copied()
-            .filter(|&b| b != b' ' && b != b';')
-            .collect()
-    };
-    canon(frame) == canon(echo.as_bytes())
-}
-
-/// A frame written and not yet echoed.
-#[derive(Debug)]
-struct InFlight {
-    frame: Vec<u8>,
-    at: Instant,
-    thrust: bool,
-    /// The frame's number, in the order written.
-    serial: u64,
-}
-
-/// The oldest in-flight frame that `is_it` recognises, and every older one
-/// (frames the board lost: it echoes in order), taken out: the echoed one
-/// is reported to `confirm`, the older ones as lost and counted. An echo
-/// of nothing in flight (another writer's frame, a garbled one) changes
-/// nothing.
-fn acknowledge(
-    in_flight: &mut VecDeque<InFlight>,
-    stats: &mut LinkStats,
-    confirm: &mut Confirm,
-    is_it: impl Fn(&[u8]) -> bool,
-) {
-    let Some(i) = in_flight.iter().position(|f| is_it(&f.frame)) else {
-        return;
-    };
-    let newest_alike = in_flight
-        .iter()
-        .skip(i + 1)
-        .filter(|g| g.thrust)
-        .all(|g| g.frame == in_flight[i].frame);
-    for (n, f) in in_flight.drain(..=i).enumerate() {
-        if n < i {
-            stats.echoes_missed += 1;
-            if f.thrust {
-                confirm.lost(f.serial);
-            }
-        } else if f.thrust {
-            stats.thrust_echoed += 1;
-            confirm.echoed(f.serial, newest_alike);
-        }
-    }
-}
 
 /// How often the figures are published while the device is open (at most;
 /// when the session runs anyway), and while it is closed.
@@ -139,57 +78,6 @@ const NEUTRAL_GO: Command = Command::Go {
 /// its `motors:` reports are compared with.
 fn cfg_motors() -> crate::vehicle::mixer::BoardMotors {
     crate::vehicle::mixer::BoardMotors::default()
-}
-
-/// Pending writes: control commands in order (a level replacing a pending
-/// one of its kind in place, the keep-alive ping ahead of the levels), plus
-/// the newest thrust command — which goes first when it is neutral (a stop
-/// waits for nothing but the handshake).
-#[derive(Debug, Default)]
-struct Outbox {
-    control: VecDeque<Command>,
-    thrust: Option<Command>,
-}
-
-impl Outbox {
-    fn push(&mut self, cmd: Command, stats: &mut LinkStats) {
-        if cmd.is_thrust() {
-            if self.thrust.replace(cmd).is_some() {
-                stats.thrust_coalesced += 1;
-            }
-        } else if let Some(pending) = cmd
-            .is_level()
-            .then(|| self.control.iter_mut().find(|c| c.name() == cmd.name()))
-            .flatten()
-        {
-            *pending = cmd;
-            stats.settings_coalesced += 1;
-        } else {
-            self.control.push_back(cmd);
-        }
-    }
-    fn neutral_first(&self) -> bool {
-        self.thrust == Some(NEUTRAL_GO)
-            && !self
-                .control
-                .front()
-                .is_some_and(|c| matches!(c, Command::DeadMan(_) | Command::Start))
-    }
-    fn pop(&mut self) -> Option<Command> {
-        if self.neutral_first() {
-            return self.thrust.take();
-        }
-        self.control.pop_front().or_else(|| self.thrust.take())
-    }
-    fn peek(&self) -> Option<Command> {
-        if self.neutral_first() {
-            return self.thrust;
-        }
-        self.control.front().copied().or(self.thrust)
-    }
-    fn is_empty(&self) -> bool {
-        self.control.is_empty() && self.thrust.is_none()
-    }
 }
 
 /// What lives only as long as one opening of the device.
@@ -230,32 +118,7 @@ struct Connection {
     last_heard: Option<Instant>,
 }
 
-/// A frame not echoed this long after it was written is given up while
-/// the board keeps talking: its loop reads a frame within milliseconds of
-/// its arrival and echoes it at once, so the frame or its echo was lost on
-/// a noisy line — and a lost echo must not hold the budget (and the stop
-/// or the keep-alive behind it) for the whole echo timeout.
-const ECHO_LOST_WHILE_TALKING: Duration = Duration::from_millis(120);
-
-/// Bytes from the board this long after a frame was written were printed
-/// by its loop after the frame arrived (its own transmit buffer drains in
-/// a few milliseconds): the board was not busy elsewhere.
-const TALKED_AFTER: Duration = Duration::from_millis(50);
-
 impl Connection {
-    /// When the frame `f` stops holding the budget unechoed: after
-    /// [`ECHO_LOST_WHILE_TALKING`] if the board has talked since, else
-    /// after `echo_timeout` (a busy board reads nothing, and what it has
-    /// not read still fills its receive buffer).
-    fn echo_given_up_at(&self, f: &InFlight, echo_timeout: Duration) -> Instant {
-        let talked = self.last_heard.is_some_and(|h| h >= f.at + TALKED_AFTER);
-        f.at + if talked {
-            ECHO_LOST_WHILE_TALKING.min(echo_timeout)
-        } else {
-            echo_timeout
-        }
-    }
-
     /// The board is still in its set-up: heard, but neither `boot` nor
     /// telemetry yet. A command written now would wait in its receive
     /// buffer through the set-up and its echo time out, and more would
@@ -589,7 +452,7 @@ impl Session {
         while let Some(f) = conn
             .in_flight
             .front()
-            .is_some_and(|f| now > conn.echo_given_up_at(f, self.cfg.echo_timeout))
+            .is_some_and(|f| now.duration_since(f.at) > self.cfg.echo_timeout)
             .then(|| conn.in_flight.pop_front())
             .flatten()
         {
@@ -598,18 +461,31 @@ impl Session {
                 self.confirm.lost(f.serial);
             }
         }
-        let in_flight: usize = conn.in_flight.iter().map(|f| f.frame.len()).sum();
+        let budget = Budget::at(&conn.in_flight, self.cfg.max_in_flight_bytes, now);
         if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
             && conn.handshaken
-            && let Some(cmd) = self.outbox.peek()
+            && let Some(mut cmd) = self.outbox.peek()
         {
             frame.clear();
             encode(&cmd, self.cfg.framing, frame);
-            if in_flight + frame.len() > self.cfg.max_in_flight_bytes {
-                // Waits for the board's echo (or its timeout).
-                return None;
+            if budget.fits(&cmd, frame.len()) {
+                self.outbox.pop();
+            } else {
+                // Waits for the board's echo (or its timeout) — but a
+                // keep-alive behind it goes past (a stop written again
+                // into a budget lost echoes hold must not starve the
+                // board's dead-man).
+                if cmd == Command::Ping(0) || !self.outbox.take_ping() {
+                    return None;
+                }
+                cmd = Command::Ping(0);
+                frame.clear();
+                encode(&cmd, self.cfg.framing, frame);
+                if !budget.fits(&cmd, frame.len()) {
+                    self.outbox.control.push_front(cmd);
+                    return None;
+                }
             }
-            self.outbox.pop();
             let serial = self.next_serial;
             self.next_serial += 1;
             if cmd.is_thrust() {
@@ -764,17 +640,24 @@ impl Session {
             wake = wake.min(t);
         }
         if conn.handshaken && !self.outbox.is_empty() {
-            wake = wake.min(
-                conn.line_free_at
-                    .checked_sub(self.cfg.max_ahead)
-                    .unwrap_or(now),
-            );
-            // Waiting for an echo: its timeout is the latest the budget
-            // frees (just past it: the check is "later than").
-            if let Some(f) = conn.in_flight.front() {
+            // The line's room, when the board's has room for the next frame
+            // too (else only an echo, or its timeout, frees it: waking for
+            // the line would spin).
+            if self.next_fits(conn, now) {
                 wake = wake.min(
-                    conn.echo_given_up_at(f, self.cfg.echo_timeout) + Duration::from_millis(1),
+                    conn.line_free_at
+                        .checked_sub(self.cfg.max_ahead)
+                        .unwrap_or(now),
                 );
+            }
+            // Waiting for an echo: the oldest frame's overdue time (when a
+            // keep-alive or a stop may go) and its timeout are the latest
+            // the budget frees (just past each: the checks are "later
+            // than").
+            if let Some(f) = conn.in_flight.front() {
+                let overdue = f.at + ECHO_OVERDUE + Duration::from_millis(1);
+                let timeout = f.at + self.cfg.echo_timeout + Duration::from_millis(1);
+                wake = wake.min(if overdue > now { overdue } else { timeout });
             }
         }
         let alive = self.vehicle_healthy(now) && !self.ping_gap(conn, now);
@@ -789,6 +672,19 @@ impl Session {
             wake = wake.min(conn.next_ping);
         }
         wake
+    }
+
+    /// Whether the board has room for the next frame [`Session::poll_transmit`]
+    /// would write (the pending keep-alive, if the head must wait).
+    fn next_fits(&self, conn: &Connection, now: Instant) -> bool {
+        let budget = Budget::at(&conn.in_flight, self.cfg.max_in_flight_bytes, now);
+        let fits = |cmd: &Command| {
+            let mut frame = Vec::new();
+            encode(cmd, self.cfg.framing, &mut frame);
+            budget.fits(cmd, frame.len())
+        };
+        self.outbox.peek().is_some_and(|c| fits(&c))
+            || (self.outbox.control.contains(&Command::Ping(0)) && fits(&Command::Ping(0)))
     }
 
     /// Whether the pings have had a gap at `now` that may have tripped the

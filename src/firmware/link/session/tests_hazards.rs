@@ -385,3 +385,38 @@ fn a_stop_a_report_seemed_to_confirm_is_written_again_when_its_frame_turns_out_l
     assert_eq!(drain_writes(&mut s, t + 5 * MS), [NEUTRAL_GO]);
     assert_eq!(s.stats().thrust_resent, 1);
 }
+
+#[test]
+fn a_stop_and_the_keep_alive_never_wait_behind_frames_whose_echoes_were_lost() {
+    let (mut s, t) = holding(1500);
+    // Pushes whose echoes a noisy line damaged: the budget is full.
+    let mut now = t;
+    for us in [1600, 1610, 1620, 1630] {
+        s.command(go(us));
+        now += 10 * MS;
+        s.healthy(now);
+        drain(&mut s, now, false);
+    }
+    s.command(go(1640));
+    now += 10 * MS;
+    assert!(
+        drain(&mut s, now, false).is_empty(),
+        "a push waits for the board's room"
+    );
+    // … asleep until an echo comes or the oldest frame is overdue: waking
+    // for the line's room would spin.
+    let overdue = t + 10 * MS + outbox::ECHO_OVERDUE + MS;
+    assert_eq!(s.next_wake(now), overdue);
+    // The pilot lets go. A board merely slow to read would echo within the
+    // overdue time: until then the stop waits for room like anything else
+    // (its buffer is never overrun) — then it goes, ahead of the push, not
+    // half a second later at the echo timeout.
+    s.command(NEUTRAL_GO);
+    assert!(drain(&mut s, now + MS, false).is_empty());
+    assert_eq!(s.next_wake(now + MS), overdue);
+    assert_eq!(drain(&mut s, overdue, false), [NEUTRAL_GO]);
+    // The keep-alive too, when it is due.
+    let ping_at = t + s.cfg.ping_period;
+    s.healthy(ping_at);
+    assert_eq!(drain(&mut s, ping_at, false), [Command::Ping(0)]);
+}

@@ -199,12 +199,12 @@ fn on_the_noisy_line_the_dead_man_never_trips_in_ten_minutes() {
         run.trips,
         run.pings_written.len()
     );
-    // A ping waits for the board's room at most until a frame whose echo
-    // was lost is given up (the board kept talking), not the whole echo
+    // A ping waits behind frames whose echoes were lost only until the
+    // oldest is overdue (it then has room of its own), not for their echo
     // timeout.
     let written = widest(&run.pings_written);
     assert!(
-        written <= Duration::from_millis(400) + ECHO_LOST_WHILE_TALKING,
+        written <= Duration::from_millis(410) + super::outbox::ECHO_OVERDUE,
         "the pings were held back: {written:?} apart"
     );
     let read = widest(&run.pings_read);
