@@ -156,8 +156,10 @@ export class View {
     // The serial line's quality beside the link: frames and lines damaged
     // or lost over the last 10 s (a long or wet cable to the board).
     const dropPct = h && h.board_line_drop_pct > 0 ? h.board_line_drop_pct : 0;
-    const line = h && h.board_link && dropPct > 0 ? ` · line ${dropPct < 10 ? dropPct.toFixed(1) : dropPct.toFixed(0)} % damaged` : '';
-    setPill('link', `board: ${!t.vehicle_seen ? 'no vehicle' : h ? (h.board_link ? 'link up' : 'LINK DOWN') : '—'}${line}`, h && h.board_link && t.vehicle_seen ? (dropPct >= LINE_DAMAGE_WARN_PCT ? 'warn' : 'ok') : 'bad');
+    // The colour follows the figure shown (0.96 reads "1.0": amber).
+    const shown = dropPct < 10 ? dropPct.toFixed(1) : dropPct.toFixed(0);
+    const line = h && h.board_link && dropPct > 0 ? ` · line ${shown} % damaged` : '';
+    setPill('link', `board: ${!t.vehicle_seen ? 'no vehicle' : h ? (h.board_link ? 'link up' : 'LINK DOWN') : '—'}${line}`, h && h.board_link && t.vehicle_seen ? (Number(shown) >= LINE_DAMAGE_WARN_PCT ? 'warn' : 'ok') : 'bad');
     $('link').title = h ? `board serial line: ${dropPct.toFixed(2)} % of frames and lines damaged or lost over the last 10 s, ${h.board_line_errors} since the start` : '';
     this.failsafe(t);
     this.battery(t);

@@ -457,6 +457,11 @@ impl Session {
             .flatten()
         {
             self.stats.echoes_missed += 1;
+            tracing::debug!(
+                frame = %String::from_utf8_lossy(&f.frame).trim_start_matches(|c: char| !c.is_ascii_graphic()),
+                age_ms = now.duration_since(f.at).as_millis() as u64,
+                "the board never echoed a frame"
+            );
             if f.thrust {
                 self.confirm.lost(f.serial);
             }

@@ -65,6 +65,10 @@ pub(super) fn acknowledge(
     for (n, f) in in_flight.drain(..=i).enumerate() {
         if n < i {
             stats.echoes_missed += 1;
+            tracing::debug!(
+                frame = %String::from_utf8_lossy(&f.frame).trim_start_matches(|c: char| !c.is_ascii_graphic()),
+                "the board echoed a later frame first: this one was lost"
+            );
             if f.thrust {
                 confirm.lost(f.serial);
             }
