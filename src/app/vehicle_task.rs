@@ -164,6 +164,7 @@ impl VehicleTask {
         match ev {
             LinkEvent::State { state, reason } => self.handle(Input::Link { state, reason }),
             LinkEvent::Telemetry(ev) => self.handle(Input::Board(ev)),
+            LinkEvent::Quality(q) => self.handle(Input::LinkQuality(q)),
         }
     }
 
@@ -244,6 +245,9 @@ impl VehicleTask {
             telemetry_age_ms = s.telemetry_age_ms.unwrap_or(u64::MAX),
             rejected = s.decode.rejected_total(),
             crc_fail = s.crc_failures_echoed,
+            echoes_missed = s.echoes_missed,
+            thrust_resent = s.thrust_resent,
+            line_drop_pct = f64::from(s.drop_rate_cpct) / 100.0,
             "telemetry"
         );
     }

@@ -347,7 +347,7 @@ pub struct AutopilotView {
 }
 
 /// Health bits of SYS_STATUS that the operator needs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
 pub struct HealthView {
     /// Motor outputs healthy: the board link is up.
     pub board_link: bool,
@@ -360,6 +360,11 @@ pub struct HealthView {
     pub battery: bool,
     /// Pre-arm checks pass.
     pub prearm: bool,
+    /// The board's serial line: frames and lines damaged or lost (both
+    /// ways) over the last 10 s, percent (SYS_STATUS `drop_rate_comm`).
+    pub board_line_drop_pct: f64,
+    /// The same since the vehicle started, a count (`errors_comm`).
+    pub board_line_errors: u16,
 }
 
 /// How old each kind of data is: milliseconds between the arrival of the

@@ -214,6 +214,8 @@ impl Model {
                     pilot_input: h.contains(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
                     battery: h.contains(S::MAV_SYS_STATUS_SENSOR_BATTERY),
                     prearm: h.contains(S::MAV_SYS_STATUS_PREARM_CHECK),
+                    board_line_drop_pct: f64::from(s.drop_rate_comm) / 100.0,
+                    board_line_errors: s.errors_comm,
                 });
                 // A value the message lacks keeps its last reading (its age
                 // says how old). The core repeats the last voltage while the

@@ -91,7 +91,7 @@ use super::params::ParamStore;
 use crate::dialect::neptunus::*;
 pub use crate::eventlog::LogEvent;
 use crate::firmware::codec::{Command, Event};
-use crate::firmware::link::LinkState;
+use crate::firmware::link::{LinkQuality, LinkState};
 pub use crate::vehicle::mixer::NEUTRAL_US;
 
 /// Our MAVLink component id (the autopilot).
@@ -169,6 +169,9 @@ pub enum Input {
         state: LinkState,
         reason: Option<String>,
     },
+    /// The board line's quality changed (SYS_STATUS `drop_rate_comm`,
+    /// `errors_comm`).
+    LinkQuality(LinkQuality),
     /// Periodic (the app ticks at 100 Hz): telemetry, timeouts.
     Tick,
     /// Ground truth from the simulator (only when running on it).
@@ -566,6 +569,7 @@ impl Vehicle {
         match input {
             Input::Tick => self.tick(now, out),
             Input::Link { state, reason } => self.on_link(state, reason, now, out),
+            Input::LinkQuality(q) => self.board.link_quality = q,
             Input::Board(ev) => {
                 // In SIMULATOR run mode the board's navigation and power
                 // telemetry is not the vehicle's (the simulator's is).

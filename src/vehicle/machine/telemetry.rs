@@ -438,6 +438,10 @@ impl Vehicle {
             }),
             current_battery: self.fresh_current_ca(now),
             battery_remaining: self.battery_remaining(now),
+            // The serial line to the board (frames and lines damaged or
+            // lost, both ways: `firmware/link/session/quality.rs`).
+            drop_rate_comm: self.board.link_quality.drop_rate_cpct,
+            errors_comm: self.board.link_quality.errors,
             ..Default::default()
         })
     }
