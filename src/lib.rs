@@ -36,6 +36,8 @@ pub mod dialect;
 pub mod doctor;
 pub mod eventlog;
 pub mod firmware;
+#[doc(hidden)]
+pub mod fuzzing;
 #[cfg(feature = "hil")]
 pub mod hil;
 pub mod hmi;

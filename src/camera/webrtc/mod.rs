@@ -26,7 +26,7 @@ mod net;
 pub mod peer;
 pub mod protocol;
 pub mod signalling;
-mod stun;
+pub(crate) mod stun;
 mod ws;
 
 use std::net::SocketAddr;
