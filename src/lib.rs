@@ -41,6 +41,8 @@ pub mod durable;
 pub mod eventlog;
 pub mod files;
 pub mod firmware;
+#[doc(hidden)]
+pub mod fuzzing;
 #[cfg(feature = "hil")]
 pub mod hil;
 pub mod hmi;

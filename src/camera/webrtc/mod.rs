@@ -30,7 +30,7 @@ pub mod peer;
 pub mod protocol;
 pub mod signalling;
 pub mod streams;
-mod stun;
+pub(crate) mod stun;
 mod ws;
 
 use std::net::SocketAddr;

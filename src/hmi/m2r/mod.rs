@@ -58,7 +58,7 @@ const MAX_FRAME_BYTES: usize = 16 * 1024;
 /// What one read of a client's socket takes at most.
 const READ_BUFFER_BYTES: usize = 4096;
 
-fn is_api_path(path: &str) -> bool {
+pub(crate) fn is_api_path(path: &str) -> bool {
     PREFIXES.iter().any(|p| {
         path.strip_prefix(p).is_some_and(|rest| {
             rest == "/mavlink"
@@ -314,7 +314,7 @@ fn json_response(status: StatusCode, body: String) -> Response {
 
 /// What a read of `path` in the view is for: the message it names, or
 /// (for the view as a whole or a vehicle's part) the vehicle's heartbeat.
-fn wanted(path: &str, vehicle_sysid: u8) -> (u8, u8, &str) {
+pub(crate) fn wanted(path: &str, vehicle_sysid: u8) -> (u8, u8, &str) {
     let seg: Vec<&str> = path.trim_matches('/').split('/').take(6).collect();
     let named = match seg[..] {
         ["vehicles", sys, "components", comp, "messages", name] => sys

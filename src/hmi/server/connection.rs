@@ -102,14 +102,7 @@ async fn plain_http_on_tls_port(
         }
     }
     let text = String::from_utf8_lossy(&head);
-    let host = text
-        .lines()
-        .skip(1)
-        .find_map(|l| {
-            let (k, v) = l.split_once(':')?;
-            k.trim().eq_ignore_ascii_case("host").then(|| v.trim())
-        })
-        .filter(|h| crate::hmi::headers::plain_host(h));
+    let host = redirect_host(&text);
     let reply = match host {
         Some(h) => format!(
             "HTTP/1.1 301 Moved Permanently\r\nLocation: https://{h}/\r\nContent-Type: text/plain; charset=utf-8\r\n\
@@ -130,6 +123,18 @@ async fn plain_http_on_tls_port(
     })
     .await;
     tracing::debug!("browser HMI: plain HTTP from {peer} on the TLS port, sent to https://");
+}
+
+/// The Host a plain-HTTP request head names, when it is a plain host name
+/// (it goes into the redirect's `Location`); `None` otherwise.
+pub(crate) fn redirect_host(head: &str) -> Option<&str> {
+    head.lines()
+        .skip(1)
+        .find_map(|l| {
+            let (k, v) = l.split_once(':')?;
+            k.trim().eq_ignore_ascii_case("host").then(|| v.trim())
+        })
+        .filter(|h| crate::hmi::headers::plain_host(h))
 }
 
 /// The body of the answer to plain HTTP on the TLS port.

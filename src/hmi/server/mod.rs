@@ -25,7 +25,7 @@
 //! This file holds the accept loop and the public types; `connection` serves
 //! one connection, `slots` keeps the caps.
 
-mod connection;
+pub(crate) mod connection;
 mod slots;
 
 use std::future::Future;
