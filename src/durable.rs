@@ -1,5 +1,6 @@
 //! Files that must survive a power cut: the parameters, the signing key and
-//! its timestamps, the HMI password, the TLS key and certificate.
+//! its timestamps, the HMI password, the TLS key and certificate, Cockpit's
+//! settings bag.
 //!
 //! [`write()`] is the one way they are written: `NAME.tmp` in the same
 //! directory, the bytes, fsync of the file, rename over `NAME`, fsync of the

@@ -413,6 +413,85 @@ fn config_values(s: &mut Seeds) {
     add(s, "config_values", "values", values.as_bytes());
 }
 
+/// One MAVLink FTP request payload (251 bytes): the header (sequence,
+/// session, opcode, size, offset) and its data.
+fn ftp_request(seq: u16, session: u8, opcode: u8, offset: u32, data: &[u8]) -> Vec<u8> {
+    let mut p = vec![0u8; neptunus::mavlink::ftp::PAYLOAD_LEN];
+    p[0..2].copy_from_slice(&seq.to_le_bytes());
+    p[2] = session;
+    p[3] = opcode;
+    p[4] = u8::try_from(data.len()).unwrap();
+    p[8..12].copy_from_slice(&offset.to_le_bytes());
+    p[12..12 + data.len()].copy_from_slice(data);
+    p
+}
+
+fn ftp_requests(s: &mut Seeds) {
+    use neptunus::mavlink::ftp::op;
+    let list = ftp_request(0, 0, op::LIST_DIRECTORY, 0, b"/");
+    add(s, "ftp_requests", "list_root", list.clone());
+    let fetch = [
+        ftp_request(1, 0, op::OPEN_FILE_RO, 0, b"/component/general.json"),
+        ftp_request(2, 0, op::BURST_READ_FILE, 0, &[]),
+        ftp_request(3, 0, op::READ_FILE, 239, &[]),
+        ftp_request(4, 0, op::CALC_FILE_CRC32, 0, b"/component/general.json"),
+        ftp_request(5, 0, op::TERMINATE_SESSION, 0, &[]),
+    ]
+    .concat();
+    add(s, "ftp_requests", "fetch_metadata", fetch);
+    let tricks = [
+        ftp_request(6, 0, op::LIST_DIRECTORY, 0, b"/logs/../component"),
+        ftp_request(7, 0, op::OPEN_FILE_RO, 0, b"/recordings/.hidden"),
+        ftp_request(8, 9, op::READ_FILE, 1 << 30, &[]),
+        ftp_request(9, 0, op::REMOVE_FILE, 0, b"/logs/x.tlog"),
+        ftp_request(10, 0, op::RESET_SESSIONS, 0, &[]),
+    ]
+    .concat();
+    add(s, "ftp_requests", "tricks", tricks);
+}
+
+/// One settings-bag operation as the target reads it: path length, writer,
+/// body length, the path, the body.
+fn bag_op(path: &str, who: u8, body: &[u8]) -> Vec<u8> {
+    let mut v = vec![
+        u8::try_from(path.len()).unwrap(),
+        who,
+        u8::try_from(body.len()).unwrap(),
+    ];
+    v.extend_from_slice(path.as_bytes());
+    v.extend_from_slice(body);
+    v
+}
+
+fn bag_paths(s: &mut Seeds) {
+    add(
+        s,
+        "bag_paths",
+        "cockpit_start",
+        [
+            bag_op("cockpit/cockpit-vehicle-id", 0, br#""3b9a1c2e""#),
+            bag_op(
+                "cockpit/settings-v2/pilot/theme",
+                0,
+                br#"{"dark":true,"size":1.5}"#,
+            ),
+            bag_op("cockpit/settings-v2/guest/theme", 1, br#"{"dark":false}"#),
+        ]
+        .concat(),
+    );
+    add(
+        s,
+        "bag_paths",
+        "tricks",
+        [
+            bag_op("cockpit/../etc/passwd", 0, b"1"),
+            bag_op("cockpit//x", 2, b"{"),
+            bag_op("cockpit/settings-v2/guest/big", 3, &[b'7'; 200]),
+        ]
+        .concat(),
+    );
+}
+
 fn generate() -> Seeds {
     let mut s = Seeds::new();
     telemetry_lines(&mut s);
@@ -425,6 +504,8 @@ fn generate() -> Seeds {
     hmi_messages(&mut s);
     webrtc_signalling(&mut s);
     config_values(&mut s);
+    ftp_requests(&mut s);
+    bag_paths(&mut s);
     s
 }
 

@@ -753,7 +753,10 @@ fn with_signing_on_an_unsigned_frame_with_the_pilots_ids_reads_nothing() {
         assert_eq!(nak_code(&out), vec![2, 13]);
     }
     assert_eq!(
-        nak_code(&b.ftp(spoofer, path_req(2, op::OPEN_FILE_RO, &format!("/logs/tlogs/{LOG_A}")))),
+        nak_code(&b.ftp(
+            spoofer,
+            path_req(2, op::OPEN_FILE_RO, &format!("/logs/tlogs/{LOG_A}"))
+        )),
         vec![2, 13]
     );
     let mut out = b.msg(spoofer, list_request(0, 0xffff));

@@ -13,6 +13,9 @@
    STATUSTEXT that says why, and the dive goes on: still armed, still in
    ALT_HOLD at its depth, the thrusters still answer the sticks, and a
    parameter change is still saved to disk.
+3. Home over MAVLink FTP: a recording stopped by the pilot is listed in
+   `/recordings` and fetched, video and telemetry, byte for byte, by
+   pymavlink's MAVFTP client.
 
 Every wait is a condition with a generous deadline (the machine is shared).
 """
@@ -28,7 +31,7 @@ from pathlib import Path
 
 import pytest
 
-from mavhelpers import ACCEPTED, Deadline, from_vehicle, mavlink, servos, start_vehicle, statustext
+from mavhelpers import ACCEPTED, Deadline, GcsHeartbeat, from_vehicle, mavlink, recv, servos, start_vehicle, statustext
 from test_depth_hold import IGNORE_ALL_BUT_Z, TOLERANCE_M
 
 CAMERA = 100
@@ -279,3 +282,57 @@ def stream_of(path: Path) -> str:
         capture_output=True, text=True, timeout=60, check=True,
     )
     return next(line.strip() for line in probe.stdout.splitlines() if line.strip())
+
+
+def test_a_recording_is_listed_and_fetched_over_mavftp(make_vehicle, tmp_path):
+    """The pilot records three seconds, stops, and fetches the recording's
+    first segment and its telemetry with pymavlink's MAVFTP client (as
+    MAVProxy does): what comes home is the file on the vehicle, byte for byte,
+    and the /recordings listing names it."""
+    from pymavlink import mavftp
+
+    from test_transfers import connect
+    from transfer_clients import ftp_get
+
+    v = start_vehicle(make_vehicle, {})
+    conn = connect(v.udp_port)
+    rec = v.data_dir / "recordings"
+    with GcsHeartbeat(conn):
+        for cmd in (mavlink.MAV_CMD_VIDEO_START_CAPTURE, None, mavlink.MAV_CMD_VIDEO_STOP_CAPTURE):
+            if cmd is None:
+                status = recv(
+                    conn,
+                    "CAMERA_CAPTURE_STATUS",
+                    START_DEADLINE_S,
+                    lambda m: from_camera(m) and m.video_status == 1 and m.recording_time_ms >= 3000,
+                )
+                assert status is not None, "the camera never reported 3 s recorded"
+                continue
+            conn.mav.command_long_send(1, CAMERA, cmd, 0, 0, 0, 0, 0, 0, 0, 0)
+            ack = recv(conn, "COMMAND_ACK", 10, lambda m: from_camera(m) and m.command == cmd)
+            assert ack is not None and ack.result == ACCEPTED, f"{cmd}: {ack}"
+        # Stopped: asked, the camera says it no longer records (the recorder
+        # has closed the files).
+        dl = Deadline(20.0)
+        idle = None
+        while idle is None and not dl.expired():
+            conn.mav.command_long_send(1, CAMERA, mavlink.MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS, 0, 1, 0, 0, 0, 0, 0, 0)
+            idle = recv(conn, "CAMERA_CAPTURE_STATUS", 1.0, lambda m: from_camera(m) and m.video_status == 0)
+        assert idle is not None, "the camera still records after the stop"
+
+        segments = sorted(rec.glob("rec-*.ts"))
+        assert segments, f"nothing recorded: {sorted(p.name for p in rec.iterdir())}"
+        ts = segments[0]
+        csv_file = rec / (ts.name.rsplit("-", 1)[0] + ".csv")
+        assert csv_file.exists(), f"no telemetry beside {ts.name}"
+
+        ftp = None
+        for f in (ts, csv_file):
+            out = tmp_path / f.name
+            ftp, ret = ftp_get(conn, f"/recordings/{f.name}", str(out))
+            assert ret.error_code == mavftp.FtpError.Success, f"{f.name}: {ret}"
+            assert out.read_bytes() == f.read_bytes(), f"{f.name}: what came home differs from the vehicle's file"
+        listing = ftp.cmd_list(["/recordings"])
+        assert listing.error_code == mavftp.FtpError.Success, listing
+        names = {e.name for e in ftp.list_result}
+        assert {ts.name, csv_file.name} <= names, f"/recordings lists {sorted(names)}"

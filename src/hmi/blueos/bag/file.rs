@@ -1,6 +1,7 @@
 //! The settings bag's file: `DATA_DIR/bag.json`, every record with its
 //! path and writer, replaced whole at every change that changes something
-//! ([`write_atomic`]: a temporary file, synced, renamed, the folder synced),
+//! ([`crate::durable::write`]: a temporary file, synced, renamed, the folder
+//! synced),
 //! so a power cut leaves the old bag or the new one, never half of one.
 //!
 //! A file that cannot be read is set aside (`bag.json.bad`) and the bag
@@ -8,7 +9,6 @@
 //! its settings' link to this vehicle, never the vehicle's start.
 
 use std::fs;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::store::{Bag, Limits};
@@ -36,7 +36,7 @@ impl BagFile {
     /// The bag as the file holds it; an empty one when there is no file,
     /// and when it cannot be read (then set aside, and said why).
     pub fn load(&self, limits: Limits) -> Bag {
-        let _ = fs::remove_file(tmp_path(&self.path));
+        let _ = fs::remove_file(crate::durable::tmp_path(&self.path));
         let bytes = match fs::read(&self.path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Bag::new(limits),
@@ -73,45 +73,13 @@ impl BagFile {
 
     /// Stores the bag (blocking: off the async threads).
     pub fn save(&self, bag: &Bag) -> std::io::Result<()> {
-        write_atomic(&self.path, &bag.to_file())
+        crate::durable::write(
+            &self.path,
+            &bag.to_file(),
+            crate::durable::Mode::Exactly(0o600),
+        )?;
+        Ok(())
     }
-}
-
-fn tmp_path(path: &Path) -> PathBuf {
-    path.with_extension("json.tmp")
-}
-
-/// Writes `contents` to `path` so that a crash or a power cut leaves the
-/// old file or the new one: a temporary file beside it (0600), synced,
-/// renamed over `path`, then the folder synced. The one place the bag
-/// writes its file.
-pub fn write_atomic(path: &Path, contents: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    fs::create_dir_all(dir)?;
-    let tmp = tmp_path(path);
-    let result = (|| {
-        let mut opts = fs::OpenOptions::new();
-        opts.write(true).create(true).truncate(true);
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::OpenOptionsExt as _;
-            opts.mode(0o600);
-        }
-        let mut f = opts.open(&tmp)?;
-        f.write_all(contents)?;
-        f.sync_all()?;
-        drop(f);
-        fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-        return result;
-    }
-    // Best effort: the rename is durable once the folder is synced.
-    if let Ok(d) = fs::File::open(dir) {
-        let _ = d.sync_all();
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -130,7 +98,7 @@ mod tests {
         bag.set(&id, br#""6f1c""#, &Writer::Watcher("10.0.0.2".into()))
             .unwrap();
         file.save(&bag).unwrap();
-        assert!(!tmp_path(file.path()).exists());
+        assert!(!crate::durable::tmp_path(file.path()).exists());
         let again = BagFile::new(dir.path()).load(Limits::default());
         assert_eq!(again, bag);
         fs::write(file.path(), b"{\"version\":1,").unwrap();

@@ -167,9 +167,12 @@ pub(crate) async fn set(State(shared): State<Arc<Shared>>, req: Request<Body>) -
     };
     let contents = bag.to_file();
     let at = service.file.path().to_path_buf();
-    let saved = tokio::task::spawn_blocking(move || file::write_atomic(&at, &contents))
-        .await
-        .unwrap_or_else(|e| Err(std::io::Error::other(e.to_string())));
+    let saved = tokio::task::spawn_blocking(move || {
+        crate::durable::write(&at, &contents, crate::durable::Mode::Exactly(0o600))
+            .map_err(std::io::Error::from)
+    })
+    .await
+    .unwrap_or_else(|e| Err(std::io::Error::other(e.to_string())));
     match saved {
         Ok(()) => stored(),
         Err(e) => {

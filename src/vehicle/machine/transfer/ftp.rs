@@ -438,9 +438,11 @@ impl Vehicle {
 
     /// Whether the station's session `id` reads a record (a disk file).
     fn session_is_record(&self, station: &Station, id: u8) -> bool {
-        self.transfers.ftp.sessions.iter().any(|s| {
-            s.id == id && s.station.is(station) && matches!(s.source, Source::Disk(_))
-        })
+        self.transfers
+            .ftp
+            .sessions
+            .iter()
+            .any(|s| s.id == id && s.station.is(station) && matches!(s.source, Source::Disk(_)))
     }
 
     fn close_session(&mut self, id: u8) {
