@@ -78,16 +78,16 @@ fn drive(secs: u64, flip_in: u32, lose_in: u32, seed: u64) -> Run {
     while now < end {
         now += 5 * MS;
         step += 1;
-        if step % 10 == 0 {
+        if step.is_multiple_of(10) {
             s.healthy(now);
         }
-        if step % 8 == 0 {
+        if step.is_multiple_of(8) {
             s.command(go(1500 + 10 * (step / 8 % 30) as u16));
         }
-        if step % 997 == 0 {
+        if step.is_multiple_of(997) {
             s.command(Command::Lights((step % 200) as u8));
         }
-        if step % 20 == 0 {
+        if step.is_multiple_of(20) {
             s.received(NAV, now);
         }
         while let Some((_, line)) = pending

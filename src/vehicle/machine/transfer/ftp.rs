@@ -23,7 +23,6 @@ use crate::dialect::neptunus::*;
 use crate::files::tree::{self, Node, StaticDir};
 use crate::files::{FileAnswer, FileError, FileOp, FileRequest, MemFile, component};
 use crate::mavlink::ftp::{self as wire, DirEntry, Header, Nak, Request, errno};
-use crate::vehicle::machine::texts::ReplyKind;
 use crate::vehicle::machine::{Now, Output, Sender, Vehicle};
 
 /// Sessions one station may have open.
@@ -285,20 +284,7 @@ impl Vehicle {
         out: &mut Vec<Output>,
     ) {
         let station = Station::of(from);
-        if !self.may_control(from) {
-            let text = format!(
-                "Refused file access from sysid {}: the logs and recordings are for stations that may control (SYSID_MYGCS, NEPT_GCS_ALLOWn{})",
-                from.sysid,
-                if self.signing_active { ", signed" } else { "" }
-            );
-            self.reply_text(
-                from,
-                ReplyKind::Files,
-                MavSeverity::MAV_SEVERITY_WARNING,
-                &text,
-                now,
-                out,
-            );
+        if !self.records_allowed(from, "file access", now, out) {
             return reply(station, wire::nak(&h, Nak::FailErrno(errno::EACCES)), out);
         }
         if self.transfers.pending_of(&station) >= PENDING_PER_STATION {

@@ -99,28 +99,6 @@ impl Vehicle {
         }
     }
 
-    /// Whether `from` may have the logs; if not, it is told why (and the
-    /// list it asked for comes back empty).
-    fn logs_allowed(&mut self, from: Sender, what: &str, now: Now, out: &mut Vec<Output>) -> bool {
-        if self.may_control(from) {
-            return true;
-        }
-        let text = format!(
-            "Refused {what} from sysid {}: the logs are for stations that may control (SYSID_MYGCS, NEPT_GCS_ALLOWn{})",
-            from.sysid,
-            if self.signing_active { ", signed" } else { "" }
-        );
-        self.reply_text(
-            from,
-            ReplyKind::Files,
-            MavSeverity::MAV_SEVERITY_WARNING,
-            &text,
-            now,
-            out,
-        );
-        false
-    }
-
     pub(in crate::vehicle::machine) fn log_request_list(
         &mut self,
         from: Sender,
@@ -128,7 +106,7 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if !self.logs_allowed(from, "the log list", now, out) {
+        if !self.records_allowed(from, "the log list", now, out) {
             out.push(Output::Send {
                 to: from.reply(),
                 msg: empty_list(),
@@ -153,7 +131,7 @@ impl Vehicle {
         now: Now,
         out: &mut Vec<Output>,
     ) {
-        if !self.logs_allowed(from, "a log download", now, out) {
+        if !self.records_allowed(from, "a log download", now, out) {
             return;
         }
         if self.transfers.endpoint_rate(from.endpoint) == 0 {

@@ -274,6 +274,35 @@ impl Vehicle {
 
     /// Drops the log downloads and FTP sessions nobody used for [`IDLE`]
     /// (a station that went away). Run on the core's tick.
+    /// Whether `from` may have the vehicle's records (logs, recordings): a
+    /// station that may control. If not, it alone is told why; what it asked
+    /// (`what`) is then refused by the caller, the protocol's way.
+    fn records_allowed(
+        &mut self,
+        from: Sender,
+        what: &str,
+        now: Now,
+        out: &mut Vec<Output>,
+    ) -> bool {
+        if self.may_control(from) {
+            return true;
+        }
+        let text = format!(
+            "Refused {what} from sysid {}: the logs and recordings are for stations that may control (SYSID_MYGCS, NEPT_GCS_ALLOWn{})",
+            from.sysid,
+            if self.signing_active { ", signed" } else { "" }
+        );
+        self.reply_text(
+            from,
+            super::texts::ReplyKind::Files,
+            MavSeverity::MAV_SEVERITY_WARNING,
+            &text,
+            now,
+            out,
+        );
+        false
+    }
+
     pub(super) fn transfers_tick(&mut self, now: Now) {
         self.transfers.ftp.expire(now.mono);
         let live = self.transfers.ftp.session_ids();
