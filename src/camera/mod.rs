@@ -10,7 +10,17 @@
 //!   exponential backoff when it exits, stalls or cannot be found;
 //! - `url`: an MJPEG HTTP stream elsewhere, reconnected with the same
 //!   backoff;
+//! - `v4l2`: a camera read by Neptunus itself ([`v4l2`]): its own H.264
+//!   or JPEG passed through as it comes, the format chosen from what it
+//!   offers ([`plan`]);
 //! - `none`: no camera.
+//!
+//! The choice of paths — the camera's H.264 or an encoder for RTP and
+//! WebRTC, the camera's JPEG or an encoder for the page — is [`plan`]'s,
+//! published as a `watch` of [`VideoPlan`] ([`Camera::plan`]). The camera's
+//! own H.264 pictures go out on a broadcast ([`Camera::units`]) that the
+//! RTP sender and the WebRTC viewers read; JPEG pictures on the `watch`
+//! below.
 //!
 //! The latest frame lives in a `watch` channel: every viewer and
 //! [`Camera::latest`] see the newest frame, and a slow viewer skips frames
@@ -28,8 +38,10 @@ mod config;
 mod error;
 mod font;
 mod frame;
+pub mod h264;
 mod http;
 mod meter;
+pub mod plan;
 mod process;
 mod publisher;
 mod render;
@@ -39,6 +51,7 @@ mod source;
 pub mod splitter;
 mod synthetic;
 pub mod timecode;
+pub mod v4l2;
 pub mod webrtc;
 
 use std::sync::Arc;
@@ -55,6 +68,7 @@ pub use config::{
 pub use error::SourceError;
 pub use frame::{Frame, Scene};
 pub use meter::FPS_WINDOW;
+pub use plan::{Encode, EncodeSetting, H264Route, JpegRoute, VideoPlan};
 pub use render::{RenderError, SyntheticRenderer};
 pub use shared::{CameraState, CameraStatus, DemandGuard};
 pub use splitter::{JpegFrame, JpegSplitter, SplitterStats};
@@ -107,7 +121,11 @@ impl Camera {
     }
 
     fn start_with(cfg: CameraConfig, scene: watch::Receiver<Scene>, on_demand: bool) -> Camera {
-        let shared = Arc::new(Shared::new(&cfg));
+        let plan = plan::initial(&cfg);
+        if cfg.validate().is_ok() {
+            tracing::info!("{plan}");
+        }
+        let shared = Arc::new(Shared::new(&cfg, plan));
         let (tx, frames) = watch::channel(None);
         let task = match cfg.validate() {
             Err(e) => {
@@ -156,6 +174,19 @@ impl Camera {
             frame_age_ms: s.frame_age_ms,
             frames_total: s.frames_total,
         }
+    }
+
+    /// The paths chosen and why, as they change (each start of a `v4l2`
+    /// camera asks it again).
+    pub fn plan(&self) -> watch::Receiver<VideoPlan> {
+        self.shared.plan()
+    }
+
+    /// The camera's own H.264 pictures as they come (none unless the
+    /// camera gives H.264); a reader that falls behind by more than the
+    /// backlog is told how many it missed.
+    pub fn units(&self) -> tokio::sync::broadcast::Receiver<Arc<h264::AccessUnit>> {
+        self.shared.units()
     }
 
     /// The newest frame, if any arrived.
@@ -214,6 +245,14 @@ impl CameraHandle {
 
     pub(crate) fn subscribe(&self) -> watch::Receiver<Option<Frame>> {
         self.frames.clone()
+    }
+
+    pub(crate) fn plan(&self) -> watch::Receiver<VideoPlan> {
+        self.shared.plan()
+    }
+
+    pub(crate) fn units(&self) -> tokio::sync::broadcast::Receiver<Arc<h264::AccessUnit>> {
+        self.shared.units()
     }
 }
 

@@ -15,17 +15,7 @@
 use str0m::format::CodecExtra;
 use str0m::unversioned::{Depacketizer, H264Depacketizer};
 
-/// One picture, ready for str0m's H.264 packetizer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AccessUnit {
-    /// NAL units with Annex B start codes.
-    pub data: Vec<u8>,
-    /// The media clock at 90 kHz, monotonic across encoder restarts.
-    pub time_90khz: u64,
-    /// Holds an IDR picture (with x264's `repeat-headers`, SPS and PPS too):
-    /// a viewer may start here.
-    pub keyframe: bool,
-}
+pub use crate::camera::h264::AccessUnit;
 
 /// What went by, for the log and the tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
