@@ -146,10 +146,12 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     // sessions and for the mavlink2rest API (Cockpit).
     let hmi_ep = endpoints.len();
     let z_centered = crate::hmi::z_centered_by(profiles.clone());
+    // Which way the video goes: a V4L2 camera is asked what it offers.
+    let plan = crate::camera::plan::initial(&settings.camera);
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 2)
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
-        .with_camera(camera_spec(&settings.camera))
+        .with_camera(camera_spec(&settings.camera, &plan))
         .with_wall_clock(
             crate::wallclock::system_sync(),
             crate::wallclock::BUILD_UNIX_S * 1_000_000,
@@ -174,8 +176,12 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let (video_to, station_rx) = watch::channel(None);
     let (camera, rtp, webrtc) = {
         let _side = side.handle().enter();
-        let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
-        let webrtc = start_webrtc(&settings);
+        let camera = crate::camera::Camera::start_on_demand_planned(
+            settings.camera.clone(),
+            scene_rx,
+            plan.clone(),
+        );
+        let webrtc = start_webrtc(&settings, &plan);
         let feed = webrtc.as_ref().map(crate::camera::webrtc::WebRtc::feed);
         let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx, feed);
         (camera, rtp, webrtc)
@@ -187,6 +193,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             routes: camera.routes(),
             webrtc: webrtc.is_some(),
             signalling: None,
+            info: Some(video_info(&camera, &rtp)),
         };
         if let Some(w) = &webrtc {
             video.routes = video.routes.merge(w.routes());
@@ -376,14 +383,22 @@ async fn neutral_written(
 
 /// The WebRTC viewers' side, when the camera gives a picture, WebRTC is
 /// on and the HMI (which serves the signalling) runs.
-fn start_webrtc(settings: &Settings) -> Option<crate::camera::webrtc::WebRtc> {
+fn start_webrtc(
+    settings: &Settings,
+    plan: &crate::camera::VideoPlan,
+) -> Option<crate::camera::webrtc::WebRtc> {
     use crate::camera::webrtc;
     let cfg = &settings.camera;
     if !cfg.webrtc.enabled {
         tracing::info!("WebRTC video off (--webrtc off)");
         return None;
     }
-    let stream = webrtc::stream_of(cfg, webrtc::new_stream_id())?;
+    let Some(stream) = webrtc::stream_of(cfg, plan, webrtc::new_stream_id()) else {
+        if cfg.source != crate::camera::SourceKind::None {
+            tracing::info!("WebRTC video off: no H.264 — {}", plan.why);
+        }
+        return None;
+    };
     if settings.hmi.http.is_none() {
         tracing::info!(
             "WebRTC video off: its signalling is served with the browser HMI (--http off)"
@@ -399,18 +414,36 @@ fn start_webrtc(settings: &Settings) -> Option<crate::camera::webrtc::WebRtc> {
     }
 }
 
+/// What `GET /api/video` adds: the paths (the plan as it is now), whether
+/// `/video.mjpg` has pictures, and what the H.264 sender runs.
+fn video_info(
+    camera: &crate::camera::Camera,
+    rtp: &crate::camera::rtp::RtpVideo,
+) -> crate::hmi::VideoInfo {
+    let plan = camera.plan();
+    let running = rtp.running();
+    let status = camera.status_handle();
+    std::sync::Arc::new(move || {
+        crate::camera::plan::api_json(&plan.borrow(), *running.borrow(), status().h264_profile)
+    })
+}
+
 /// The MAVLink camera component exists when a camera source is configured
-/// or the camera's own H.264 is passed through to RTP; its nominal picture
-/// is the configured size and rate (the running stream's, once the stream
-/// reports it).
-fn camera_spec(c: &crate::camera::CameraConfig) -> Option<crate::vehicle::machine::CameraSpec> {
+/// or H.264 comes from elsewhere; its nominal picture is the camera's as
+/// chosen, or the configured size and rate (the running stream's, once the
+/// stream reports it).
+fn camera_spec(
+    c: &crate::camera::CameraConfig,
+    plan: &crate::camera::VideoPlan,
+) -> Option<crate::vehicle::machine::CameraSpec> {
+    use crate::camera::H264Route;
     use crate::camera::rtp::RtpDest;
-    let passthrough = !c.h264.passthrough.is_empty()
-        && (c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off));
-    let (width, height, fps) = if passthrough {
-        c.h264.passthrough_shape()
-    } else {
-        (c.width, c.height, c.fps)
+    let sent = c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off);
+    let passthrough = plan.h264 == H264Route::FfmpegCopy && sent;
+    let (width, height, fps) = match &plan.capture {
+        Some(cap) => (cap.width, cap.height, cap.fps()),
+        None if passthrough => c.h264.passthrough_shape(),
+        None => (c.width, c.height, c.fps),
     };
     (c.source != crate::camera::SourceKind::None || passthrough).then(|| {
         crate::vehicle::machine::CameraSpec {

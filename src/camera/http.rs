@@ -222,7 +222,8 @@ mod tests {
 
     #[tokio::test]
     async fn a_slow_viewer_gets_the_newest_frame_not_a_backlog() {
-        let shared = Arc::new(Shared::new(&CameraConfig::synthetic()));
+        let cfg = CameraConfig::synthetic();
+        let shared = Arc::new(Shared::new(&cfg, crate::camera::plan::initial(&cfg)));
         let (tx, rx) = watch::channel(None);
         let mut stream = Box::pin(mjpeg_stream(rx, shared.clone()));
         assert_eq!(shared.lock().viewers, 1);

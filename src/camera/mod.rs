@@ -120,8 +120,30 @@ impl Camera {
         Camera::start_with(cfg, scene, true)
     }
 
+    /// Like [`start_on_demand`](Camera::start_on_demand), with the paths
+    /// already chosen ([`plan::initial`]) by the caller.
+    ///
+    /// # Panics
+    /// Outside a tokio runtime.
+    pub fn start_on_demand_planned(
+        cfg: CameraConfig,
+        scene: watch::Receiver<Scene>,
+        plan: VideoPlan,
+    ) -> Camera {
+        Camera::start_with_plan(cfg, scene, true, plan)
+    }
+
     fn start_with(cfg: CameraConfig, scene: watch::Receiver<Scene>, on_demand: bool) -> Camera {
         let plan = plan::initial(&cfg);
+        Camera::start_with_plan(cfg, scene, on_demand, plan)
+    }
+
+    fn start_with_plan(
+        cfg: CameraConfig,
+        scene: watch::Receiver<Scene>,
+        on_demand: bool,
+        plan: VideoPlan,
+    ) -> Camera {
         if cfg.validate().is_ok() {
             tracing::info!("{plan}");
         }
@@ -164,6 +186,12 @@ impl Camera {
 
     pub fn status(&self) -> CameraStatus {
         self.shared.status(Instant::now())
+    }
+
+    /// [`status`](Camera::status) without the camera's lifetime.
+    pub fn status_handle(&self) -> impl Fn() -> CameraStatus + Send + Sync + 'static {
+        let shared = self.shared.clone();
+        move || shared.status(Instant::now())
     }
 
     pub fn telemetry(&self) -> CameraTelemetry {

@@ -43,6 +43,8 @@ pub enum RtpError {
         "RTP video: no frame from `{program}` for {secs:.1} s — restarting it (check camera.h264.passthrough and the camera; camera.stall_timeout_s)"
     )]
     Stalled { program: String, secs: f64 },
+    #[error("RTP video: cannot send to {dest}: {error} — check camera.rtp (--video-rtp)")]
+    Destination { dest: String, error: String },
     #[error(
         "RTP video: the camera's pictures changed from {from:?} to {to:?} — restarting the encoder"
     )]

@@ -10,29 +10,39 @@
 //! stream's current shape is published as [`RtpStream`] for the MAVLink
 //! camera component.
 //!
-//! Two ways to make the stream: the camera's JPEG pictures encoded
-//! (`encoder`, the synthetic camera and MJPEG cameras), or, when
-//! `[camera.h264] passthrough` names a camera that gives H.264 itself, its
-//! stream copied without decoding (`passthrough`, `-c:v copy`). This module
-//! must never send to an address nobody configured or heard from, nor panic
-//! on what the child does.
+//! Where the H.264 comes from is the camera's [`VideoPlan`]
+//! ([`super::plan`]), followed as it changes:
+//! - the camera's own H.264 (`source = "v4l2"` on a camera that offers
+//!   it), or a camera's stream that an ffmpeg child copies without
+//!   decoding (`[camera.h264] passthrough`): `relay` packetizes the
+//!   pictures as they came and hands them to the WebRTC hub directly —
+//!   no process decodes or encodes anything;
+//! - the camera's JPEG pictures encoded by ffmpeg's libx264 (`encoder`),
+//!   only where `[camera] encode` allows it;
+//! - none: nothing runs, and the plan says why.
 //!
-//! The WebRTC viewers ([`super::webrtc`]) get the same encode: while one
-//! watches, or whenever the encoder runs anyway, the loopback port the
-//! WebRTC side reads is one more destination. So the encoder runs while a
-//! ground station has a destination *or* a WebRTC viewer watches —
-//! `--video-rtp off` stops the RTP to ground stations, not WebRTC — and the
-//! RTP stream announced to ground stations never names the loopback one.
+//! This module must never send to an address nobody configured or heard
+//! from, nor panic on what the child does.
+//!
+//! The WebRTC viewers ([`super::webrtc`]) get the same pictures: while one
+//! watches, or whenever the stream runs anyway, they are one more
+//! destination (for the encoder, the loopback port the WebRTC side reads).
+//! So the stream runs while a ground station has a destination *or* a
+//! WebRTC viewer watches — `--video-rtp off` stops the RTP to ground
+//! stations, not WebRTC — and the RTP stream announced to ground stations
+//! never names the loopback one.
 
 pub(super) mod config;
 mod encoder;
 mod passthrough;
+mod relay;
 mod stations;
 
 use std::net::IpAddr;
 
 use futures_util::FutureExt;
-use tokio::sync::watch;
+use serde::Serialize;
+use tokio::sync::{mpsc, watch};
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
@@ -43,9 +53,12 @@ pub use stations::{GroundStations, STATION_TIMEOUT};
 use super::Camera;
 use super::backoff::Backoff;
 use super::config::CameraConfig;
+use super::h264::AccessUnit;
+use super::plan::{H264Route, VideoPlan};
 use super::webrtc::WebRtcFeed;
 use encoder::{Encode, destinations};
 use passthrough::Copy;
+use relay::Relay;
 
 /// The RTP stream being sent, for the MAVLink camera component
 /// (VIDEO_STREAM_INFORMATION).
@@ -59,12 +72,23 @@ pub struct RtpStream {
     pub bitrate_kbps: u32,
 }
 
+/// What the sender runs now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Running {
+    /// Where its pictures come from: `camera` and `ffmpeg-copy` encode
+    /// nothing, `encoder` is libx264.
+    pub route: H264Route,
+    /// Its child's process id: the encoder, or the ffmpeg that copies; none
+    /// for the camera's own H.264.
+    pub pid: Option<u32>,
+}
+
 /// The running RTP sender. Dropping it (or [`shutdown`](RtpVideo::shutdown))
 /// kills its child.
 #[derive(Debug)]
 pub struct RtpVideo {
     stream: watch::Receiver<Option<RtpStream>>,
-    pid: watch::Receiver<Option<u32>>,
+    running: watch::Receiver<Option<Running>>,
     task: Option<JoinHandle<()>>,
 }
 
@@ -83,23 +107,38 @@ impl RtpVideo {
         webrtc: Option<WebRtcFeed>,
     ) -> RtpVideo {
         let (stream_tx, stream) = watch::channel(None);
-        let (pid_tx, pid) = watch::channel(None);
+        let (running_tx, running) = watch::channel(None);
         let off = cfg.rtp.iter().all(|d| *d == RtpDest::Off);
         let task = (!off || webrtc.is_some()).then(|| {
             let sup = Supervisor {
                 dests: cfg.rtp.clone(),
                 webrtc: webrtc.as_ref().map(|w| w.port),
+                webrtc_units: webrtc.as_ref().map(|w| w.units.clone()),
                 h264: cfg.h264.clone(),
                 camera_fps: cfg.fps,
                 stall: cfg.stall_timeout(),
                 backoff: Backoff::from_config(&cfg.backoff),
                 stream: stream_tx,
-                pid: pid_tx,
+                running: running_tx,
+                epoch: Instant::now(),
             };
             let wanted = webrtc.map(|w| w.wanted);
-            tokio::spawn(sup.run(camera.clone_handle(), Wants { station, wanted }))
+            let handle = camera.clone_handle();
+            let plan = handle.plan();
+            tokio::spawn(sup.run(
+                handle,
+                Wants {
+                    station,
+                    wanted,
+                    plan,
+                },
+            ))
         });
-        RtpVideo { stream, pid, task }
+        RtpVideo {
+            stream,
+            running,
+            task,
+        }
     }
 
     /// The stream as it is sent now; `None` while nothing is sent.
@@ -107,9 +146,15 @@ impl RtpVideo {
         self.stream.clone()
     }
 
-    /// The encoder child's process id while it runs.
+    /// The child's process id while one runs (the encoder, or the
+    /// ffmpeg that copies a camera's stream).
     pub fn pid(&self) -> Option<u32> {
-        *self.pid.borrow()
+        self.running.borrow().and_then(|r| r.pid)
+    }
+
+    /// What runs now, as it changes; `None` while nothing is sent.
+    pub fn running(&self) -> watch::Receiver<Option<Running>> {
+        self.running.clone()
     }
 
     pub async fn shutdown(mut self) {
@@ -128,17 +173,27 @@ impl Drop for RtpVideo {
     }
 }
 
-/// What the destinations follow: the ground station's address, and
-/// whether a WebRTC viewer wants the stream.
+/// What the destinations follow: the ground station's address, whether
+/// a WebRTC viewer wants the stream, and where the H.264 comes from.
 struct Wants {
     station: watch::Receiver<Option<IpAddr>>,
     wanted: Option<watch::Receiver<bool>>,
+    plan: watch::Receiver<VideoPlan>,
 }
 
 impl Wants {
-    /// The next change of either (pending forever once both are gone).
+    /// The next change of any (pending forever once all are gone).
     async fn changed(&mut self) {
-        let Wants { station, wanted } = self;
+        let Wants {
+            station,
+            wanted,
+            plan,
+        } = self;
+        let replanned = async {
+            if plan.changed().await.is_err() {
+                std::future::pending::<()>().await;
+            }
+        };
         let viewers = async {
             if let Some(w) = wanted.as_mut()
                 && w.changed().await.is_ok()
@@ -155,6 +210,7 @@ impl Wants {
         tokio::select! {
             () = moved => {}
             () = viewers => {}
+            () = replanned => {}
         }
     }
 }
@@ -165,6 +221,8 @@ impl Wants {
 struct Dests {
     stations: Vec<(String, u16)>,
     webrtc: Option<(String, u16)>,
+    /// Where the pictures come from (`pending` is read as the camera's).
+    route: H264Route,
 }
 
 impl Dests {
@@ -179,14 +237,18 @@ impl Dests {
 
 struct Supervisor {
     dests: Vec<RtpDest>,
-    /// The WebRTC side's loopback port.
+    /// The WebRTC side's loopback port (for the encoder's RTP).
     webrtc: Option<u16>,
+    /// The WebRTC hub's input for pictures that need no depacketizing.
+    webrtc_units: Option<mpsc::Sender<AccessUnit>>,
     h264: H264Config,
     camera_fps: f64,
     stall: std::time::Duration,
     backoff: Backoff,
     stream: watch::Sender<Option<RtpStream>>,
-    pid: watch::Sender<Option<u32>>,
+    running: watch::Sender<Option<Running>>,
+    /// The media clock's zero for pictures ffmpeg copies.
+    epoch: Instant,
 }
 
 impl Supervisor {
@@ -201,7 +263,12 @@ impl Supervisor {
             .webrtc
             .filter(|_| wanted || !stations.is_empty())
             .map(|port| ("127.0.0.1".to_owned(), port));
-        Dests { stations, webrtc }
+        let route = wants.plan.borrow().h264;
+        Dests {
+            stations,
+            webrtc,
+            route,
+        }
     }
 
     /// One run encoding the camera's pictures.
@@ -212,23 +279,51 @@ impl Supervisor {
         let _demand = camera.demand();
         let mut frames = camera.subscribe();
         encoder::run(&self.h264.program, &enc, &mut frames, |p, (w, h)| {
-            self.announce(p, &dests.stations, (w, h), enc.fps);
+            self.announce(p, H264Route::Encoder, &dests.stations, (w, h), enc.fps);
         })
         .await
     }
 
-    /// One run copying the H.264 the camera gives: the camera's pictures
-    /// are not asked for.
-    async fn copy(&self, dests: &Dests) -> RtpError {
+    /// The WebRTC hub's input, while a viewer is among the destinations.
+    fn hub(&self, dests: &Dests) -> Option<mpsc::Sender<AccessUnit>> {
+        dests.webrtc.as_ref().and(self.webrtc_units.clone())
+    }
+
+    /// One run relaying the camera's own H.264: nothing is encoded.
+    async fn relay_camera(&self, camera: &super::CameraHandle, dests: &Dests) -> RtpError {
+        let mut relay = match Relay::new(&dests.stations, self.hub(dests)).await {
+            Ok(r) => r,
+            Err(e) => return e,
+        };
+        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), "RTP video: sending the camera's own H.264 (no encoder)");
+        let capture = camera.plan().borrow().capture.clone();
+        let (w, h, fps) = capture.map_or((0, 0, 0.0), |c| (c.width, c.height, c.fps()));
+        self.running.send_replace(Some(Running {
+            route: H264Route::Camera,
+            pid: None,
+        }));
+        relay::from_camera(camera, &mut relay, || {
+            self.announce(None, H264Route::Camera, &dests.stations, (w, h), fps);
+        })
+        .await
+    }
+
+    /// One run relaying the H.264 an ffmpeg child copies from a camera
+    /// (`[camera.h264] passthrough`): the camera's pictures are not asked
+    /// for, nothing is decoded or encoded.
+    async fn relay_copy(&self, dests: &Dests) -> RtpError {
+        let mut relay = match Relay::new(&dests.stations, self.hub(dests)).await {
+            Ok(r) => r,
+            Err(e) => return e,
+        };
         let copy = Copy {
             input: self.h264.passthrough.clone(),
-            dests: dests.all(),
             stall: self.stall,
         };
-        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), "RTP video: passing the camera's H.264 through");
+        tracing::info!(to = ?dests.stations, webrtc = dests.webrtc.is_some(), "RTP video: passing the camera's H.264 through (ffmpeg -c:v copy)");
         let (w, h, fps) = self.h264.passthrough_shape();
-        passthrough::run(&self.h264.program, &copy, |p| {
-            self.announce(p, &dests.stations, (w, h), fps);
+        relay::from_ffmpeg(&self.h264.program, &copy, self.epoch, &mut relay, |p| {
+            self.announce(p, H264Route::FfmpegCopy, &dests.stations, (w, h), fps);
         })
         .await
     }
@@ -236,8 +331,15 @@ impl Supervisor {
     /// The stream runs: say so to the camera component, naming the first
     /// ground station's destination (none: only WebRTC viewers watch, and
     /// no RTP stream is announced).
-    fn announce(&self, pid: Option<u32>, stations: &[(String, u16)], (w, h): (u32, u32), fps: f64) {
-        self.pid.send_replace(pid);
+    fn announce(
+        &self,
+        pid: Option<u32>,
+        route: H264Route,
+        stations: &[(String, u16)],
+        (w, h): (u32, u32),
+        fps: f64,
+    ) {
+        self.running.send_replace(Some(Running { route, pid }));
         let Some((host, port)) = stations.first() else {
             self.stream.send_replace(None);
             return;
@@ -256,18 +358,25 @@ impl Supervisor {
         let mut logged_not_found = false;
         loop {
             let dests = self.current(&wants);
+            if dests.route == H264Route::None {
+                self.stream.send_replace(None);
+                self.running.send_replace(None);
+                tracing::info!("RTP video: no H.264 to send — {}", wants.plan.borrow().why);
+                wants.changed().await;
+                continue;
+            }
             if dests.stations.is_empty() && dests.webrtc.is_none() {
                 self.stream.send_replace(None);
-                self.pid.send_replace(None);
+                self.running.send_replace(None);
                 tracing::info!("RTP video: no destination, not sending");
                 wants.changed().await;
                 continue;
             }
             let started = Instant::now();
-            let run = if self.h264.passthrough.is_empty() {
-                self.encode(&camera, &dests).boxed()
-            } else {
-                self.copy(&dests).boxed()
+            let run = match dests.route {
+                H264Route::Encoder => self.encode(&camera, &dests).boxed(),
+                H264Route::FfmpegCopy => self.relay_copy(&dests).boxed(),
+                _ => self.relay_camera(&camera, &dests).boxed(),
             };
             let this = &self;
             let wants = &mut wants;
@@ -287,7 +396,7 @@ impl Supervisor {
                 }
             };
             self.stream.send_replace(None);
-            self.pid.send_replace(None);
+            self.running.send_replace(None);
             let wait = self.backoff.after_run(started.elapsed());
             match err {
                 RtpError::CameraGone => return,

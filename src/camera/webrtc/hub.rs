@@ -1,6 +1,8 @@
 //! The WebRTC viewers' one task: it owns every peer connection, the media
 //! sockets and the loopback socket the RTP encoder also sends to, and
-//! hands each picture of that one encode to every viewer.
+//! hands each picture of the one stream — the encoder's, read back from
+//! that socket, or a camera's own, arriving as access units — to every
+//! viewer.
 //!
 //! The signalling connections talk to it with [`Command`]s and hear back
 //! through their own [`PeerEvent`] channel. While any viewer exists it says
@@ -16,7 +18,7 @@ use std::time::{Duration, Instant};
 use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 
-use super::depay::Depay;
+use super::depay::{AccessUnit, Depay};
 use super::net::{Inbound, Sockets};
 use super::peer::Peer;
 use super::protocol::Bind;
@@ -53,6 +55,8 @@ pub(super) struct Hub {
     pub commands: mpsc::Receiver<Command>,
     /// The encoder's RTP, on loopback.
     pub rtp: UdpSocket,
+    /// A camera's own pictures, from the RTP sender that relays them.
+    pub units: mpsc::Receiver<AccessUnit>,
     pub wanted: watch::Sender<bool>,
     pub max_viewers: usize,
     pub sockets: Sockets,
@@ -66,6 +70,7 @@ impl Hub {
         let mut depay = Depay::new();
         let mut buf = vec![0u8; 2048];
         let mut logged = Instant::now();
+        let mut relayed = 0u64;
         loop {
             let next = viewers
                 .values()
@@ -94,13 +99,12 @@ impl Hub {
                         continue;
                     }
                     if let Some(au) = depay.push(&buf[..n]) {
-                        let now = Instant::now();
-                        let data: Arc<[u8]> = Arc::from(au.data.as_slice());
-                        for v in viewers.values_mut() {
-                            v.peer.send(now, &au, &data);
-                            flush(&self.sockets, &mut v.peer);
-                        }
+                        self.picture(&au, &mut viewers);
                     }
+                }
+                Some(au) = self.units.recv() => {
+                    relayed += 1;
+                    self.picture(&au, &mut viewers);
                 }
                 Some(d) = self.inbound.recv() => {
                     if let Some(new) = self.reflexive.take(&d) {
@@ -135,6 +139,7 @@ impl Hub {
                 tracing::info!(
                     viewers = viewers.len(),
                     pictures = s.units,
+                    camera_pictures = relayed,
                     lost_packets = s.lost,
                     bad_packets = s.bad,
                     "WebRTC video"
@@ -146,6 +151,16 @@ impl Hub {
                 session_id,
                 reason: "the vehicle is shutting down".into(),
             });
+        }
+    }
+
+    /// One picture to every viewer.
+    fn picture(&self, au: &AccessUnit, viewers: &mut BTreeMap<String, Viewer>) {
+        let now = Instant::now();
+        let data: Arc<[u8]> = Arc::from(au.data.as_slice());
+        for v in viewers.values_mut() {
+            v.peer.send(now, au, &data);
+            flush(&self.sockets, &mut v.peer);
         }
     }
 
