@@ -424,7 +424,7 @@ fn video_info(
     let running = rtp.running();
     let status = camera.status_handle();
     std::sync::Arc::new(move || {
-        crate::camera::plan::api_json(&plan.borrow(), *running.borrow(), status().h264_profile)
+        crate::camera::api_json(&plan.borrow(), *running.borrow(), status().h264_profile)
     })
 }
 

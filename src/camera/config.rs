@@ -10,7 +10,7 @@ use std::time::Duration;
 use axum::http::Uri;
 use serde::{Deserialize, Serialize};
 
-use super::plan::EncodeSetting;
+use super::encode::EncodeSetting;
 use super::rtp::config::{H264Config, RtpDest, check_dests};
 use super::v4l2::V4l2Config;
 use super::webrtc::config::WebRtcConfig;

@@ -35,6 +35,7 @@
 mod backoff;
 mod client;
 mod config;
+mod encode;
 mod error;
 mod font;
 mod frame;
@@ -291,4 +292,23 @@ impl Drop for Camera {
         }
         self.shared.stopped();
     }
+}
+
+/// The JSON `GET /api/video` adds: `path` (the plan), `mjpeg` (whether
+/// `/video.mjpg` has pictures: not while the camera streams H.264),
+/// `h264` (what the sender runs now: its route and child, or `null`),
+/// `encoder_running` (a libx264 encoder runs now) and `h264_profile` (the
+/// camera's own H.264, from its SPS).
+pub fn api_json(
+    plan: &VideoPlan,
+    running: Option<rtp::Running>,
+    h264_profile: Option<String>,
+) -> serde_json::Value {
+    serde_json::json!({
+        "mjpeg": !matches!(plan.jpeg, plan::JpegRoute::None),
+        "path": plan,
+        "h264": running,
+        "encoder_running": running.is_some_and(|r| r.route == plan::H264Route::Encoder && r.pid.is_some()),
+        "h264_profile": h264_profile,
+    })
 }

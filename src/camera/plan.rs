@@ -14,61 +14,13 @@
 
 use std::fmt;
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use super::config::{CameraConfig, SourceKind};
-use super::v4l2::{Capture, DeviceCaps, FormatChoice, Interval, Kind};
-
-/// `[camera] encode`: whether Neptunus may encode video itself.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum EncodeSetting {
-    /// `never` on a 32-bit ARM build (the BeagleBone: one Cortex-A8, no
-    /// video encoder), `when-needed` elsewhere.
-    #[default]
-    Auto,
-    /// Only what the camera encodes itself reaches the viewers.
-    Never,
-    /// Encode where the camera gives no H.264 (libx264 for RTP and WebRTC)
-    /// or no JPEG (a raw camera's page).
-    WhenNeeded,
-}
-
-/// What `encode` comes to on this build.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Encode {
-    Never,
-    WhenNeeded,
-}
-
-impl EncodeSetting {
-    pub fn resolve(self) -> Encode {
-        match self {
-            EncodeSetting::Never => Encode::Never,
-            EncodeSetting::WhenNeeded => Encode::WhenNeeded,
-            EncodeSetting::Auto if cfg!(target_arch = "arm") => Encode::Never,
-            EncodeSetting::Auto => Encode::WhenNeeded,
-        }
-    }
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            EncodeSetting::Auto => "auto",
-            EncodeSetting::Never => "never",
-            EncodeSetting::WhenNeeded => "when-needed",
-        }
-    }
-}
-
-impl Encode {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Encode::Never => "never",
-            Encode::WhenNeeded => "when-needed",
-        }
-    }
-}
+pub use super::encode::{Encode, EncodeSetting};
+use super::v4l2::{
+    Capture, DeviceCaps, FormatChoice, Interval, Kind, Node, V4l2Config, node, probe,
+};
 
 /// Where the H.264 for QGroundControl (RTP) and the WebRTC viewers comes
 /// from.
@@ -428,30 +380,24 @@ fn round_fps(f: f64) -> String {
 /// (blocking: a few ioctls), any other source needs no asking.
 pub fn initial(cfg: &CameraConfig) -> VideoPlan {
     let offer = if cfg.source == SourceKind::V4l2 {
-        super::v4l2::offer(&cfg.v4l2)
+        offer(&cfg.v4l2)
     } else {
         Offer::NotV4l2
     };
     choose(cfg, &offer)
 }
 
-/// The JSON `GET /api/video` adds: `path` (the plan), `mjpeg` (whether
-/// `/video.mjpg` has pictures: not while the camera streams H.264),
-/// `h264` (what the sender runs now: its route and child, or `null`),
-/// `encoder_running` (a libx264 encoder runs now) and `h264_profile` (the
-/// camera's own H.264, from its SPS).
-pub fn api_json(
-    plan: &VideoPlan,
-    running: Option<crate::camera::rtp::Running>,
-    h264_profile: Option<String>,
-) -> serde_json::Value {
-    serde_json::json!({
-        "mjpeg": !matches!(plan.jpeg, JpegRoute::None),
-        "path": plan,
-        "h264": running,
-        "encoder_running": running.is_some_and(|r| r.route == H264Route::Encoder && r.pid.is_some()),
-        "h264_profile": h264_profile,
-    })
+/// What the camera at `cfg.device` offers (blocking: a few ioctls).
+pub fn offer(cfg: &V4l2Config) -> Offer {
+    let path = std::path::Path::new(&cfg.device);
+    match node(path) {
+        Node::File | Node::Pipe => Offer::Recorded,
+        Node::Missing => Offer::Unreadable(format!("camera device {} does not exist", cfg.device)),
+        Node::Device => match probe(path) {
+            Ok(caps) => Offer::Device(caps),
+            Err(e) => Offer::Unreadable(e.to_string()),
+        },
+    }
 }
 
 impl VideoPlan {

@@ -9,7 +9,7 @@
 
 use super::Check;
 use super::host::find_program;
-use crate::camera::plan::{Offer, choose};
+use crate::camera::plan::{Offer, choose, offer};
 use crate::camera::{CameraConfig, H264Route, JpegRoute, SourceKind, VideoPlan};
 
 const NAME: &str = "video";
@@ -17,7 +17,7 @@ const NAME: &str = "video";
 /// The plan for `c` and its check.
 pub fn video(c: &CameraConfig) -> Check {
     let offer = if c.source == SourceKind::V4l2 {
-        crate::camera::v4l2::offer(&c.v4l2)
+        offer(&c.v4l2)
     } else {
         Offer::NotV4l2
     };

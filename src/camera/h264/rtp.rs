@@ -9,7 +9,8 @@
 
 use str0m::unversioned::{H264Packetizer, Packetizer};
 
-use crate::camera::rtp::RTP_PACKET_BYTES;
+/// RTP packets stay under a typical path MTU with room for tunnels.
+pub const RTP_PACKET_BYTES: u32 = 1200;
 
 const HEADER_BYTES: usize = 12;
 pub const PAYLOAD_TYPE: u8 = 96;

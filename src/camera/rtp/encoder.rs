@@ -16,8 +16,7 @@ use super::config::{H264Config, RtpDest};
 use crate::camera::frame::Frame;
 use crate::camera::process::StderrTail;
 
-/// RTP packets stay under a typical path MTU with room for tunnels.
-pub const RTP_PACKET_BYTES: u32 = 1200;
+pub use crate::camera::h264::rtp::RTP_PACKET_BYTES;
 
 /// Why a run of the encoder ended.
 #[derive(Debug, thiserror::Error)]

@@ -98,18 +98,3 @@ pub fn node(path: &std::path::Path) -> Node {
         Err(_) => Node::Missing,
     }
 }
-
-/// What the camera at `cfg.device` offers, for [`super::plan::choose`]
-/// (blocking: a few ioctls).
-pub fn offer(cfg: &V4l2Config) -> super::plan::Offer {
-    use super::plan::Offer;
-    let path = std::path::Path::new(&cfg.device);
-    match node(path) {
-        Node::File | Node::Pipe => Offer::Recorded,
-        Node::Missing => Offer::Unreadable(format!("camera device {} does not exist", cfg.device)),
-        Node::Device => match probe(path) {
-            Ok(caps) => Offer::Device(caps),
-            Err(e) => Offer::Unreadable(e.to_string()),
-        },
-    }
-}

@@ -26,7 +26,7 @@ const KIND: SourceKind = SourceKind::V4l2;
 
 pub(crate) async fn run(cfg: &CameraConfig, out: &mut Publisher) -> SourceError {
     let v4l2 = cfg.v4l2.clone();
-    let offer = tokio::task::spawn_blocking(move || super::offer(&v4l2))
+    let offer = tokio::task::spawn_blocking(move || crate::camera::plan::offer(&v4l2))
         .await
         .unwrap_or_else(|_| Offer::Unreadable("asking the camera failed".into()));
     let plan = choose(cfg, &offer);
