@@ -208,10 +208,7 @@ fn choose_v4l2(
                 fourcc: fourcc(kind).into(),
                 width: cfg.width,
                 height: cfg.height,
-                interval: Interval {
-                    numerator: 1000,
-                    denominator: (cfg.fps * 1000.0).round() as u32,
-                },
+                interval: Interval::from_fps(cfg.fps),
             });
             let what = format!(
                 "{dev} is not a V4L2 device: read as a recorded {} stream at {} fps",

@@ -93,6 +93,22 @@ impl Interval {
     }
 }
 
+impl Interval {
+    /// The interval of `fps` frames a second, as a reduced fraction
+    /// (`30` → `1/30`, `7.5` → `2/15`).
+    pub fn from_fps(fps: f64) -> Interval {
+        let den = (fps.max(0.001) * 1000.0).round() as u32;
+        let (mut a, mut b) = (1000u32, den.max(1));
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        Interval {
+            numerator: 1000 / a,
+            denominator: den.max(1) / a,
+        }
+    }
+}
+
 impl fmt::Display for Interval {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}/{}", self.numerator, self.denominator)
@@ -292,6 +308,9 @@ mod tests {
         assert_eq!(iv("1/30").to_string(), "1/30");
         assert_eq!(iv("2/15").fps(), 7.5);
         assert_eq!(iv("0/1").fps(), 0.0);
+        assert_eq!(Interval::from_fps(30.0), iv("1/30"));
+        assert_eq!(Interval::from_fps(7.5), iv("2/15"));
+        assert_eq!(Interval::from_fps(0.1), iv("10/1"));
         assert!("30".parse::<Interval>().is_err());
         assert!("1/x".parse::<Interval>().is_err());
     }
