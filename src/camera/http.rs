@@ -97,7 +97,15 @@ fn unavailable(c: &CameraRoutes) -> Option<Response> {
             status.last_error.as_deref().unwrap_or("invalid configuration")
         ),
         (_, CameraState::Stopped) => "the camera was shut down".to_owned(),
-        _ => return None,
+        _ => {
+            // A camera that streams H.264 gives no JPEG pictures.
+            let plan = c.shared.plan();
+            let plan = plan.borrow();
+            if plan.jpeg != crate::camera::plan::JpegRoute::None {
+                return None;
+            }
+            format!("no JPEG pictures: {}", plan.why)
+        }
     };
     Some(error_response(&status.source, status.state, &reason))
 }
