@@ -1,12 +1,13 @@
 //! The choice of video paths on recorded device answers: what
 //! `VIDIOC_QUERYCAP`, `VIDIOC_ENUM_FMT`, `VIDIOC_ENUM_FRAMESIZES` and
-//! `VIDIOC_ENUM_FRAMEINTERVALS` return for cameras nobody has here, kept as
-//! JSON in `tests/data/v4l2/`:
-//! - `c920.json`: a Logitech C920 of the firmware that lists H.264 on its
+//! `VIDIOC_ENUM_FRAMEINTERVALS` return for cameras nobody has here, as
+//! `v4l2-ctl --info --list-formats-ext` prints them (what the vehicle asks
+//! and reads), kept in `tests/data/v4l2/`:
+//! - `c920.txt`: a Logitech C920 of the firmware that lists H.264 on its
 //!   capture node: YUYV, H264 and MJPG (one at a time);
-//! - `openrov-mjpeg.json`: an OpenROV-like HD camera: MJPEG only;
-//! - `yuyv-webcam.json`: a plain webcam: raw YUYV only;
-//! - `h264-node.json`: the H.264-only node of a camera that shows its
+//! - `openrov-mjpeg.txt`: an OpenROV-like HD camera: MJPEG only;
+//! - `yuyv-webcam.txt`: a plain webcam: raw YUYV only;
+//! - `h264-node.txt`: the H.264-only node of a camera that shows its
 //!   encoder as a second device.
 //!
 //! For each: which path the H.264 (RTP, WebRTC) and the JPEG (the page)
@@ -15,15 +16,53 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use neptunus::camera::plan::{Offer, choose};
-use neptunus::camera::v4l2::{DeviceCaps, FormatChoice, Interval, Kind};
+use neptunus::camera::v4l2::{DeviceCaps, FormatChoice, Interval, Intervals, Kind, Sizes};
 use neptunus::camera::{
     CameraConfig, Encode, EncodeSetting, H264Route, JpegRoute, SourceKind, VideoPlan,
 };
 
 fn recorded(name: &str) -> DeviceCaps {
-    let path = format!("{}/tests/data/v4l2/{name}.json", env!("CARGO_MANIFEST_DIR"));
-    let text = std::fs::read_to_string(&path).unwrap();
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
+    let path = format!("{}/tests/data/v4l2/{name}.txt", env!("CARGO_MANIFEST_DIR"));
+    neptunus::camera::v4l2::parse(&std::fs::read_to_string(&path).unwrap())
+}
+
+#[test]
+fn the_recorded_answers_read_as_the_device_gave_them() {
+    let c = recorded("c920");
+    assert_eq!(
+        (c.driver.as_str(), c.card.as_str()),
+        ("uvcvideo", "HD Pro Webcam C920")
+    );
+    assert_eq!(c.fourccs(), ["YUYV", "H264", "MJPG"]);
+    assert!(c.formats[1].compressed && !c.formats[0].compressed);
+    let Sizes::Discrete(sizes) = &c.formats[0].sizes else {
+        panic!("discrete sizes");
+    };
+    assert_eq!((sizes[0].width, sizes[0].height), (640, 480));
+    let Intervals::Discrete(iv) = &sizes[0].intervals else {
+        panic!("discrete intervals");
+    };
+    assert_eq!(iv.len(), 7);
+    assert_eq!(iv[5], iv_of(2, 15));
+    assert_eq!(recorded("openrov-mjpeg").fourccs(), ["MJPG"]);
+    assert_eq!(recorded("yuyv-webcam").fourccs(), ["YUYV"]);
+    assert_eq!(recorded("h264-node").fourccs(), ["H264"]);
+    // What the vehicle then asks ffmpeg to read: copied, not encoded.
+    let p = plan(&v4l2(EncodeSetting::Never), "c920");
+    let args = neptunus::camera::v4l2::device_args("/dev/video0", p.capture.as_ref().unwrap(), 80)
+        .join(" ");
+    assert!(
+        args.contains("-input_format h264 -video_size 640x480 -framerate 10/1 -i /dev/video0 -an -c:v copy -f h264"),
+        "{args}"
+    );
+    assert!(!args.contains("libx264"), "{args}");
+}
+
+fn iv_of(numerator: u32, denominator: u32) -> Interval {
+    Interval {
+        numerator,
+        denominator,
+    }
 }
 
 fn v4l2(encode: EncodeSetting) -> CameraConfig {

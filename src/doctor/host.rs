@@ -219,7 +219,7 @@ pub fn camera(c: &CameraConfig) -> Check {
 }
 
 /// `source = "v4l2"`: the device is there, this user may use it, and it
-/// answers what it offers (asked by Neptunus itself: no tool needed).
+/// answers what it offers (`v4l2-ctl --list-formats-ext`).
 fn v4l2_camera(c: &CameraConfig) -> Check {
     use crate::camera::v4l2::{Node, node, probe};
     let name = "camera";
@@ -267,10 +267,13 @@ fn v4l2_camera(c: &CameraConfig) -> Check {
                 }
             ),
         ),
+        Err(e @ crate::camera::v4l2::ProbeError::NoTool { .. }) => {
+            Check::fail(name, e.to_string(), "sudo apt install v4l-utils".to_owned())
+        }
         Err(e) => Check::fail(
             name,
             e.to_string(),
-            "is another program using the camera (mjpg_streamer, another neptunus: `fuser -v DEVICE`)? Otherwise name the camera's capture node in camera.v4l2.device (`v4l2-ctl --list-devices`)".to_owned(),
+            "is it the camera's capture node? A camera often has a second node for metadata: name the right one in camera.v4l2.device (`v4l2-ctl --list-devices`)".to_owned(),
         ),
     }
 }

@@ -262,6 +262,8 @@ impl Intervals {
     /// a tie); within a range, `1/fps` itself.
     pub fn nearest(&self, fps: f64) -> Option<Interval> {
         match self {
+            // A driver that lists none is asked for the rate wanted.
+            Intervals::Discrete(list) if list.is_empty() => Some(Interval::from_fps(fps)),
             Intervals::Discrete(list) => list
                 .iter()
                 .copied()

@@ -1,148 +1,139 @@
-//! Reading the camera's frames: a V4L2 device on a thread of its own
-//! (memory-mapped streaming; each buffer the driver fills is one picture),
-//! or a recorded stream from a file or named pipe in its place.
+//! Reading the camera's frames: a V4L2 device through an ffmpeg child
+//! that copies what the camera gives to its stdout (`-c:v copy`: its
+//! H.264 or JPEG as they are, nothing decoded or encoded; only a raw
+//! YUYV camera's pictures are JPEG-encoded, where `encode` allows it), or
+//! a recorded stream from a file or named pipe in its place, read
+//! directly.
 //!
-//! Both hand over bytes on a channel ([`Read`]): whole pictures from the
-//! device, arbitrary chunks from a stream (the caller cuts them). Nothing
-//! is decoded here. The device thread ends when the receiver is dropped
-//! (checked at least twice a second), closing the device.
+//! Both hand over the bytes on a channel ([`Read`]) for the caller to cut
+//! into pictures. The child is killed when the receiver is dropped.
 
-use std::os::fd::AsFd;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
+use std::process::Stdio;
 
-use linuxvideo::Fract;
-use linuxvideo::format::{PixFormat, PixelFormat};
 use tokio::io::AsyncReadExt;
 use tokio::sync::mpsc;
 
-use super::caps::Capture;
-use super::probe;
+use super::caps::{Capture, Kind};
+use crate::camera::process::StderrTail;
 
 /// What a reader hands over.
 #[derive(Debug)]
 pub(crate) enum Read {
-    /// The device took the format: its size and rate as the driver set them.
-    Started {
-        width: u32,
-        height: u32,
-        fps: Option<f64>,
-    },
-    /// One whole picture (device) or the next bytes (stream).
+    /// The device or stream is open.
+    Started,
+    /// The next bytes.
     Bytes(Vec<u8>),
     /// The device or stream failed, or a stream ended (`None`).
     Ended(Option<String>),
 }
 
-/// Starts reading the V4L2 device `path` in `cap`'s format on a thread.
-pub(crate) fn device(path: PathBuf, cap: Capture) -> mpsc::Receiver<Read> {
-    let (tx, rx) = mpsc::channel(4);
-    let spawned = std::thread::Builder::new()
-        .name("camera-v4l2".into())
-        .spawn({
-            let tx = tx.clone();
-            move || {
-                let end = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    read_device(&path, &cap, &tx)
-                })) {
-                    Ok(Ok(())) => return,
-                    Ok(Err(e)) => e,
-                    Err(_) => "its driver answered something unexpected".into(),
-                };
-                let _ = tx.blocking_send(Read::Ended(Some(end)));
-            }
-        });
-    if let Err(e) = spawned {
-        let _ = tx.try_send(Read::Ended(Some(format!("no thread to read it: {e}"))));
+/// ffmpeg's arguments after the program name for reading `device` as
+/// `cap` asks.
+pub fn device_args(device: &str, cap: &Capture, quality: u8) -> Vec<String> {
+    let mut a: Vec<String> = ["-hide_banner", "-nostdin", "-loglevel", "error"]
+        .map(String::from)
+        .to_vec();
+    a.extend(["-fflags", "nobuffer", "-f", "v4l2", "-input_format"].map(String::from));
+    a.push(
+        match cap.kind {
+            Kind::H264 => "h264",
+            Kind::Mjpeg => "mjpeg",
+            Kind::Yuyv => "yuyv422",
+        }
+        .into(),
+    );
+    a.push("-video_size".into());
+    a.push(format!("{}x{}", cap.width, cap.height));
+    a.push("-framerate".into());
+    // A rate, the interval upside down.
+    a.push(format!(
+        "{}/{}",
+        cap.interval.denominator, cap.interval.numerator
+    ));
+    a.push("-i".into());
+    a.push(device.into());
+    a.push("-an".into());
+    match cap.kind {
+        // The camera's own encoding, copied.
+        Kind::H264 => a.extend(["-c:v", "copy", "-f", "h264"].map(String::from)),
+        // UVC cameras often leave the Huffman tables out: put them back.
+        Kind::Mjpeg => {
+            a.extend(["-c:v", "copy", "-bsf:v", "mjpeg2jpeg", "-f", "mjpeg"].map(String::from))
+        }
+        // Raw pictures: JPEG-encoded for the page (allowed by the plan).
+        Kind::Yuyv => {
+            let q = (31 - u32::from(quality.min(100)) * 29 / 100).to_string();
+            a.extend(["-c:v", "mjpeg", "-q:v", &q, "-f", "mjpeg"].map(String::from));
+        }
     }
-    rx
+    a.extend(["-flush_packets", "1", "pipe:1"].map(String::from));
+    a
 }
 
-fn read_device(path: &Path, cap: &Capture, tx: &mpsc::Sender<Read>) -> Result<(), String> {
-    let dev = probe::open(path).map_err(|e| e.to_string())?;
-    let fourcc: [u8; 4] = cap
-        .fourcc
-        .as_bytes()
-        .try_into()
-        .map_err(|_| format!("{:?} is not a four-character code", cap.fourcc))?;
-    let want = PixelFormat::from_fourcc(fourcc);
-    let capture = dev
-        .video_capture(PixFormat::new(cap.width, cap.height, want))
-        .map_err(|e| {
-            format!(
-                "VIDIOC_S_FMT {} {}×{}: {e}",
-                cap.fourcc, cap.width, cap.height
-            )
-        })?;
-    let (got_format, got_width, got_height) = {
-        let f = capture.format();
-        (f.pixel_format(), f.width(), f.height())
-    };
-    if got_format != want {
-        return Err(format!(
-            "asked for {}, the driver set {}",
-            cap.fourcc,
-            String::from_utf8_lossy(&got_format.as_fourcc())
-        ));
-    }
-    let fps = match capture
-        .set_frame_interval(Fract::new(cap.interval.numerator, cap.interval.denominator))
-    {
-        Ok(f) if f.numerator() > 0 => Some(f64::from(f.denominator()) / f64::from(f.numerator())),
-        Ok(_) => None,
-        Err(e) => {
-            tracing::warn!(
-                "camera {}: the frame interval {} was refused ({e}): the camera's own rate is used",
-                path.display(),
-                cap.interval
-            );
-            None
-        }
-    };
-    let mut stream = capture
-        .into_stream()
-        .map_err(|e| format!("starting the stream (VIDIOC_REQBUFS/STREAMON): {e}"))?;
-    if tx
-        .blocking_send(Read::Started {
-            width: got_width,
-            height: got_height,
-            fps,
-        })
-        .is_err()
-    {
-        return Ok(());
-    }
-    loop {
-        if tx.is_closed() {
-            return Ok(());
-        }
-        let ready = {
-            use nix::poll::{PollFd, PollFlags, PollTimeout, poll};
-            let mut fds = [PollFd::new(stream.as_fd(), PollFlags::POLLIN)];
-            match poll(&mut fds, PollTimeout::from(500u16)) {
-                Ok(n) => n > 0,
-                Err(nix::errno::Errno::EINTR) => false,
-                Err(e) => return Err(format!("poll: {e}")),
+/// Starts `program` reading the V4L2 device with `args`.
+pub(crate) fn device(program: String, args: Vec<String>) -> mpsc::Receiver<Read> {
+    let (tx, rx) = mpsc::channel(4);
+    tokio::spawn(async move {
+        let mut cmd = tokio::process::Command::new(&program);
+        cmd.args(&args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .kill_on_drop(true);
+        let mut child = match cmd.spawn() {
+            Ok(c) => c,
+            Err(e) => {
+                let why = if e.kind() == std::io::ErrorKind::NotFound {
+                    format!(
+                        "`{program}` is not installed (sudo apt install ffmpeg): it reads the camera"
+                    )
+                } else {
+                    format!("cannot start `{program}`: {e}")
+                };
+                let _ = tx.send(Read::Ended(Some(why))).await;
+                return;
             }
         };
-        if !ready {
-            continue;
+        let mut stderr = StderrTail::new(child.stderr.take(), &program);
+        let Some(mut stdout) = child.stdout.take() else {
+            return;
+        };
+        if tx.send(Read::Started).await.is_err() {
+            return;
         }
-        let picture = stream
-            .dequeue(|buf| {
-                Ok(if buf.is_error() {
-                    None
-                } else {
-                    Some(buf.to_vec())
-                })
-            })
-            .map_err(|e| format!("VIDIOC_DQBUF: {e}"))?;
-        // A buffer the driver flagged as damaged is dropped.
-        if let Some(bytes) = picture.filter(|b| !b.is_empty())
-            && tx.blocking_send(Read::Bytes(bytes)).is_err()
-        {
-            return Ok(());
+        let mut buf = vec![0u8; 64 * 1024];
+        loop {
+            tokio::select! {
+                r = stdout.read(&mut buf) => match r {
+                    Ok(n) if n > 0 => {
+                        if tx.send(Read::Bytes(buf[..n].to_vec())).await.is_err() {
+                            return;
+                        }
+                    }
+                    _ => break,
+                },
+                () = stderr.next() => {}
+                () = tx.closed() => return,
+            }
         }
-    }
+        let status =
+            match tokio::time::timeout(std::time::Duration::from_secs(2), child.wait()).await {
+                Ok(Ok(s)) => s.to_string(),
+                _ => {
+                    let _ = child.kill().await;
+                    "killed".into()
+                }
+            };
+        stderr.drain(std::time::Duration::from_secs(1)).await;
+        let _ = tx
+            .send(Read::Ended(Some(format!(
+                "`{program}` reading the camera exited ({status}){}",
+                stderr.tail()
+            ))))
+            .await;
+    });
+    rx
 }
 
 /// Reads a file or named pipe in chunks until it ends.
@@ -156,15 +147,7 @@ pub(crate) fn stream(path: PathBuf) -> mpsc::Receiver<Read> {
                 return;
             }
         };
-        if tx
-            .send(Read::Started {
-                width: 0,
-                height: 0,
-                fps: None,
-            })
-            .await
-            .is_err()
-        {
+        if tx.send(Read::Started).await.is_err() {
             return;
         }
         let mut buf = vec![0u8; 64 * 1024];
@@ -189,4 +172,34 @@ pub(crate) fn stream(path: PathBuf) -> mpsc::Receiver<Read> {
         }
     });
     rx
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::v4l2::Interval;
+
+    #[test]
+    fn the_device_is_copied_never_encoded_unless_raw() {
+        let cap = |kind, fourcc: &str| Capture {
+            kind,
+            fourcc: fourcc.into(),
+            width: 640,
+            height: 480,
+            interval: Interval::from_fps(30.0),
+        };
+        let a = device_args("/dev/video0", &cap(Kind::H264, "H264"), 80).join(" ");
+        assert!(
+            a.contains("-f v4l2 -input_format h264 -video_size 640x480 -framerate 30/1 -i /dev/video0 -an -c:v copy -f h264"),
+            "{a}"
+        );
+        assert!(!a.contains("libx264"), "{a}");
+        let a = device_args("/dev/video0", &cap(Kind::Mjpeg, "MJPG"), 80).join(" ");
+        assert!(a.contains("-input_format mjpeg"), "{a}");
+        assert!(a.contains("-c:v copy -bsf:v mjpeg2jpeg -f mjpeg"), "{a}");
+        let a = device_args("/dev/video0", &cap(Kind::Yuyv, "YUYV"), 80).join(" ");
+        assert!(a.contains("-input_format yuyv422"), "{a}");
+        assert!(a.contains("-c:v mjpeg -q:v 8 -f mjpeg"), "{a}");
+        assert!(a.ends_with("-flush_packets 1 pipe:1"), "{a}");
+    }
 }

@@ -1,15 +1,16 @@
-//! A camera read through V4L2 by Neptunus itself (`source = "v4l2"`): what
-//! the device offers (`caps`, `probe`), and its frames (`capture`) — the
-//! camera's own H.264 or JPEG as the driver hands them over, with nothing
-//! decoded or encoded on the way.
+//! A camera read through V4L2 (`source = "v4l2"`): what the device offers
+//! (`caps`, `probe`: `v4l2-ctl --list-formats-ext`), and its frames
+//! (`capture`: an ffmpeg child copying them) — the camera's own H.264 or
+//! JPEG as the driver hands them over, with nothing decoded or encoded on
+//! the way.
 //!
 //! A path that is not a V4L2 device (a file, a named pipe) is read as a
 //! recorded stream of the format `format` names: the same code path from
 //! the bytes on, which is how the tests and benchmarks feed it a camera's
 //! stream without a camera.
 //!
-//! This module must never block the runtime (the device is read on a
-//! thread of its own), nor panic on what a driver answers.
+//! This module must never block the runtime, nor panic on what a driver
+//! or a tool answers.
 
 mod caps;
 pub(crate) mod capture;
@@ -23,7 +24,8 @@ use serde::{Deserialize, Serialize};
 pub use caps::{
     Capture, DeviceCaps, FormatCaps, Interval, Intervals, Kind, SizeCaps, Sizes, StepwiseSizes,
 };
-pub use probe::{ProbeError, probe};
+pub use capture::device_args;
+pub use probe::{ProbeError, parse, probe};
 
 /// `camera.v4l2.format`: the format asked of the camera.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
