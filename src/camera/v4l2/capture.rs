@@ -179,6 +179,82 @@ mod tests {
     use super::*;
     use crate::camera::v4l2::Interval;
 
+    /// The child-reading half of the device path, on a recording instead
+    /// of `-f v4l2`: every picture comes through, and the end is told.
+    #[tokio::test]
+    async fn an_ffmpeg_child_copying_a_camera_stream_hands_over_every_picture() {
+        let dir = tempfile::tempdir().expect("dir");
+        let clip = dir.path().join("camera.h264");
+        let made = std::process::Command::new("ffmpeg")
+            .args(["-hide_banner", "-loglevel", "error", "-f", "lavfi"])
+            .args(["-i", "testsrc2=size=320x240:rate=30", "-frames:v", "45"])
+            .args([
+                "-c:v",
+                "libx264",
+                "-preset",
+                "ultrafast",
+                "-g",
+                "15",
+                "-f",
+                "h264",
+            ])
+            .arg(&clip)
+            .status()
+            .expect("ffmpeg is needed by this test: apt install ffmpeg");
+        assert!(made.success());
+        let mut args: Vec<String> = [
+            "-hide_banner",
+            "-nostdin",
+            "-loglevel",
+            "error",
+            "-f",
+            "h264",
+            "-i",
+        ]
+        .map(String::from)
+        .to_vec();
+        args.push(clip.display().to_string());
+        args.extend(
+            [
+                "-an",
+                "-c:v",
+                "copy",
+                "-f",
+                "h264",
+                "-flush_packets",
+                "1",
+                "pipe:1",
+            ]
+            .map(String::from),
+        );
+        let mut rx = device("ffmpeg".into(), args);
+        let mut split = crate::camera::h264::UnitSplitter::new();
+        let (mut started, mut units, mut keyframes) = (false, 0, 0);
+        loop {
+            match rx.recv().await {
+                Some(Read::Started) => started = true,
+                Some(Read::Bytes(b)) => split.push(&b),
+                Some(Read::Ended(why)) => {
+                    assert!(why.expect("a reason").contains("exited (exit status: 0)"));
+                    break;
+                }
+                None => panic!("the reader stopped without saying why"),
+            }
+        }
+        split.end_unit();
+        while let Some(u) = split.next_unit() {
+            units += 1;
+            keyframes += usize::from(u.keyframe);
+        }
+        assert!(started);
+        assert_eq!((units, keyframes), (45, 3));
+        let mut rx = device("no-such-ffmpeg".into(), Vec::new());
+        match rx.recv().await {
+            Some(Read::Ended(Some(why))) => assert!(why.contains("is not installed"), "{why}"),
+            other => panic!("{other:?}"),
+        }
+    }
+
     #[test]
     fn the_device_is_copied_never_encoded_unless_raw() {
         let cap = |kind, fourcc: &str| Capture {
