@@ -24,7 +24,13 @@ pub struct VideoRoutes {
     /// The signalling's own address and its routes; a port that cannot be
     /// bound is logged and left out.
     pub signalling: Option<(SocketAddr, axum::Router)>,
+    /// What `GET /api/video` adds: the paths the video takes and why.
+    pub info: Option<VideoInfo>,
 }
+
+/// The camera's own account of its video paths, as JSON, asked at each
+/// `GET /api/video`.
+pub type VideoInfo = Arc<dyn Fn() -> serde_json::Value + Send + Sync>;
 
 /// A listener beside the HMI's and what it serves.
 pub struct Beside {

@@ -42,7 +42,7 @@ pub mod server;
 pub mod session;
 pub mod tls;
 
-pub use beside::{Beside, VideoRoutes};
+pub use beside::{Beside, VideoInfo, VideoRoutes};
 pub(crate) use outlet::queued;
 pub use outlet::{Deliveries, Delivery, Outlet};
 
@@ -182,6 +182,8 @@ pub struct HmiContext {
     pub transport: server::Transport,
     /// WebRTC runs: `/webrtc` and `/api/webrtc` are among `extra_routes`.
     pub webrtc: bool,
+    /// The video paths for `GET /api/video`.
+    pub video_info: Option<VideoInfo>,
     /// A port beside the HMI's with routes of its own (the WebRTC
     /// signalling, where Cockpit looks for it), under the same guard.
     pub beside: Option<Beside>,
@@ -214,6 +216,7 @@ pub(crate) struct Shared {
     pub video: bool,
     /// WebRTC's routes are merged: `/api/webrtc` exists.
     pub webrtc: bool,
+    pub video_info: Option<VideoInfo>,
     pub free_sysids: Mutex<BTreeSet<u8>>,
     pub sysid_range: (u8, u8),
     pub next_session: AtomicU64,
@@ -335,6 +338,7 @@ pub async fn serve(
         data_dir: ctx.data_dir,
         video: ctx.extra_routes.is_some(),
         webrtc: ctx.webrtc,
+        video_info: ctx.video_info,
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
         next_session: AtomicU64::new(2),
@@ -430,9 +434,9 @@ impl Hmi {
         data_dir: PathBuf,
         video: Option<VideoRoutes>,
     ) -> Result<Self, HmiError> {
-        let (extra_routes, webrtc, beside) = match video {
-            Some(v) => (Some(v.routes), v.webrtc, v.signalling),
-            None => (None, false, None),
+        let (extra_routes, webrtc, beside, video_info) = match video {
+            Some(v) => (Some(v.routes), v.webrtc, v.signalling, v.info),
+            None => (None, false, None, None),
         };
         let outlet = Outlet::new(endpoint);
         let m2r_outlet = Outlet::every_component(endpoint + 1);
@@ -530,6 +534,7 @@ impl Hmi {
             data_dir,
             extra_routes,
             webrtc,
+            video_info,
             transport: server::Transport {
                 limits: settings.limits,
                 tls: tls.map(|t| t.config),
