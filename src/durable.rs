@@ -1,7 +1,7 @@
 //! Files that must survive a power cut: the parameters, the signing key and
 //! its timestamps, the HMI password, the TLS key and certificate.
 //!
-//! [`write`] is the one way they are written: `NAME.tmp` in the same
+//! [`write()`] is the one way they are written: `NAME.tmp` in the same
 //! directory, the bytes, fsync of the file, rename over `NAME`, fsync of the
 //! directory (without it the rename itself may be lost with the power, and
 //! the old file comes back). A cut at any moment leaves the old file or the
@@ -45,7 +45,7 @@ impl From<DurableError> for io::Error {
     }
 }
 
-/// `NAME.tmp` beside `path`, the name [`write`] writes first.
+/// `NAME.tmp` beside `path`, the name [`write()`] writes first.
 pub fn tmp_path(path: &Path) -> PathBuf {
     let mut name = path.as_os_str().to_owned();
     name.push(".tmp");
