@@ -256,9 +256,11 @@ fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result
     }
     writeln!(
         out,
-        "camera:    {} (rotation {}°)",
+        "camera:    {} (rotation {}°), encode {} ({} on this build)",
         s.camera.source.as_str(),
-        s.camera.rotation_deg
+        s.camera.rotation_deg,
+        s.camera.encode.as_str(),
+        s.camera.encode.resolve().as_str()
     )?;
     let w = &s.camera.webrtc;
     let signalling = neptunus::camera::webrtc::SignallingAddr::resolve(w.signalling, s.hmi.http);

@@ -145,7 +145,7 @@ fn every_check_passes_against_the_emulated_board() {
     let text = stdout(&o);
     assert!(o.status.success(), "doctor failed:\n{text}");
     for name in [
-        "config", "serial", "board", "camera", "ports", "data_dir", "clock",
+        "config", "serial", "board", "camera", "video", "ports", "data_dir", "clock",
     ] {
         assert!(
             text.lines()
@@ -155,7 +155,7 @@ fn every_check_passes_against_the_emulated_board() {
     }
     assert!(text.contains("crc8"), "{text}");
     let v = report(&cfg);
-    assert_eq!(v["checks"].as_array().map(Vec::len), Some(7), "{v}");
+    assert_eq!(v["checks"].as_array().map(Vec::len), Some(8), "{v}");
     // A plain (December 2014) board passes when the configuration says plain.
     let plain = Board::start("plain");
     let cfg = config(
@@ -253,6 +253,69 @@ fn the_other_framing_fails_with_its_fix() {
         "[camera]\nsource = \"none\"\n",
     );
     assert_fails(&cfg, "board", "framing = \"crc8\"");
+}
+
+/// The `video` check: a camera in V4L2's place (a recording of MJPEG, as
+/// the OpenROV camera gives) with nothing to be encoded warns that
+/// QGroundControl gets no video, with the fix; a recording of H.264 passes
+/// through and passes; a raw camera's format with nothing encoded fails.
+#[test]
+fn the_video_check_says_which_path_and_gives_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::start("crc8");
+    let clip = dir.path().join("camera.rec");
+    std::fs::write(&clip, b"recorded").unwrap();
+    let cam = |format: &str, encode: &str| {
+        format!(
+            "[camera]\nsource = \"v4l2\"\nencode = \"{encode}\"\n[camera.v4l2]\ndevice = \"{}\"\nformat = \"{format}\"\n",
+            clip.display()
+        )
+    };
+    let cfg = config(dir.path(), &board.path, "crc8", &cam("mjpeg", "never"));
+    let o = doctor(&cfg, false);
+    let text = stdout(&o);
+    assert!(o.status.success(), "a warning is not a failure:\n{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    let at = lines
+        .iter()
+        .position(|l| l.starts_with("warn") && l.split_whitespace().nth(1) == Some("video"))
+        .unwrap_or_else(|| panic!("no warn line for video:\n{text}"));
+    assert!(lines[at].contains("JPEG from the camera"), "{text}");
+    let fix = lines[at + 1..]
+        .iter()
+        .find(|l| l.trim_start().starts_with("fix:"))
+        .unwrap();
+    assert!(
+        fix.contains("QGroundControl gets no video: the camera offers MJPEG only; set [camera] encode = \"when-needed\"")
+            && fix.contains("or use an H.264 UVC camera"),
+        "{text}"
+    );
+    assert!(text.contains("read as a recorded mjpeg stream"), "{text}");
+    let cfg = config(dir.path(), &board.path, "crc8", &cam("h264", "never"));
+    let v = report(&cfg);
+    let c = check(&v, "video");
+    assert_eq!(
+        (c["ok"].as_bool(), c["warning"].as_bool()),
+        (Some(true), Some(false)),
+        "{v}"
+    );
+    assert!(
+        c["detail"]
+            .as_str()
+            .unwrap()
+            .contains("H.264 from the camera"),
+        "{v}"
+    );
+    assert!(
+        c["detail"]
+            .as_str()
+            .unwrap()
+            .contains("no decode, no encode"),
+        "{v}"
+    );
+    // A recording cannot be asked what it holds: auto is refused.
+    let cfg = config(dir.path(), &board.path, "crc8", &cam("auto", "never"));
+    assert_fails(&cfg, "video", "camera.v4l2.format = \"h264\"");
 }
 
 #[test]

@@ -3,7 +3,7 @@
 //! chapter ("Fuzzing") says how a new one is added.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use neptunus::camera::webrtc::depay::Depay;
+use neptunus::camera::h264::depay::Depay;
 use neptunus::camera::{JpegFrame, JpegSplitter, SplitterStats};
 use neptunus::dialect::neptunus::MavMessage;
 use neptunus::hmi::auth::parse_origin;

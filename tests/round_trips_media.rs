@@ -10,7 +10,7 @@ use std::net::{IpAddr, SocketAddr};
 
 use jpeg_encoder::{ColorType, Encoder};
 use neptunus::camera::JpegSplitter;
-use neptunus::camera::webrtc::depay::{AccessUnit, Depay};
+use neptunus::camera::h264::depay::{AccessUnit, Depay};
 use neptunus::fuzzing::{binding_request, parse_binding_success, stun_binding_success};
 use proptest::prelude::*;
 

@@ -14,7 +14,7 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use neptunus::camera::webrtc::depay::{AccessUnit, Depay};
+use neptunus::camera::h264::depay::{AccessUnit, Depay};
 
 /// The input read a byte at a time; zeros once it runs out.
 struct Bytes<'a>(&'a [u8]);

@@ -38,9 +38,9 @@ pub(super) struct Tasks {
     /// [`stream`](crate::camera::rtp::RtpVideo::stream) is what the
     /// MAVLink camera component announces.
     pub(super) rtp: crate::camera::rtp::RtpVideo,
-    /// The WebRTC viewers (Cockpit, the page), fed by the same encode.
+    /// The WebRTC viewers (Cockpit, the page), fed by the one H.264 stream.
     webrtc: Option<crate::camera::webrtc::WebRtc>,
-    /// Recording on the vehicle, fed by the same encode.
+    /// Recording on the vehicle, fed by the one H.264 stream.
     recorder: Option<crate::camera::record::Recorder>,
     /// What the recorder tells the core.
     pub(super) recorder_events: mpsc::UnboundedReceiver<crate::vehicle::machine::RecorderEvent>,
@@ -152,11 +152,13 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     // sessions and for the mavlink2rest API (Cockpit).
     let hmi_ep = endpoints.len();
     let z_centered = crate::hmi::z_centered_by(profiles.clone());
+    // Which way the video goes: a V4L2 camera is asked what it offers.
+    let plan = crate::camera::plan::initial(&settings.camera);
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 2)
         .with_transfer_rates(transfer_rates(endpoints))
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
-        .with_camera(camera_spec(&settings.camera))
+        .with_camera(camera_spec(&settings.camera, &plan))
         .with_wall_clock(
             crate::wallclock::system_sync(),
             crate::wallclock::BUILD_UNIX_S * 1_000_000,
@@ -176,7 +178,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     }
     let t0 = Instant::now();
     let (recorder_tx, recorder_events) = mpsc::unbounded_channel();
-    let recorder = start_recorder(&settings, &clock, t0, recorder_tx);
+    let recorder = start_recorder(&settings, &plan, &clock, t0, recorder_tx);
     let vehicle = vehicle.with_recording(recorder.is_some());
     // The camera: its picture follows the vehicle (the synthetic source draws it).
     let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
@@ -184,8 +186,12 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     let (video_to, station_rx) = watch::channel(None);
     let (camera, rtp, webrtc) = {
         let _side = side.handle().enter();
-        let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
-        let webrtc = start_webrtc(&settings);
+        let camera = crate::camera::Camera::start_on_demand_planned(
+            settings.camera.clone(),
+            scene_rx,
+            plan.clone(),
+        );
+        let webrtc = start_webrtc(&settings, &plan);
         let taps = webrtc
             .as_ref()
             .map(crate::camera::webrtc::WebRtc::feed)
@@ -203,6 +209,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             webrtc: webrtc.is_some(),
             signalling: None,
             streams: None,
+            info: Some(video_info(&camera, &rtp)),
         };
         if let Some(w) = &webrtc {
             video.routes = video.routes.merge(w.routes());
@@ -210,7 +217,7 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             video.signalling = at.map(|addr| (addr, w.signalling_routes()));
             let streams = SignallingAddr::resolve_streams(settings.camera.webrtc.streams, at);
             video.streams =
-                streams.map(|addr| (addr, w.streams_routes(rtp.stream(), rtp.encoder())));
+                streams.map(|addr| (addr, w.streams_routes(rtp.stream(), rtp.running())));
         }
         side.handle()
             .spawn(async move {
@@ -440,40 +447,43 @@ async fn neutral_written(
 
 /// The WebRTC viewers' side, when the camera gives a picture, WebRTC is
 /// on and the HMI (which serves the signalling) runs.
-fn start_webrtc(settings: &Settings) -> Option<crate::camera::webrtc::WebRtc> {
+fn start_webrtc(
+    settings: &Settings,
+    plan: &crate::camera::VideoPlan,
+) -> Option<crate::camera::webrtc::WebRtc> {
     use crate::camera::webrtc;
     let cfg = &settings.camera;
     if !cfg.webrtc.enabled {
         tracing::info!("WebRTC video off (--webrtc off)");
         return None;
     }
-    let stream = webrtc::stream_of(cfg, webrtc::new_stream_id())?;
+    let Some(stream) = webrtc::stream_of(cfg, plan, webrtc::new_stream_id()) else {
+        if cfg.source != crate::camera::SourceKind::None {
+            tracing::info!("WebRTC video off: no H.264 — {}", plan.why);
+        }
+        return None;
+    };
     if settings.hmi.http.is_none() {
         tracing::info!(
             "WebRTC video off: its signalling is served with the browser HMI (--http off)"
         );
         return None;
     }
-    match webrtc::WebRtc::start(&cfg.webrtc, Some(stream)) {
-        Ok(w) => Some(w),
-        Err(e) => {
-            tracing::error!("WebRTC video off: cannot bind its loopback port: {e}");
-            None
-        }
-    }
+    Some(webrtc::WebRtc::start(&cfg.webrtc, Some(stream)))
 }
 
 /// Recording on the vehicle, when there is a camera: its own thread, fed
-/// by the one encode; None (and the camera cannot record) when its
-/// loopback port cannot be bound.
+/// by the one H.264 stream; None (and the camera cannot record) when its
+/// thread cannot be started.
 fn start_recorder(
     settings: &Settings,
+    plan: &crate::camera::VideoPlan,
     clock: &std::sync::Arc<crate::wallclock::WallClock>,
     t0: Instant,
     events: mpsc::UnboundedSender<crate::vehicle::machine::RecorderEvent>,
 ) -> Option<crate::camera::record::Recorder> {
     use crate::camera::record::{RecordConfig, Recorder};
-    camera_spec(&settings.camera)?;
+    camera_spec(&settings.camera, plan)?;
     let cfg = RecordConfig {
         data_dir: settings.data_dir.clone(),
         storage: settings.storage,
@@ -489,18 +499,36 @@ fn start_recorder(
     }
 }
 
+/// What `GET /api/video` adds: the paths (the plan as it is now), whether
+/// `/video.mjpg` has pictures, and what the H.264 sender runs.
+fn video_info(
+    camera: &crate::camera::Camera,
+    rtp: &crate::camera::rtp::RtpVideo,
+) -> crate::hmi::VideoInfo {
+    let plan = camera.plan();
+    let running = rtp.running();
+    let status = camera.status_handle();
+    std::sync::Arc::new(move || {
+        crate::camera::api_json(&plan.borrow(), *running.borrow(), status().h264_profile)
+    })
+}
+
 /// The MAVLink camera component exists when a camera source is configured
-/// or the camera's own H.264 is passed through to RTP; its nominal picture
-/// is the configured size and rate (the running stream's, once the stream
-/// reports it).
-fn camera_spec(c: &crate::camera::CameraConfig) -> Option<crate::vehicle::machine::CameraSpec> {
+/// or H.264 comes from elsewhere; its nominal picture is the camera's as
+/// chosen, or the configured size and rate (the running stream's, once the
+/// stream reports it).
+fn camera_spec(
+    c: &crate::camera::CameraConfig,
+    plan: &crate::camera::VideoPlan,
+) -> Option<crate::vehicle::machine::CameraSpec> {
+    use crate::camera::H264Route;
     use crate::camera::rtp::RtpDest;
-    let passthrough = !c.h264.passthrough.is_empty()
-        && (c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off));
-    let (width, height, fps) = if passthrough {
-        c.h264.passthrough_shape()
-    } else {
-        (c.width, c.height, c.fps)
+    let sent = c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off);
+    let passthrough = plan.h264 == H264Route::FfmpegCopy && sent;
+    let (width, height, fps) = match &plan.capture {
+        Some(cap) => (cap.width, cap.height, cap.fps()),
+        None if passthrough => c.h264.passthrough_shape(),
+        None => (c.width, c.height, c.fps),
     };
     (c.source != crate::camera::SourceKind::None || passthrough).then(|| {
         crate::vehicle::machine::CameraSpec {

@@ -17,7 +17,7 @@ use crate::wallclock::{BUILD_UNIX_S, ClockSync, system_sync, system_unix_us};
 const MIN_FREE_BYTES: u64 = 100 * 1024 * 1024;
 
 /// `name` on PATH (or as a path).
-fn find_program(name: &str) -> Option<PathBuf> {
+pub(super) fn find_program(name: &str) -> Option<PathBuf> {
     if name.contains('/') {
         return Path::new(name).is_file().then(|| PathBuf::from(name));
     }
@@ -112,6 +112,7 @@ pub fn camera(c: &CameraConfig) -> Check {
                 ),
             );
         }
+        SourceKind::V4l2 => return v4l2_camera(c),
         SourceKind::Ffmpeg => (c.ffmpeg.program.as_str(), "sudo apt install ffmpeg"),
         SourceKind::MjpgStreamer => (
             c.mjpg_streamer.program.as_str(),
@@ -213,6 +214,66 @@ pub fn camera(c: &CameraConfig) -> Check {
             ),
             "use a UVC camera that gives MJPEG or YUYV (the OpenROV HD camera gives MJPEG)"
                 .to_owned(),
+        ),
+    }
+}
+
+/// `source = "v4l2"`: the device is there, this user may use it, and it
+/// answers what it offers (`v4l2-ctl --list-formats-ext`).
+fn v4l2_camera(c: &CameraConfig) -> Check {
+    use crate::camera::v4l2::{Node, node, probe};
+    let name = "camera";
+    let dev = Path::new(&c.v4l2.device);
+    match node(dev) {
+        Node::Missing => {
+            return Check::fail(
+                name,
+                format!("camera device {} does not exist", dev.display()),
+                "plug in the USB camera (`v4l2-ctl --list-devices` lists the devices) or name the right one in camera.v4l2.device".to_owned(),
+            );
+        }
+        Node::File | Node::Pipe => {
+            return Check::pass(
+                name,
+                format!(
+                    "{} is not a device: read as a recorded {} stream (camera.v4l2.format)",
+                    dev.display(),
+                    c.v4l2.format
+                ),
+            );
+        }
+        Node::Device => {}
+    }
+    use nix::unistd::{AccessFlags, access};
+    if let Err(e) = access(dev, AccessFlags::R_OK | AccessFlags::W_OK) {
+        return Check::fail(
+            name,
+            format!("camera device {} is not usable by this user: {e}", dev.display()),
+            "add the user to the video group (`sudo adduser USER video`); the service's user neptunus is in it".to_owned(),
+        );
+    }
+    match probe(dev) {
+        Ok(caps) => Check::pass(
+            name,
+            format!(
+                "{} is {} ({}), offers {}",
+                dev.display(),
+                caps.card,
+                caps.driver,
+                if caps.formats.is_empty() {
+                    "no format".to_owned()
+                } else {
+                    caps.fourccs().join(", ")
+                }
+            ),
+        ),
+        Err(e @ crate::camera::v4l2::ProbeError::NoTool { .. }) => {
+            Check::fail(name, e.to_string(), "sudo apt install v4l-utils".to_owned())
+        }
+        Err(e) => Check::fail(
+            name,
+            e.to_string(),
+            "is it the camera's capture node? A camera often has a second node for metadata: name the right one in camera.v4l2.device (`v4l2-ctl --list-devices`)".to_owned(),
         ),
     }
 }

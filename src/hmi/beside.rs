@@ -28,6 +28,8 @@ pub struct VideoRoutes {
     pub signalling: Option<(SocketAddr, axum::Router)>,
     /// mavlink-camera-manager's REST port (`/streams`) and its routes.
     pub streams: Option<(SocketAddr, axum::Router)>,
+    /// What `GET /api/video` adds: the paths the video takes and why.
+    pub info: Option<VideoInfo>,
 }
 
 /// Which of the camera manager's ports.
@@ -36,6 +38,10 @@ pub enum BesideKind {
     Signalling,
     Streams,
 }
+
+/// The camera's own account of its video paths, as JSON, asked at each
+/// `GET /api/video`.
+pub type VideoInfo = Arc<dyn Fn() -> serde_json::Value + Send + Sync>;
 
 /// A listener beside the HMI's and what it serves.
 pub struct Beside {

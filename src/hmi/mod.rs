@@ -45,7 +45,7 @@ pub mod session;
 mod start;
 pub mod tls;
 
-pub use beside::{Beside, BesideKind, VideoRoutes};
+pub use beside::{Beside, BesideKind, VideoInfo, VideoRoutes};
 pub(crate) use outlet::queued;
 pub use outlet::{Deliveries, Delivery, Outlet};
 pub use start::Hmi;
@@ -197,6 +197,8 @@ pub struct HmiContext {
     /// manager's: the WebRTC signalling and `/streams`, where Cockpit looks
     /// for them), under the same guard.
     pub beside: Vec<Beside>,
+    /// The video paths for `GET /api/video`.
+    pub video_info: Option<VideoInfo>,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -226,6 +228,7 @@ pub(crate) struct Shared {
     pub video: bool,
     /// WebRTC's routes are merged: `/api/webrtc` exists.
     pub webrtc: bool,
+    pub video_info: Option<VideoInfo>,
     pub free_sysids: Mutex<BTreeSet<u8>>,
     pub sysid_range: (u8, u8),
     pub next_session: AtomicU64,
@@ -357,6 +360,7 @@ pub async fn serve(
         data_dir: ctx.data_dir,
         video: ctx.extra_routes.is_some(),
         webrtc: ctx.webrtc,
+        video_info: ctx.video_info,
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
         next_session: AtomicU64::new(2),

@@ -234,12 +234,21 @@ async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
 /// Whether the page should load `/video.mjpg`, and where WebRTC is
 /// described when it runs (asked first, so a vehicle without a camera or
 /// WebRTC costs the page no failed request).
+/// Whether the page has video and where; with a camera, the paths its
+/// video takes and why (`path`), whether `/video.mjpg` has pictures
+/// (`mjpeg`), and what the H.264 sender runs now (`h264`).
 async fn video(State(shared): State<Arc<Shared>>) -> Json<serde_json::Value> {
-    Json(serde_json::json!({
+    let mut v = serde_json::json!({
         "available": shared.video,
         "url": "/video.mjpg",
         "webrtc": shared.webrtc.then_some("/api/webrtc"),
-    }))
+    });
+    if let (Some(info), Some(map)) = (&shared.video_info, v.as_object_mut())
+        && let serde_json::Value::Object(extra) = info()
+    {
+        map.extend(extra);
+    }
+    Json(v)
 }
 
 #[derive(Serialize)]

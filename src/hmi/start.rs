@@ -70,7 +70,7 @@ impl Hmi {
         data_dir: PathBuf,
         video: Option<VideoRoutes>,
     ) -> Result<Self, HmiError> {
-        let (extra_routes, webrtc, ports) = match video {
+        let (extra_routes, webrtc, ports, video_info) = match video {
             Some(v) => (
                 Some(v.routes),
                 v.webrtc,
@@ -78,8 +78,9 @@ impl Hmi {
                     v.signalling.map(|s| (BesideKind::Signalling, s)),
                     v.streams.map(|s| (BesideKind::Streams, s)),
                 ],
+                v.info,
             ),
-            None => (None, false, [None, None]),
+            None => (None, false, [None, None], None),
         };
         let outlet = Outlet::new(endpoint);
         let m2r_outlet = Outlet::every_component(endpoint + 1);
@@ -179,6 +180,7 @@ impl Hmi {
             data_dir,
             extra_routes,
             webrtc,
+            video_info,
             transport: server::Transport {
                 limits: settings.limits,
                 tls: tls.map(|t| t.config),

@@ -1,5 +1,6 @@
 """Recording on the vehicle, from a pymavlink ground station against the real
-`neptunus --sim` (its synthetic camera, the one H.264 encode).
+`neptunus --sim`: its synthetic camera (the one H.264 encode), and a
+camera's own H.264 (copied by ffmpeg, or read as a V4L2 camera's stream).
 
 1. The power cut: MAV_CMD_VIDEO_START_CAPTURE to the camera (1, 100), and
    once the vehicle's CAMERA_CAPTURE_STATUS says it has recorded 6 s, the
@@ -273,6 +274,40 @@ def test_a_camera_giving_h264_is_recorded_as_it_gives_it(make_vehicle, stations,
     # The camera's Main profile (CABAC), which the vehicle's own encoder
     # (constrained baseline) never makes.
     assert stream_of(ts) == stream_of(clip) == "h264,Main,320,240", f"the recording {stream_of(ts)!r}, the camera {stream_of(clip)!r}"
+
+
+def test_a_v4l2_camera_giving_h264_is_recorded_as_it_gives_it(make_vehicle, stations, tmp_path):
+    """`source = "v4l2"` on a camera that gives H.264 (here its recorded
+    stream in the device's place: a raw H.264 clip, the SPS/PPS only at
+    its start, read at the camera's rate): the recording holds the camera's
+    own pictures, and nothing is encoded — not one ffmpeg runs."""
+    clip = tmp_path / "camera.h264"
+    subprocess.run(
+        ["ffmpeg", "-hide_banner", "-loglevel", "error", "-y", "-f", "lavfi", "-i", "testsrc2=size=320x240:rate=15",
+         "-t", "60", "-c:v", "libx264", "-preset", "veryfast", "-profile:v", "main", "-bf", "0", "-g", "15", "-pix_fmt", "yuv420p",
+         "-f", "h264", str(clip)],
+        check=True,
+        timeout=120,
+    )
+    v = start_vehicle(make_vehicle, {}, start=False)
+    config = tmp_path / "v4l2.toml"
+    config.write_text(f'[camera]\nsource = "v4l2"\nfps = 15\nrtp = ["off"]\n[camera.v4l2]\ndevice = "{clip}"\nformat = "h264"\n')
+    v.extra_args = ["--config", str(config)]
+    v.start()
+    gcs = stations.gcs(v.udp_port, 255, name="pilot").connect()
+    mark = gcs.inbox.mark()
+    record(gcs, True)
+    started = statustext(gcs.inbox, r"Recording on the vehicle: rec-", mark, START_DEADLINE_S)
+    name = started.text.split(": ", 1)[1].strip()
+    recorded_ms(gcs, 3000, started._idx, 30)
+    assert ffmpeg_children(v.proc.pid) == [], ffmpeg_children(v.proc.pid)
+    mark = gcs.inbox.mark()
+    record(gcs, False)
+    statustext(gcs.inbox, r"^Recording stopped: rec-", mark, 15)
+    ts = sorted((v.data_dir / "recordings").glob(f"{name}-*.ts"))[0]
+    times = frame_times(ts)
+    assert len(times) >= 15 and times[-1] - times[0] >= 2.0, f"{len(times)} pictures over {times[-1] - times[0]:.2f} s"
+    assert stream_of(ts) == "h264,Main,320,240", f"the recording {stream_of(ts)!r}"
 
 
 def stream_of(path: Path) -> str:

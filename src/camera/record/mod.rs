@@ -1,15 +1,15 @@
-//! Recording on the vehicle: the camera's H.264, as the one encode (or the
-//! camera's own stream with `[camera.h264] passthrough`) makes it, written
-//! without re-encoding into MPEG-TS segments, with the telemetry beside it
-//! on the same clock (CSV and WebVTT), in `DATA_DIR/recordings/`.
+//! Recording on the vehicle: the camera's H.264, whatever route makes it
+//! (the one encode, a camera's stream copied by ffmpeg with `[camera.h264]
+//! passthrough`, a V4L2 camera's own H.264), written without re-encoding
+//! into MPEG-TS segments, with the telemetry beside it on the same clock
+//! (CSV and WebVTT), in `DATA_DIR/recordings/`.
 //!
 //! The vehicle core decides who may start and stop (`vehicle/machine/
 //! recording.rs`); the app hands its [`RecordControl`]s and
 //! [`RecordSample`]s here and the [`RecorderEvent`]s back. The H.264 comes
-//! like the WebRTC viewers' does: the encoder sends one more copy of its
-//! RTP to a loopback port of ours while a recording runs (or whenever it
-//! runs anyway — [`LoopbackFeed`]), and the packets are put back into
-//! pictures (`webrtc::depay`). Nothing is encoded here.
+//! like the WebRTC viewers' does: as access units on a queue, from the RTP
+//! sender's one stream while a recording runs (or whenever the stream runs
+//! anyway — [`VideoTap`]). Nothing is encoded or depacketized here.
 //!
 //! Everything runs on a thread of its own (`neptunus-record`): file writes
 //! and the once-a-second fsync may block on an SD card, and must hold up
@@ -37,8 +37,8 @@ use tokio::sync::{mpsc, watch};
 pub use budget::StorageConfig;
 pub use files::{FileKind, RECORDINGS_DIR, RecordingFile, list, listed_path, recordings_dir};
 
-use super::rtp::LoopbackFeed;
-use super::webrtc::depay::{AccessUnit, Depay};
+use super::h264::AccessUnit;
+use super::rtp::VideoTap;
 use crate::vehicle::machine::{RecordControl, RecordSample, RecorderEvent, StorageReport};
 use crate::wallclock::WallClock;
 use files::Files;
@@ -49,9 +49,12 @@ pub const SYNC_PERIOD: Duration = Duration::from_secs(1);
 pub const START_TIMEOUT: Duration = Duration::from_secs(15);
 /// A recording that got no picture for this long stops.
 pub const PICTURE_TIMEOUT: Duration = Duration::from_secs(30);
-/// The video clock follows the RTP timestamps while they stay this close
-/// to the pictures' arrival; past it (an encoder restart), arrival wins.
+/// The video clock follows the pictures' media clock while it stays this
+/// close to their arrival; past it (a restart of the source), arrival wins.
 const CLOCK_SLIP: Duration = Duration::from_millis(500);
+/// Pictures queued for the recorder's thread (about two seconds at 30 fps):
+/// past it (a slow card), the recording skips to the next keyframe.
+const UNITS_QUEUE: usize = 64;
 
 /// What the recorder needs.
 #[derive(Debug, Clone)]
@@ -77,7 +80,7 @@ enum Cmd {
 #[derive(Debug)]
 pub struct Recorder {
     cmds: mpsc::UnboundedSender<Cmd>,
-    feed: LoopbackFeed,
+    feed: VideoTap,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -92,18 +95,15 @@ impl std::fmt::Debug for Cmd {
 }
 
 impl Recorder {
-    /// Binds the loopback port the encoder will send to and starts the
-    /// thread; what happens is told on `events`.
+    /// Starts the thread; what happens is told on `events`.
     ///
     /// # Errors
-    /// When no loopback UDP port can be bound, or the thread not started.
+    /// When the thread cannot be started.
     pub fn start(
         cfg: RecordConfig,
         events: mpsc::UnboundedSender<RecorderEvent>,
     ) -> std::io::Result<Recorder> {
-        let socket = std::net::UdpSocket::bind(std::net::SocketAddr::from(([127, 0, 0, 1], 0)))?;
-        socket.set_nonblocking(true)?;
-        let port = socket.local_addr()?.port();
+        let (units_tx, units) = mpsc::channel(UNITS_QUEUE);
         let (cmds, rx) = mpsc::unbounded_channel();
         let (wanted_tx, wanted) = watch::channel(false);
         let thread = std::thread::Builder::new()
@@ -119,33 +119,29 @@ impl Recorder {
                         return;
                     }
                 };
-                rt.block_on(async move {
-                    match tokio::net::UdpSocket::from_std(socket) {
-                        Ok(socket) => {
-                            let task = Task {
-                                dir: files::recordings_dir(&cfg.data_dir),
-                                cfg,
-                                events,
-                                wanted: wanted_tx,
-                                active: None,
-                                last_report: None,
-                            };
-                            task.run(socket, rx).await;
-                        }
-                        Err(e) => tracing::error!("recording: its socket: {e}"),
-                    }
-                });
+                let task = Task {
+                    dir: files::recordings_dir(&cfg.data_dir),
+                    cfg,
+                    events,
+                    wanted: wanted_tx,
+                    active: None,
+                    last_report: None,
+                };
+                rt.block_on(task.run(units, rx));
             })?;
-        tracing::info!(loopback = port, "recording ready");
+        tracing::info!("recording ready");
         Ok(Recorder {
             cmds,
-            feed: LoopbackFeed { port, wanted },
+            feed: VideoTap {
+                wanted,
+                units: units_tx,
+            },
             thread: Some(thread),
         })
     }
 
-    /// The encoder's loopback destination for recordings.
-    pub fn feed(&self) -> LoopbackFeed {
+    /// The recorder as a consumer of the one H.264 stream.
+    pub fn feed(&self) -> VideoTap {
         self.feed.clone()
     }
 
@@ -188,7 +184,7 @@ impl Drop for Recorder {
 }
 
 /// The recording's clock: recording time 0 is the first keyframe's
-/// arrival; pictures follow their RTP timestamps from there.
+/// arrival; pictures follow their media clock (90 kHz) from there.
 #[derive(Debug, Clone, Copy)]
 struct VideoClock {
     t0: Instant,
@@ -236,7 +232,6 @@ impl VideoClock {
 /// The recording being made.
 struct Active {
     asked: Instant,
-    depay: Depay,
     files: Option<Files>,
     clock: Option<VideoClock>,
     last_picture: Instant,
@@ -252,10 +247,13 @@ struct Task {
 }
 
 impl Task {
-    async fn run(mut self, socket: tokio::net::UdpSocket, mut rx: mpsc::UnboundedReceiver<Cmd>) {
+    async fn run(
+        mut self,
+        mut units: mpsc::Receiver<AccessUnit>,
+        mut rx: mpsc::UnboundedReceiver<Cmd>,
+    ) {
         let mut tick = tokio::time::interval(SYNC_PERIOD);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        let mut buf = vec![0u8; 65_536];
         loop {
             tokio::select! {
                 cmd = rx.recv() => match cmd {
@@ -264,13 +262,9 @@ impl Task {
                     Some(Cmd::Control(RecordControl::Stop)) => self.stop(None),
                     Some(Cmd::Sample(s)) => self.sample(&s),
                 },
-                got = socket.recv(&mut buf) => {
-                    // Read whether or not a recording runs: the encoder
-                    // sends here whenever it runs.
-                    if let Ok(n) = got {
-                        self.datagram(&buf[..n], Instant::now());
-                    }
-                }
+                // Taken whether or not a recording runs: the stream comes
+                // whenever it runs.
+                Some(au) = units.recv() => self.access_unit(&au, Instant::now()),
                 _ = tick.tick() => self.every_second(),
             }
         }
@@ -315,7 +309,6 @@ impl Task {
         let now = Instant::now();
         self.active = Some(Active {
             asked: now,
-            depay: Depay::new(),
             files: None,
             clock: None,
             last_picture: now,
@@ -350,25 +343,22 @@ impl Task {
         });
     }
 
-    fn datagram(&mut self, d: &[u8], arrived: Instant) {
-        if let Err(why) = self.picture(d, arrived) {
+    fn access_unit(&mut self, au: &AccessUnit, arrived: Instant) {
+        if let Err(why) = self.picture(au, arrived) {
             self.stop(Some(why));
         }
     }
 
-    /// One datagram of the encoder's: a picture when it completes one,
-    /// written (the files created at the first keyframe).
-    fn picture(&mut self, d: &[u8], arrived: Instant) -> Result<(), String> {
+    /// One picture of the stream, written while a recording runs (the
+    /// files created at its first keyframe).
+    fn picture(&mut self, au: &AccessUnit, arrived: Instant) -> Result<(), String> {
         let Some(a) = self.active.as_mut() else {
             return Ok(());
         };
-        let Some(au) = a.depay.push(d) else {
-            return Ok(());
-        };
-        a.last_picture = arrived;
         let (files, clock) = match (a.files.as_mut(), a.clock.as_mut()) {
             (Some(f), Some(c)) => (f, c),
-            // The depayloader gives nothing before a keyframe.
+            // A recording starts at a keyframe: a player needs one first.
+            _ if !au.keyframe => return Ok(()),
             _ => {
                 let files = Files::create(&self.dir, self.cfg.clock.unix_us()).map_err(|e| {
                     format!("cannot create a recording in {}: {e}", self.dir.display())
@@ -379,11 +369,12 @@ impl Task {
                 tracing::info!(name = files.name(), "recording started");
                 (
                     a.files.insert(files),
-                    a.clock.insert(VideoClock::new(&au, arrived)),
+                    a.clock.insert(VideoClock::new(au, arrived)),
                 )
             }
         };
-        let t = clock.time(&au, arrived);
+        a.last_picture = arrived;
+        let t = clock.time(au, arrived);
         files
             .picture(&au.data, t, au.keyframe)
             .map_err(|e| format!("cannot write the video: {e}"))

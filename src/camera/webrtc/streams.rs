@@ -29,8 +29,9 @@ pub struct StreamsState {
     pub stream: Option<Stream>,
     /// The RTP stream announced to ground stations (its true size and rate).
     pub rtp: watch::Receiver<Option<RtpStream>>,
-    /// The encoder's process id while it runs.
-    pub encoder: watch::Receiver<Option<u32>>,
+    /// What sends the H.264 while it runs (the encoder, or a camera's own
+    /// stream copied or relayed).
+    pub sender: watch::Receiver<Option<crate::camera::rtp::Running>>,
 }
 
 /// The routes of the REST port.
@@ -41,7 +42,7 @@ pub fn routes(state: StreamsState) -> Router {
 }
 
 async fn streams(State(s): State<StreamsState>) -> Json<Value> {
-    let running = s.encoder.borrow().is_some();
+    let running = s.sender.borrow().is_some();
     let rtp = s.rtp.borrow().clone();
     Json(Value::Array(
         s.stream

@@ -1,5 +1,6 @@
 //! The RTP encoder's own packets, read back on loopback, turned into whole
-//! H.264 access units (Annex B) for the WebRTC viewers, sans-IO.
+//! H.264 access units (Annex B), sans-IO: once, for every consumer in the
+//! vehicle (the WebRTC viewers, the recorder).
 //!
 //! The RTP header is read here; the H.264 payload formats (single NAL
 //! units, STAP-A, FU-A) by str0m's depacketizer. Packets of one picture
@@ -19,17 +20,7 @@
 use str0m::format::CodecExtra;
 use str0m::unversioned::{Depacketizer, H264Depacketizer};
 
-/// One picture, ready for str0m's H.264 packetizer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AccessUnit {
-    /// NAL units with Annex B start codes.
-    pub data: Vec<u8>,
-    /// The media clock at 90 kHz, monotonic across encoder restarts.
-    pub time_90khz: u64,
-    /// Holds an IDR picture (with x264's `repeat-headers`, SPS and PPS too):
-    /// a viewer may start here.
-    pub keyframe: bool,
-}
+pub use crate::camera::h264::AccessUnit;
 
 /// What went by, for the log and the tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
