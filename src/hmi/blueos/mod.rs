@@ -10,7 +10,7 @@
 //! everywhere, the Origin rule on every write; reads are open to every
 //! client those admit (what the vehicle shows anyone watching), writes to
 //! the bag follow [`bag::store`]'s rules. The answers carry CORS headers
-//! for the origins the Origin rule admits ([`super::cors`]).
+//! for the origins the Origin rule admits (`hmi::cors`).
 
 pub mod bag;
 pub mod beacon;

@@ -6,7 +6,7 @@
 //! user's settings under `cockpit/settings-v2/USER/`.
 //!
 //! [`path`] checks the path, [`store`] holds the document and decides who
-//! may write what (sans-IO), [`file`] keeps it across restarts. A refused
+//! may write what (sans-IO), [`mod@file`] keeps it across restarts. A refused
 //! request (a bad path, bad JSON, a value too large, a full bag, another's
 //! value) gets a clear HTTP error with the reason in `detail`, is logged
 //! (one line per kind of refusal every few seconds, with the count) and

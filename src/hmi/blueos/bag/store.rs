@@ -18,7 +18,7 @@
 //! changed by a pilot alone.
 //!
 //! Every value is kept as the JSON text its writer sent, its keys in their
-//! order ([`super::raw`]): Cockpit compares what it reads back with what it
+//! order (`raw.rs`): Cockpit compares what it reads back with what it
 //! wrote, text for text.
 //!
 //! Never reads a file or a clock; the caller persists [`Bag::to_file`] and
