@@ -467,12 +467,7 @@ impl Session {
                 self.confirm.lost(f.serial);
             }
         }
-        let budget = Budget::at(
-            &conn.in_flight,
-            self.cfg.max_in_flight_bytes,
-            now,
-            conn.last_heard,
-        );
+        let budget = Budget::at(&conn.in_flight, self.cfg.max_in_flight_bytes, now);
         if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
             && conn.handshaken
             && let Some(mut cmd) = self.outbox.peek()

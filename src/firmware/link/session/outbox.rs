@@ -146,12 +146,6 @@ const URGENT_ROOM: usize = 32;
 /// most likely free on the board.
 pub(super) const ECHO_OVERDUE: Duration = super::confirm::CONFIRM_TIMEOUT;
 
-/// How long after a frame was written the board must still have been
-/// heard for that frame to count as lost rather than waiting in its
-/// buffer (a full buffer's bytes take about 6 ms at 115200 baud; the
-/// firmware's loop reads them within a few of its passes).
-const SPOKEN_SINCE: Duration = Duration::from_millis(60);
-
 /// The board's receive buffer as the link sees it at one moment: the bytes
 /// written and not yet echoed, and whether the oldest of them is overdue.
 #[derive(Debug, Clone, Copy)]
@@ -162,25 +156,14 @@ pub(super) struct Budget {
 }
 
 impl Budget {
-    /// With `in_flight` at `now`, the board's buffer `max` bytes, and the
-    /// board last heard at `heard`. The oldest frame counts as overdue only
-    /// once the board has spoken well after it was written: a board that
-    /// talks runs its loop, which reads what it was sent, so the frame was
-    /// lost; a board that is silent may be busy with the bytes still in its
-    /// buffer, and writing past that buffer would garble them.
-    pub(super) fn at(
-        in_flight: &VecDeque<InFlight>,
-        max: usize,
-        now: Instant,
-        heard: Option<Instant>,
-    ) -> Self {
+    /// With `in_flight` at `now`, the board's buffer `max` bytes.
+    pub(super) fn at(in_flight: &VecDeque<InFlight>, max: usize, now: Instant) -> Self {
         Self {
             in_flight: in_flight.iter().map(|f| f.frame.len()).sum(),
             max,
-            overdue: in_flight.front().is_some_and(|f| {
-                now.saturating_duration_since(f.at) > ECHO_OVERDUE
-                    && heard.is_some_and(|h| h.saturating_duration_since(f.at) > SPOKEN_SINCE)
-            }),
+            overdue: in_flight
+                .front()
+                .is_some_and(|f| now.saturating_duration_since(f.at) > ECHO_OVERDUE),
         }
     }
 

@@ -117,12 +117,7 @@ impl Session {
     /// Whether the board has room for the next frame [`Session::poll_transmit`]
     /// would write (the pending keep-alive, if the head must wait).
     pub(super) fn next_fits(&self, conn: &Connection, now: Instant) -> bool {
-        let budget = Budget::at(
-            &conn.in_flight,
-            self.cfg.max_in_flight_bytes,
-            now,
-            conn.last_heard,
-        );
+        let budget = Budget::at(&conn.in_flight, self.cfg.max_in_flight_bytes, now);
         let fits = |cmd: &Command| {
             let mut frame = Vec::new();
             encode(cmd, self.cfg.framing, &mut frame);
