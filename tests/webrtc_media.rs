@@ -237,8 +237,15 @@ fn a_viewer_gets_the_pictures_from_its_first_keyframe_on() {
     assert!(offer.contains("profile-level-id=42e01f"), "{offer}");
     assert!(offer.contains("a=sendonly"), "{offer}");
     assert!(offer.contains("10.0.0.1 5000 typ host"), "{offer}");
-    // The browser's part: str0m with its default codecs, receiving.
-    let mut viewer = Rtc::builder().build(now);
+    assert!(
+        offer.contains("/rtp-hdrext/playout-delay"),
+        "the offer asks for no playout delay: {offer}"
+    );
+    // The browser's part: str0m with its default codecs, receiving, and
+    // the playout-delay extension, as Chromium takes it.
+    let mut viewer = Rtc::builder()
+        .set_extension(6, str0m::rtp::Extension::PlayoutDelay)
+        .build(now);
     viewer.add_local_candidate(Candidate::host(addr("10.0.0.2:6000"), "udp").unwrap());
     let answer = viewer
         .sdp_api()
@@ -301,6 +308,14 @@ fn a_viewer_gets_the_pictures_from_its_first_keyframe_on() {
         assert_eq!(&m.data[..], &au.data[..], "the picture as sent");
     }
     assert!(got[0].is_keyframe());
+    for m in &got {
+        let zero = Some(str0m::media::MediaTime::from_hundredths(0));
+        assert_eq!(
+            (m.ext_vals.play_delay_min, m.ext_vals.play_delay_max),
+            (zero, zero),
+            "every picture asks to be shown at once"
+        );
+    }
     assert_eq!(peer.ended(), None);
 }
 

@@ -74,9 +74,14 @@ impl Encode {
         }
     }
 
-    /// The keyframe interval in frames: one second at most.
+    /// The keyframe interval in frames: half a second at most. A new
+    /// viewer (a WebRTC page, QGroundControl joining the RTP, a recording
+    /// starting) shows nothing before a keyframe, and the encoder, a child
+    /// process fed raw pictures, cannot be asked for one on a viewer's
+    /// request; so a keyframe comes often enough for a first picture
+    /// within about half a second of the connection.
     pub fn gop(&self) -> u32 {
-        (self.fps.floor() as u32).max(1)
+        ((self.fps / 2.0).floor() as u32).max(1)
     }
 
     /// ffmpeg's arguments after the program name, for raw pictures of
@@ -369,7 +374,7 @@ mod tests {
             a.contains("-f rawvideo -pix_fmt rgb24 -video_size 640x480 -i pipe:0"),
             "{a}"
         );
-        assert!(a.contains("-g 15 "), "{a}");
+        assert!(a.contains("-g 7 -keyint_min 7 "), "15 fps: {a}");
         assert!(a.contains("repeat-headers=1"), "{a}");
         assert!(a.contains("-c:v libx264 -profile:v baseline"), "{a}");
         assert!(
@@ -382,6 +387,7 @@ mod tests {
             vec![("::1".into(), 5600), ("10.0.0.2".into(), 5602)],
         );
         let a = two.args(&raw).join(" ");
+        assert!(a.contains("-g 5 "), "10 fps: {a}");
         assert!(
             a.ends_with("-f tee [f=rtp:payload_type=96]rtp://[::1]:5600?pkt_size=1200|[f=rtp:payload_type=96]rtp://10.0.0.2:5602?pkt_size=1200"),
             "{a}"

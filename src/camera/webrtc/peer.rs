@@ -4,7 +4,11 @@
 //! The offer names one codec, H.264 constrained baseline
 //! (`profile-level-id=42e01f`, `packetization-mode=1`: what the encoder
 //! makes and every WebRTC browser decodes), and the vehicle's host
-//! candidates (plus any server-reflexive one a STUN server gave). Until
+//! candidates (plus any server-reflexive one a STUN server gave), and the
+//! playout-delay RTP header extension: every picture goes out asking the
+//! viewer to show it at once (minimum and maximum delay 0), which a
+//! browser that takes the extension (Chromium does) obeys by holding no
+//! frame back for smoothness, whatever page plays it. Until
 //! its first keyframe a viewer gets no picture (it could not decode one);
 //! after that, every access unit, packetized by str0m.
 //!
@@ -22,6 +26,7 @@ use str0m::change::{SdpAnswer, SdpPendingOffer};
 use str0m::format::Codec;
 use str0m::media::{Direction, Frequency, MediaKind, MediaTime, Mid, Pt};
 use str0m::net::{Protocol, Receive};
+use str0m::rtp::Extension;
 use str0m::{Candidate, Event, IceConnectionState, Input, Output, Rtc, RtcError};
 
 use crate::camera::h264::AccessUnit;
@@ -29,6 +34,9 @@ use crate::camera::h264::AccessUnit;
 /// The payload type the offer gives H.264 (and its retransmissions).
 const H264_PT: u8 = 96;
 const RTX_PT: u8 = 97;
+/// The id of the playout-delay extension in the offer (free in str0m's
+/// standard map, which the offer keeps).
+const PLAYOUT_DELAY_ID: u8 = 5;
 /// Constrained baseline, level 3.1.
 pub const PROFILE_LEVEL_ID: u32 = 0x42e01f;
 /// A viewer that has not connected by then is given up.
@@ -85,7 +93,9 @@ impl Peer {
         if locals.is_empty() {
             return Err(PeerError::NoAddress);
         }
-        let mut cfg = Rtc::builder().clear_codecs();
+        let mut cfg = Rtc::builder()
+            .clear_codecs()
+            .set_extension(PLAYOUT_DELAY_ID, Extension::PlayoutDelay);
         cfg.codec_config().add_h264(
             Pt::new_with_value(H264_PT),
             Some(Pt::new_with_value(RTX_PT)),
@@ -193,8 +203,12 @@ impl Peer {
         }
         self.has_keyframe = true;
         let time = MediaTime::new(au.time_90khz, Frequency::NINETY_KHZ);
+        // No playout delay: the picture is for a pilot, shown when whole.
+        let zero = MediaTime::from_hundredths(0);
         let written = match self.rtc.writer(self.mid) {
-            Some(w) => w.write(pt, now, time, Arc::clone(data)),
+            Some(w) => w
+                .playout_delay(zero, zero)
+                .write(pt, now, time, Arc::clone(data)),
             None => return,
         };
         match written {
@@ -246,7 +260,8 @@ impl Peer {
     }
 
     /// The viewer's requests for a keyframe (PLI, FIR): it gets the
-    /// encoder's next one, at most a second away.
+    /// encoder's next one, at most half a second away (it cannot be
+    /// asked for one: see `rtp::encoder::Encode::gop`).
     pub fn keyframe_requests(&self) -> u64 {
         self.keyframe_requests
     }
