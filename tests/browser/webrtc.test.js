@@ -258,6 +258,17 @@ test('the HMI page plays WebRTC; when the picture stops it shows VIDEO LOST, the
     lost: !document.getElementById('video-lost').hidden,
   }));
   await until(async () => { const s = await video(); return s.transport === 'webrtc' && s.frames > 20; }, 20000, 'frames over WebRTC');
+  // The picture is shown as soon as it is decoded: the page asks its
+  // receiver for no jitter buffer, and Chromium took the vehicle's
+  // playout-delay extension into its answer.
+  const rx = await page.evaluate(() => {
+    const { pc, video } = window.neptunus.video.webrtc;
+    const [track] = video.srcObject.getVideoTracks();
+    const r = pc.getReceivers().find((x) => x.track === track);
+    return { target: r.jitterBufferTarget, answer: pc.localDescription.sdp };
+  });
+  assert.equal(rx.target, 0, 'jitterBufferTarget');
+  assert.match(rx.answer, /a=extmap:\d+ http:\/\/www\.webrtc\.org\/experiments\/rtp-hdrext\/playout-delay/);
   // Nobody reads /video.mjpg any more: the page's picture is the WebRTC one.
   await until(async () => (await json(`${v.url}camera/status`)).viewers === 0, 5000, 'the MJPEG stream closed');
   // The encoder stops giving pictures: the page says so, then gives WebRTC

@@ -11,6 +11,22 @@ const q = (type, content) => JSON.stringify(content === undefined
   : { type: 'question', content: { type, content } });
 const negotiation = (type, content) => JSON.stringify({ type: 'negotiation', content: { type, content } });
 
+/** Asks the browser to hold no frame back for smoothness: a pilot wants
+ * the newest picture, not an even one (the vehicle asks the same with the
+ * playout-delay RTP header extension). `jitterBufferTarget` is the
+ * standard's, `playoutDelayHint` an older Chromium name; each only where
+ * the browser has it. */
+export function showAtOnce(receiver) {
+  for (const name of ['jitterBufferTarget', 'playoutDelayHint']) {
+    if (!(name in receiver)) continue;
+    try {
+      receiver[name] = 0;
+    } catch {
+      // A browser that refuses the value keeps its own.
+    }
+  }
+}
+
 export class WebRtcVideo {
   /** `iceServers`: as the vehicle lists them (/api/webrtc). */
   constructor({ iceServers = [], onFrame = () => {}, onEnd = () => {} } = {}) {
@@ -77,6 +93,7 @@ export class WebRtcVideo {
     this.pc = pc;
     pc.addTransceiver('video', { direction: 'recvonly' });
     pc.ontrack = (ev) => {
+      showAtOnce(ev.receiver);
       this.video.srcObject = ev.streams[0] || new MediaStream([ev.track]);
       this.video.play().catch(() => {});
       const frame = (_now, meta) => {
