@@ -1,4 +1,4 @@
-//! Camera-to-screen latency of the four ways to watch the vehicle's camera,
+//! Camera-to-screen latency of the five ways to watch the vehicle's camera,
 //! printed as a table.
 //!
 //! The vehicle (`$NEPTUNUS_BIN`, else target/release, else target/debug)
@@ -19,7 +19,13 @@
 //!    mavlink-camera-manager's protocol (as Cockpit speaks it) on the
 //!    dedicated signalling port, its `<video>` read back in
 //!    `requestVideoFrameCallback`;
-//! 4. **RTP/GStreamer** — QGroundControl's receiving pipeline under
+//! 4. **Cockpit WebRTC** — the real Cockpit (its web build, as
+//!    tests/browser/cockpit.test.js runs it: `tests/browser/cockpit-harness.js`),
+//!    given only the address of a vehicle of its own on port 80 of a
+//!    loopback address, playing the vehicle's WebRTC in its own player;
+//!    its code untouched, the `<video>` it plays the stream in read back in
+//!    `requestVideoFrameCallback`;
+//! 5. **RTP/GStreamer** — QGroundControl's receiving pipeline under
 //!    `gst-launch-1.0` (`udpsrc ! rtph264depay ! h264parse ! avdec_h264`),
 //!    then `videoconvert` to 8-bit grey and `fdsink sync=false` into this
 //!    process, which reads each raw frame as it arrives (what an appsink
@@ -27,18 +33,25 @@
 //!
 //! 1–3 run in one Chromium (`tests/browser/latency-bench.js`, through
 //! playwright-core: `npm ci` in tests/browser first) against one vehicle
-//! with `--video-rtp off`; 4 against a second vehicle sending RTP to the
-//! pipeline's port with `--webrtc off`, so each way runs alone with what
-//! it needs. Each way is measured for `VIDEO_LATENCY_S` seconds (default
+//! with `--video-rtp off`; 4 in a Chromium of its own against a vehicle
+//! the script starts (root, for port 80, and Cockpit's build at
+//! ../shared/cockpit/dist or `COCKPIT_DIST`; else skipped with the
+//! reason); 5 against one more vehicle sending RTP to the pipeline's port
+//! with `--webrtc off`, so each way runs alone with what it needs. Each way is measured for `VIDEO_LATENCY_S` seconds (default
 //! 10) after its first readable frame and 1 s of settling. A frame whose
 //! code does not read (a half-updated picture) is counted as rejected, a
 //! frame shown again as repeated; neither is a sample. For the WebRTC
 //! pages the table also gives the age at the callback's `receiveTime`
-//! (the frame's last packet in) and at its `expectedDisplayTime`.
+//! (the frame's last packet in) and at its `expectedDisplayTime`, and the
+//! time from asking (the page's `startSession`) to the first picture; for
+//! the operator page, its own cost per frame (each `drawImage` of a picture
+//! on its video canvas, each animation-frame callback: the HUD and the
+//! rest).
 //!
 //! Under `cargo test --all-targets` (no `--bench`) a smoke run of 1 s per
 //! way; a way whose tools are missing (node, Chromium, playwright-core,
-//! gst-launch-1.0 with avdec_h264) is skipped with the reason. Figures are
+//! Cockpit's build or port 80, gst-launch-1.0 with avdec_h264) is skipped
+//! with the reason. Figures are
 //! printed, never asserted.
 
 #![allow(
@@ -103,8 +116,24 @@ struct Measured {
     rejected: u64,
     repeated: u64,
     seconds: f64,
+    /// From opening the page (or starting the vehicle) to the first picture.
     first_frame_ms: Option<f64>,
+    /// From the page's `startSession` to its first picture (WebRTC).
+    asked_ms: Option<f64>,
+    /// The operator page's own cost per frame: [p50, p95, count] ms.
+    draw_ms: Option<[f64; 3]>,
+    animation_frame_ms: Option<[f64; 3]>,
+    /// Over the window, by the page's `<video>`s given a stream: frames
+    /// decoded, frames dropped, how many `<video>`s.
+    video_frames: Option<[f64; 3]>,
 }
+
+const BROWSER_WAYS: [(&str, &str); 4] = [
+    ("hmi-mjpeg", "HMI MJPEG"),
+    ("hmi-webrtc", "HMI WebRTC"),
+    ("mcm-webrtc", "MCM WebRTC"),
+    ("cockpit-webrtc", "Cockpit WebRTC"),
+];
 
 fn main() -> anyhow::Result<()> {
     let full = std::env::args().any(|a| a == "--bench");
@@ -121,7 +150,7 @@ fn main() -> anyhow::Result<()> {
     let mut rows = Vec::new();
     match browser_missing() {
         Some(why) => {
-            for name in ["HMI MJPEG", "HMI WebRTC", "MCM WebRTC"] {
+            for (_, name) in BROWSER_WAYS {
                 rows.push(Row {
                     name,
                     outcome: Err(format!("skipped: {why}")),
@@ -194,6 +223,13 @@ fn gstreamer_missing() -> Option<String> {
     None
 }
 
+/// The bench's camera, as a config file's section.
+fn camera_toml() -> String {
+    format!(
+        "[camera]\nsource = \"synthetic\"\nwidth = {WIDTH}\nheight = {HEIGHT}\nfps = {FPS}\nsynthetic_timecode = true\n"
+    )
+}
+
 /// The vehicle with the bench's camera; `extra`: the video arguments;
 /// `more_toml`: appended to its config file.
 fn vehicle(
@@ -204,12 +240,7 @@ fn vehicle(
 ) -> anyhow::Result<(Vehicle, std::net::SocketAddr)> {
     std::fs::create_dir_all(dir)?;
     let config = dir.join("neptunus.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "[camera]\nsource = \"synthetic\"\nwidth = {WIDTH}\nheight = {HEIGHT}\nfps = {FPS}\nsynthetic_timecode = true\n{more_toml}"
-        ),
-    )?;
+    std::fs::write(&config, format!("{}{more_toml}", camera_toml()))?;
     let mav = format!("udpin:127.0.0.1:{}", free_udp_port()?);
     let config = config.to_string_lossy().into_owned();
     let mut args = vec!["--sim", "--config", &config, "--mavlink", &mav];
@@ -219,7 +250,8 @@ fn vehicle(
     Ok((v, addr))
 }
 
-/// 1–3: one vehicle, the node script, its JSON.
+/// 1–4: one vehicle (and Cockpit's, which the script starts), the node
+/// script, its JSON.
 fn browser_paths(bin: &Path, seconds: u64, full: bool) -> anyhow::Result<Vec<Row>> {
     let dir = tempfile::tempdir()?;
     // The MCM viewer's page is served from an origin of its own, as
@@ -242,6 +274,8 @@ fn browser_paths(bin: &Path, seconds: u64, full: bool) -> anyhow::Result<Vec<Row
         .arg(warmup_ms.to_string())
         .arg(first_ms.to_string())
         .current_dir(repo().join("tests/browser"))
+        .env("NEPTUNUS_BIN", bin)
+        .env("LATENCY_VEHICLE_TOML", camera_toml())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -267,9 +301,12 @@ fn browser_paths(bin: &Path, seconds: u64, full: bool) -> anyhow::Result<Vec<Row
             .take()
             .map(|p| Box::new(p) as Box<dyn Read + Send>),
     );
-    // Three ways, each: its first frame, settling, the measurement.
+    // Four ways, each: its first frame (Cockpit's app loading first: four
+    // times as long), settling, the measurement.
     let deadline = Instant::now()
-        + Duration::from_millis(3 * (first_ms + warmup_ms + seconds * 1000) + 30_000);
+        + Duration::from_millis(
+            4 * (warmup_ms + seconds * 1000) + 3 * first_ms + 4 * first_ms + 60_000,
+        );
     let status = loop {
         if let Some(s) = node.try_wait()? {
             break s;
@@ -298,13 +335,19 @@ fn browser_paths(bin: &Path, seconds: u64, full: bool) -> anyhow::Result<Vec<Row
         json["chromium"].as_str().unwrap_or("(version unknown)")
     );
     let mut rows = Vec::new();
-    for (key, name) in [
-        ("hmi-mjpeg", "HMI MJPEG"),
-        ("hmi-webrtc", "HMI WebRTC"),
-        ("mcm-webrtc", "MCM WebRTC"),
-    ] {
+    let spread = |v: &serde_json::Value| -> Option<[f64; 3]> {
+        Some([v[0].as_f64()?, v[1].as_f64()?, v[2].as_f64()?])
+    };
+    for (key, name) in BROWSER_WAYS {
         let p = &json["paths"][key];
         let outcome = if let Some(e) = p["error"].as_str() {
+            if e.starts_with("skipped:") {
+                rows.push(Row {
+                    name,
+                    outcome: Err(e.to_owned()),
+                });
+                continue;
+            }
             Err(format!(
                 "{e}\n--- neptunus stderr (tail) ---\n{}",
                 v.stderr_tail()
@@ -315,6 +358,10 @@ fn browser_paths(bin: &Path, seconds: u64, full: bool) -> anyhow::Result<Vec<Row
                 repeated: p["repeated"].as_u64().unwrap_or(0),
                 seconds: p["seconds"].as_f64().unwrap_or(f64::NAN),
                 first_frame_ms: p["first_frame_ms"].as_f64(),
+                asked_ms: p["asked_ms"].as_f64(),
+                draw_ms: spread(&p["draw_ms"]),
+                animation_frame_ms: spread(&p["animation_frame_ms"]),
+                video_frames: spread(&p["video_frames"]),
                 ..Measured::default()
             };
             for s in p["samples"].as_array().into_iter().flatten() {
@@ -439,17 +486,18 @@ fn print_table(rows: &[Row], bin: &Path, seconds: u64, full: bool, load: &str) {
     );
     println!("load average at the start: {load}");
     println!(
-        "| way to watch | frames seen (of ~{}) | p50 ms | p95 ms | max ms | rejected | repeated | first frame after |",
+        "| way to watch | frames seen (of ~{}) | p50 ms | p95 ms | max ms | rejected | repeated | first picture after opening | after asking |",
         u64::from(FPS) * seconds
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let secs = |ms: Option<f64>| ms.map_or("—".into(), |ms| format!("{:.2} s", ms / 1000.0));
     for r in rows {
         match &r.outcome {
             Ok(m) => {
                 let mut s = m.shown.clone();
                 s.sort_by(f64::total_cmp);
                 println!(
-                    "| {} | {} | {:.1} | {:.1} | {:.1} | {} | {} | {} |",
+                    "| {} | {} | {:.1} | {:.1} | {:.1} | {} | {} | {} | {} |",
                     r.name,
                     s.len(),
                     pct(&s, 0.5),
@@ -457,12 +505,12 @@ fn print_table(rows: &[Row], bin: &Path, seconds: u64, full: bool, load: &str) {
                     s.last().copied().unwrap_or(f64::NAN),
                     m.rejected,
                     m.repeated,
-                    m.first_frame_ms
-                        .map_or("—".into(), |ms| format!("{:.2} s", ms / 1000.0)),
+                    secs(m.first_frame_ms),
+                    secs(m.asked_ms),
                 );
             }
             Err(why) => println!(
-                "| {} | — | — | — | — | | | {} |",
+                "| {} | — | — | — | — | | | | {} |",
                 r.name,
                 why.replace('\n', " ⏎ ")
             ),
@@ -477,22 +525,49 @@ fn print_table(rows: &[Row], bin: &Path, seconds: u64, full: bool, load: &str) {
         println!();
         println!("WebRTC, by requestVideoFrameCallback's own times (p50 / p95 ms):");
         println!(
-            "| way to watch | age at receiveTime (last packet in) | age at expectedDisplayTime |"
+            "| way to watch | age at receiveTime (last packet in) | age at expectedDisplayTime | decoded / dropped by its <video>s (how many) |"
         );
-        println!("|---|---|---|");
+        println!("|---|---|---|---|");
         for (name, m) in webrtc {
             let mut rx = m.received.clone();
             rx.sort_by(f64::total_cmp);
             let mut dp = m.displayed.clone();
             dp.sort_by(f64::total_cmp);
             println!(
-                "| {name} | {:.1} / {:.1} ({}) | {:.1} / {:.1} ({}) |",
+                "| {name} | {:.1} / {:.1} ({}) | {:.1} / {:.1} ({}) | {} |",
                 pct(&rx, 0.5),
                 pct(&rx, 0.95),
                 rx.len(),
                 pct(&dp, 0.5),
                 pct(&dp, 0.95),
                 dp.len(),
+                m.video_frames
+                    .map_or("—".into(), |[d, x, n]| format!("{d} / {x} ({n})")),
+            );
+        }
+    }
+    let costs: Vec<_> = rows
+        .iter()
+        .filter_map(|r| Some((r.name, r.outcome.as_ref().ok()?)))
+        .filter(|(_, m)| m.draw_ms.is_some() || m.animation_frame_ms.is_some())
+        .collect();
+    if !costs.is_empty() {
+        println!();
+        println!("The operator page's own cost per frame (p50 / p95 ms, count):");
+        println!(
+            "| way to watch | drawImage of a picture on its canvas | an animation frame (HUD, gamepad, view) |"
+        );
+        println!("|---|---|---|");
+        let cell = |c: Option<[f64; 3]>| {
+            c.map_or("—".into(), |[p50, p95, n]| {
+                format!("{p50:.2} / {p95:.2} ({n})")
+            })
+        };
+        for (name, m) in costs {
+            println!(
+                "| {name} | {} | {} |",
+                cell(m.draw_ms),
+                cell(m.animation_frame_ms)
             );
         }
     }

@@ -14,16 +14,15 @@
 // is refused. Waits poll a condition with a deadline; nothing sleeps to let
 // time pass. Screenshots of each viewport go to target/cockpit-screenshots/
 // (and to the guide's screenshots with COCKPIT_SCREENSHOTS_TO_GUIDE=1).
+// The vehicle on port 80, Cockpit's server and its browser: cockpit-harness.js.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { createServer } from 'node:http';
-import { existsSync, mkdirSync, mkdtempSync, readFileSync, readdirSync, rmSync, statSync, copyFileSync } from 'node:fs';
+import { mkdirSync, mkdtempSync, existsSync, readdirSync, rmSync, statSync, copyFileSync } from 'node:fs';
 import { tmpdir } from 'node:os';
-import { extname, join, resolve } from 'node:path';
-import { chromium } from 'playwright-core';
-import { CHROMIUM, REPO, startVehicle, until } from './harness.js';
+import { join } from 'node:path';
+import { REPO, until } from './harness.js';
+import { cockpitContext as contextFor, cockpitMissing, cockpitVehicle, launchCockpitBrowser, serveCockpit } from './cockpit-harness.js';
 
-const DIST = resolve(process.env.COCKPIT_DIST || join(REPO, '..', 'shared', 'cockpit', 'dist'));
 const PASSWORD = 'tide-pool-42';
 const SHOTS = join(REPO, 'target', 'cockpit-screenshots');
 const GUIDE_SHOTS = join(REPO, 'docs', 'guide', 'src', 'screenshots');
@@ -31,40 +30,15 @@ const GUIDE_SHOTS = join(REPO, 'docs', 'guide', 'src', 'screenshots');
  * that takes a while. */
 const COCKPIT_READY_MS = 180000;
 
-const TYPES = {
-  '.html': 'text/html', '.js': 'text/javascript', '.mjs': 'text/javascript', '.css': 'text/css',
-  '.json': 'application/json', '.webmanifest': 'application/manifest+json', '.svg': 'image/svg+xml',
-  '.png': 'image/png', '.avif': 'image/avif', '.ico': 'image/x-icon', '.wasm': 'application/wasm',
-  '.woff': 'font/woff', '.woff2': 'font/woff2', '.ttf': 'font/ttf', '.glb': 'model/gltf-binary',
-};
-
 let browser;
 let server;
 let origin;
 before(async () => {
-  if (!existsSync(join(DIST, 'index.html'))) {
-    throw new Error(`Cockpit's web build is not at ${DIST}: set COCKPIT_DIST (the shared folder's cockpit/README.md says which commit and how it is built)`);
-  }
-  let unprivileged = 1024;
-  try { unprivileged = Number(readFileSync('/proc/sys/net/ipv4/ip_unprivileged_port_start', 'utf8')); } catch { /* not Linux */ }
-  if (process.getuid?.() !== 0 && unprivileged > 80) {
-    throw new Error('the vehicle must listen on port 80 (Cockpit derives every URL from the address alone): run as root, as the test command does');
-  }
-  // A single-page app: an unknown path is index.html.
-  server = createServer((req, res) => {
-    let file = join(DIST, decodeURIComponent(new URL(req.url, 'http://x').pathname));
-    if (!file.startsWith(DIST) || !existsSync(file) || statSync(file).isDirectory()) file = join(DIST, 'index.html');
-    res.writeHead(200, { 'content-type': TYPES[extname(file)] || 'application/octet-stream' });
-    res.end(readFileSync(file));
-  });
-  await new Promise((ok) => server.listen(0, '127.0.0.1', ok));
-  origin = `http://127.0.0.1:${server.address().port}`;
-  browser = await chromium.launch({
-    executablePath: CHROMIUM,
-    headless: true,
-    args: ['--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--autoplay-policy=no-user-gesture-required',
-      '--disable-background-networking', '--disable-component-update', '--disable-sync'],
-  });
+  const missing = cockpitMissing();
+  if (missing) throw new Error(missing);
+  server = await serveCockpit();
+  origin = server.origin;
+  browser = await launchCockpitBrowser();
   mkdirSync(SHOTS, { recursive: true });
 });
 after(async () => {
@@ -73,55 +47,16 @@ after(async () => {
 });
 
 /** The vehicle on port 80 of a loopback address of its own, with the pilot
- * password set, nobody piloting without it, and Cockpit's origin allowed.
- * Another address is tried when one is taken. */
-async function rovAt(dataDir, ip) {
-  for (let attempt = 0; ; attempt++) {
-    const at = ip || `127.0.${2 + Math.floor(Math.random() * 250)}.${2 + Math.floor(Math.random() * 250)}`;
-    let v;
-    try {
-      v = await startVehicle(['--video-rtp', 'off'], {
-        http: `${at}:80`,
-        password: existsSync(join(dataDir, 'hmi-password')) ? undefined : PASSWORD,
-        dataDir,
-        toml: '[camera]\nsource = "synthetic"\nfps = 30\n',
-        hmiToml: `allowed_origins = ["${origin}"]\nopen_control = "none"`,
-      });
-    } catch (e) {
-      if (ip || attempt >= 4) throw e;
-      continue;
-    }
-    // The camera manager's ports beside it, where Cockpit looks.
-    const beside = await until(() => {
-      const log = v.stderr();
-      return log.includes(`on ws://${at}:6021/`) && log.includes(`on http://${at}:6020/streams`) ? true : null;
-    }, 20000, 'the signalling (6021) and /streams (6020)').catch(() => null);
-    if (beside) return { ...v, ip: at };
-    await v.stop();
-    if (ip || attempt >= 4) throw new Error(`ports 6020/6021 on ${at} were taken`);
-  }
-}
+ * password set, nobody piloting without it, and Cockpit's origin allowed. */
+const rovAt = (dataDir, ip) => cockpitVehicle(dataDir, {
+  origin,
+  ip,
+  password: existsSync(join(dataDir, 'hmi-password')) ? undefined : PASSWORD,
+  toml: '[camera]\nsource = "synthetic"\nfps = 30\n',
+  hmiToml: 'open_control = "none"',
+});
 
-/** A browser context as a new user's browser: Cockpit given the vehicle's
- * address (and past its first-run screens: the tutorial, the splash), the
- * internet refused, no service worker. */
-async function cockpitContext(ip, viewport) {
-  const context = await browser.newContext({ viewport, serviceWorkers: 'block' });
-  await context.route('**/*', (route) => {
-    const host = new URL(route.request().url()).hostname;
-    return host === '127.0.0.1' || host === ip ? route.continue() : route.abort();
-  });
-  await context.addInitScript((address) => {
-    if (location.port === '80' || location.port === '') return; // the vehicle's own page
-    localStorage.setItem('cockpit-vehicle-address', address);
-    localStorage.setItem('cockpit-has-seen-tutorial', 'true');
-    localStorage.setItem('cockpit-show-splash-screen-on-startup', 'false');
-    localStorage.setItem('cockpit-prevent-auto-vehicle-discovery-dialog', 'true');
-    // Headless Chromium has no speech voices: Cockpit would say so.
-    localStorage.setItem('cockpit-enable-voice-alerts', 'false');
-  }, ip);
-  return context;
-}
+const cockpitContext = (ip, viewport) => contextFor(browser, ip, viewport);
 
 /** What a page of Cockpit did with the vehicle: its requests and console. */
 function watch(page, ip) {
