@@ -222,6 +222,15 @@ fn main() -> anyhow::Result<()> {
         .filter(|p| p.extension().is_some_and(|x| x == "tlog"))
         .collect();
     tlogs.sort();
+    if !python().exists() && !std::env::args().any(|a| a == "--bench") {
+        // The smoke run under `cargo test` comes before the test command
+        // has made the clients' venv on a fresh machine.
+        println!(
+            "tlog: not read back (skipped: no {}; the test command makes it after the cargo tests)",
+            python().display()
+        );
+        return Ok(());
+    }
     let out = Command::new(python())
         .arg("-c")
         .arg(READ_TLOG)
