@@ -10,13 +10,16 @@ cd "$(dirname "$0")/.."
 # would only fill the disk (about 14 GB of the debug build's 22).
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 
-echo "== toolchain"
+# Each stage's header says how long the run has taken so far.
+stage() { printf '== %s  [%d min %02d s]\n' "$1" $((SECONDS / 60)) $((SECONDS % 60)); }
+
+stage "toolchain"
 cargo --version
 rustc --version
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
-echo "== test tools"
+stage "test tools"
 # The camera tests run a real ffmpeg (tests/camera.rs).
 if ! command -v ffmpeg >/dev/null 2>&1; then
     as_root apt-get update -q
@@ -62,7 +65,7 @@ if [ ! -f "$firmware_dir/30.0.2/OpenROV/OpenROV.ino" ] || [ ! -f "$firmware_dir/
 fi
 export OPENROV_FIRMWARE_DIR="$firmware_dir"
 
-echo "== formatting and lints"
+stage "formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked --features hil -- -D warnings
 # The vehicle as packaged (without the simulator of the genuine firmware).
@@ -70,7 +73,7 @@ cargo clippy --all-targets --locked -- -D warnings
 # The API docs build without a warning (broken links included).
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --features hil
 
-echo "== the user guide (mdBook: docs/guide -> target/guide)"
+stage "the user guide (mdBook: docs/guide -> target/guide)"
 # Debian has no mdbook package: cargo installs the pinned version once. Only
 # the search feature: the guide is built here, never served or watched.
 mdbook_version=0.4.52
@@ -87,11 +90,11 @@ if ! find /usr/share/fonts -name '*.ttf' -print -quit 2>/dev/null | grep -q .; t
     as_root apt-get update -q && as_root apt-get install -y -q fonts-dejavu-core
 fi
 
-echo "== tests"
+stage "tests"
 status=0
 cargo test --all-targets --locked --features hil --no-fail-fast 2>&1 | tee target/test-output.txt || status=1
 
-echo "== fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
+stage "fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
 # libFuzzer (built by libfuzzer-sys) needs a C++ compiler.
 if ! command -v c++ >/dev/null 2>&1; then
     as_root apt-get update -q && as_root apt-get install -y -q g++
@@ -100,7 +103,7 @@ fi
 # crash fails the run with the input's path and how to run it again.
 FUZZ_SECONDS="${FUZZ_SECONDS:-20}" bash fuzz/run.sh || status=1
 
-echo "== interoperability tests (real ground-station clients against the binary)"
+stage "interoperability tests (real ground-station clients against the binary)"
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
 venv=target/interop-venv
 reqs=tests/interop/requirements.txt
@@ -125,7 +128,7 @@ rm -f target/interop-junit.xml
 NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest tests/interop -q \
     -p no:cacheprovider --timeout 300 --junitxml target/interop-junit.xml || status=1
 
-echo "== browser tests (Debian's Chromium, driven by playwright-core)"
+stage "browser tests (Debian's Chromium, driven by playwright-core)"
 # Debian's Chromium, never a browser a tool downloads; npm ci from the lock.
 if [ ! -x /usr/bin/chromium ]; then
     as_root apt-get update -q && as_root apt-get install -y -q chromium
@@ -147,7 +150,7 @@ rm -f target/browser-junit.xml
     --test-reporter=junit --test-reporter-destination=../../target/browser-junit.xml \
     ./*.test.js) || status=1
 
-echo "== interoperability tests with the genuine firmware in the loop (neptunus --hil)"
+stage "interoperability tests with the genuine firmware in the loop (neptunus --hil)"
 # The same clients against `--hil`: QGroundControl's connect sequence,
 # pymavlink's everyday calls, depth hold and the mavlink2rest client
 # (Cockpit's API), with the 30.0.2 firmware in simavr reading the
@@ -173,7 +176,7 @@ else
     status=1
 fi
 
-echo "== Debian package (built for this machine and checked: tests/package.sh)"
+stage "Debian package (built for this machine and checked: tests/package.sh)"
 pk_pass=0
 pk_fail=0
 if bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
