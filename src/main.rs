@@ -478,7 +478,9 @@ fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
 fn raise_open_file_limit() {
     use nix::sys::resource::{Resource, getrlimit, setrlimit};
     // RLIM_INFINITY is not a valid soft limit for descriptors (fs.nr_open caps it).
-    const CEILING: u64 = 1 << 20;
+    // `rlim_t` is 64 bits on x86_64 and arm64 but 32 on armhf: the ceiling
+    // is written in the platform's own type.
+    const CEILING: nix::libc::rlim_t = 1 << 20;
     match getrlimit(Resource::RLIMIT_NOFILE) {
         Ok((soft, hard)) => {
             let target = hard.min(CEILING);
