@@ -296,6 +296,8 @@ fn method_check(arm: &Arm) -> anyhow::Result<()> {
 /// One scenario's figures.
 struct Row {
     scenario: Scenario,
+    /// The guest's resident memory at the end of the reference run, MB.
+    guest_mb: f64,
     /// Units (datagrams to the station + HMI messages) per second, reference run.
     units_per_s: f64,
     /// The logged run's units per second over the reference's.
@@ -316,7 +318,7 @@ fn scenario_budget(s: Scenario, arm: &Arm, k: &Knobs) -> anyhow::Result<Row> {
     let secs = k.window.as_secs_f64();
     // Reference: real time, no logging.
     let plain = arm.launcher("plain", None)?;
-    let reference = {
+    let (reference, guest_mb) = {
         let mut r = scenario::start_on(s, &plain, &arm.host_bin, None)?;
         std::thread::sleep(k.settle);
         r.check()?;
@@ -324,7 +326,8 @@ fn scenario_budget(s: Scenario, arm: &Arm, k: &Knobs) -> anyhow::Result<Row> {
         std::thread::sleep(k.window);
         let t1 = r.tally.counts();
         r.check()?;
-        units(t1) - units(t0)
+        let guest_mb = guest_resident_kb(r.vehicle.pid(), &arm.bin)? as f64 / 1024.0;
+        (units(t1) - units(t0), guest_mb)
     };
     // Counting: the same scenario under qemu's logs.
     let name = format!("{}-count", s.name());
@@ -352,6 +355,7 @@ fn scenario_budget(s: Scenario, arm: &Arm, k: &Knobs) -> anyhow::Result<Row> {
     let syscalls_per_unit = counted.syscalls as f64 / got as f64;
     Ok(Row {
         scenario: s,
+        guest_mb,
         units_per_s,
         kept_up: got as f64 / wall / units_per_s,
         insns_per_unit,
@@ -360,6 +364,43 @@ fn scenario_budget(s: Scenario, arm: &Arm, k: &Knobs) -> anyhow::Result<Row> {
         insns_per_s: insns_per_unit * units_per_s,
         syscalls_per_s: syscalls_per_unit * units_per_s,
     })
+}
+
+/// What the ARM program holds in memory under qemu-arm `pid`: the resident
+/// pages of the guest's mappings, which qemu places in one reserved run of
+/// the host's address space (the mappings around the binary's, with no gap
+/// between them); qemu's own code, heap and translation cache lie outside.
+fn guest_resident_kb(pid: u32, bin: &Path) -> anyhow::Result<u64> {
+    let smaps = std::fs::read_to_string(format!("/proc/{pid}/smaps"))?;
+    let bin = std::fs::canonicalize(bin)?;
+    // (start, end, path, Rss kB) per mapping.
+    let mut maps: Vec<(u64, u64, String, u64)> = Vec::new();
+    for line in smaps.lines() {
+        let mut f = line.split_whitespace();
+        let first = f.next().unwrap_or("");
+        if let Some((a, b)) = first.split_once('-')
+            && let (Ok(a), Ok(b)) = (u64::from_str_radix(a, 16), u64::from_str_radix(b, 16))
+        {
+            let path = f.nth(4).unwrap_or("").to_owned();
+            maps.push((a, b, path, 0));
+        } else if first == "Rss:"
+            && let Some(m) = maps.last_mut()
+        {
+            m.3 = f.next().and_then(|v| v.parse().ok()).unwrap_or(0);
+        }
+    }
+    let at = maps
+        .iter()
+        .position(|m| Path::new(&m.2) == bin)
+        .with_context(|| format!("{} is not mapped in process {pid}", bin.display()))?;
+    let (mut lo, mut hi) = (at, at);
+    while lo > 0 && maps[lo - 1].1 == maps[lo].0 {
+        lo -= 1;
+    }
+    while hi + 1 < maps.len() && maps[hi + 1].0 == maps[hi].1 {
+        hi += 1;
+    }
+    Ok(maps[lo..=hi].iter().map(|m| m.3).sum())
 }
 
 /// Share of the 1 GHz core, %.
@@ -373,11 +414,11 @@ fn kernel_pct(syscalls_per_s: f64, k: &Knobs) -> f64 {
 
 fn print_scenarios(rows: &[Row], k: &Knobs) {
     println!(
-        "\n{:<9} {:>10} {:>8} {:>12} {:>10} {:>11} {:>9} {:>10} {:>9}  goal",
-        "scenario", "units/s", "kept up", "insns/unit", "sys/unit", "Minsns/s", "user %", "syscall/s", "kernel %"
+        "\n{:<9} {:>10} {:>8} {:>12} {:>10} {:>11} {:>9} {:>10} {:>9} {:>9}  goal",
+        "scenario", "units/s", "kept up", "insns/unit", "sys/unit", "Minsns/s", "user %", "syscall/s", "kernel %", "guest MB"
     );
     println!(
-        "(units: datagrams to the station + HMI messages; user %: share of a 1 GHz Cortex-A8 at IPC {}; kernel %: estimated from the system calls at {} µs each)",
+        "(units: datagrams to the station + HMI messages; user %: share of a 1 GHz Cortex-A8 at IPC {}; kernel %: estimated from the system calls at {} µs each; guest MB: the ARM program's resident memory at the end of the reference run)",
         k.ipc, k.syscall_us
     );
     for r in rows {
@@ -387,7 +428,7 @@ fn print_scenarios(rows: &[Row], k: &Knobs) {
             _ => "",
         };
         println!(
-            "{:<9} {:>10.1} {:>8.2} {:>12.0} {:>10.2} {:>11.2} {:>9.2} {:>10.0} {:>9.2}  {goal}",
+            "{:<9} {:>10.1} {:>8.2} {:>12.0} {:>10.2} {:>11.2} {:>9.2} {:>10.0} {:>9.2} {:>9.1}  {goal}",
             r.scenario.name(),
             r.units_per_s,
             r.kept_up,
@@ -396,7 +437,8 @@ fn print_scenarios(rows: &[Row], k: &Knobs) {
             r.insns_per_s / 1e6,
             share_pct(r.insns_per_s, k),
             r.syscalls_per_s,
-            kernel_pct(r.syscalls_per_s, k)
+            kernel_pct(r.syscalls_per_s, k),
+            r.guest_mb
         );
     }
 }

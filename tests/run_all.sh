@@ -165,6 +165,13 @@ pk_pass=0
 pk_fail=0
 if bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
 
+echo "== the BeagleBone's vehicle (armhf: built as the guide says, packaged, run under qemu-arm: tests/armhf.sh)"
+# Its build, its package's checks, --sim and the genuine firmware under
+# qemu-arm -cpu cortex-a8; it counts as one test here and prints its own.
+ah_pass=0
+ah_fail=0
+if bash tests/armhf.sh; then ah_pass=1; else ah_fail=1; status=1; fi
+
 # Summarise as one plain line for CI: cargo prints one result line per test
 # binary; pytest's and node's counts come from their JUnit XML.
 junit_counts() {
@@ -223,8 +230,8 @@ if shown:
 PY
 }
 failure_details target/test-output.txt target/interop-junit.xml target/interop-hil-junit.xml \
-    target/browser-junit.xml target/browser-hil-junit.xml
-awk -v pp="$((py_pass + br_pass + pk_pass))" -v pf="$((py_fail + br_fail + pk_fail))" -v ps="$((py_skip + br_skip))" \
+    target/browser-junit.xml target/browser-hil-junit.xml target/armhf-junit.xml
+awk -v pp="$((py_pass + br_pass + pk_pass + ah_pass))" -v pf="$((py_fail + br_fail + pk_fail + ah_fail))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
 exit "$status"
