@@ -177,7 +177,10 @@ fn arm() -> anyhow::Result<Arm> {
         "NEPTUNUS_ARMHF_BIN",
         "target/armv7-unknown-linux-gnueabihf/rov/neptunus",
     );
-    let qemu = pick("NEPTUNUS_QEMU_ARM", "target/qemu-trixie/root/usr/bin/qemu-arm");
+    let qemu = pick(
+        "NEPTUNUS_QEMU_ARM",
+        "target/qemu-trixie/root/usr/bin/qemu-arm",
+    );
     if !bin.is_file() {
         bail!(
             "no armhf binary at {} — `bash debian/build-armhf.sh`, or set NEPTUNUS_ARMHF_BIN",
@@ -230,11 +233,20 @@ fn header(arm: &Arm, k: &Knobs) {
             .args(args)
             .output()
             .ok()
-            .map(|o| String::from_utf8_lossy(&o.stdout).lines().next().unwrap_or("?").to_owned())
+            .map(|o| {
+                String::from_utf8_lossy(&o.stdout)
+                    .lines()
+                    .next()
+                    .unwrap_or("?")
+                    .to_owned()
+            })
             .unwrap_or_else(|| "?".into())
     };
     println!("neptunus CPU budget on the BeagleBone (armhf under qemu-arm -cpu cortex-a8)");
-    println!("date:     {}", out(Path::new("date"), &["-u", "+%Y-%m-%d %H:%M:%S UTC"]));
+    println!(
+        "date:     {}",
+        out(Path::new("date"), &["-u", "+%Y-%m-%d %H:%M:%S UTC"])
+    );
     let cpu = std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|c| {
@@ -243,8 +255,15 @@ fn header(arm: &Arm, k: &Knobs) {
                 .map(|v| v.trim_start_matches([' ', '\t', ':']).to_owned())
         })
         .unwrap_or_else(|| "?".into());
-    println!("host:     {cpu}, nproc {}", std::thread::available_parallelism().map_or(0, |n| n.get()));
-    println!("binary:   {} ({} bytes)", arm.bin.display(), std::fs::metadata(&arm.bin).map_or(0, |m| m.len()));
+    println!(
+        "host:     {cpu}, nproc {}",
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
+    println!(
+        "binary:   {} ({} bytes)",
+        arm.bin.display(),
+        std::fs::metadata(&arm.bin).map_or(0, |m| m.len())
+    );
     println!("qemu:     {}", out(&arm.qemu, &["--version"]));
     println!("board:    {} emulate-board (host)", arm.host_bin.display());
     println!(
@@ -252,7 +271,11 @@ fn header(arm: &Arm, k: &Knobs) {
         k.window.as_secs_f64(),
         k.settle.as_secs(),
         k.frames,
-        if k.full { "" } else { " — smoke run (no --bench)" }
+        if k.full {
+            ""
+        } else {
+            " — smoke run (no --bench)"
+        }
     );
     println!(
         "CPU:      1 GHz Cortex-A8 at an assumed {} instructions per cycle; kernel time at an assumed {} µs per system call",
@@ -288,7 +311,9 @@ fn method_check(arm: &Arm) -> anyhow::Result<()> {
         blocks.insns, blocks.blocks, blocks.unknown, blocks.resized, single.blocks
     );
     if !(0.98..=1.02).contains(&ratio) {
-        bail!("the two ways of counting disagree by more than 2 % ({ratio:.4}): the block-size count cannot be trusted");
+        bail!(
+            "the two ways of counting disagree by more than 2 % ({ratio:.4}): the block-size count cannot be trusted"
+        );
     }
     Ok(())
 }
@@ -348,7 +373,10 @@ fn scenario_budget(s: Scenario, arm: &Arm, k: &Knobs) -> anyhow::Result<Row> {
     };
     tracer.finish()?;
     if reference == 0 || got == 0 {
-        bail!("{}: no datagram or HMI message in a window (reference {reference}, logged {got})", s.name());
+        bail!(
+            "{}: no datagram or HMI message in a window (reference {reference}, logged {got})",
+            s.name()
+        );
     }
     let units_per_s = reference as f64 / secs;
     let insns_per_unit = counted.insns as f64 / got as f64;
@@ -415,7 +443,16 @@ fn kernel_pct(syscalls_per_s: f64, k: &Knobs) -> f64 {
 fn print_scenarios(rows: &[Row], k: &Knobs) {
     println!(
         "\n{:<9} {:>10} {:>8} {:>12} {:>10} {:>11} {:>9} {:>10} {:>9} {:>9}  goal",
-        "scenario", "units/s", "kept up", "insns/unit", "sys/unit", "Minsns/s", "user %", "syscall/s", "kernel %", "guest MB"
+        "scenario",
+        "units/s",
+        "kept up",
+        "insns/unit",
+        "sys/unit",
+        "Minsns/s",
+        "user %",
+        "syscall/s",
+        "kernel %",
+        "guest MB"
     );
     println!(
         "(units: datagrams to the station + HMI messages; user %: share of a 1 GHz Cortex-A8 at IPC {}; kernel %: estimated from the system calls at {} µs each; guest MB: the ARM program's resident memory at the end of the reference run)",

@@ -735,13 +735,24 @@ fn the_armhf_vehicle_under_qemu_drives_the_genuine_2015_firmware() {
     let launcher = var("NEPTUNUS_ARMHF_VEHICLE");
     // The ELF header: 32-bit, ARM (EM_ARM 40), EABI 5, hard-float.
     let header = std::fs::read(&arm_bin).unwrap_or_else(|e| panic!("{arm_bin:?}: {e}"));
-    assert!(header.len() > 52 && &header[..4] == b"\x7fELF", "{arm_bin:?} is no ELF file");
+    assert!(
+        header.len() > 52 && &header[..4] == b"\x7fELF",
+        "{arm_bin:?} is no ELF file"
+    );
     let e_machine = u16::from_le_bytes([header[18], header[19]]);
     let e_flags = u32::from_le_bytes([header[36], header[37], header[38], header[39]]);
     assert_eq!(header[4], 1, "{arm_bin:?} is not a 32-bit ELF");
     assert_eq!(e_machine, 40, "{arm_bin:?} is not an ARM program");
-    assert_eq!(e_flags & 0xff00_0000, 0x0500_0000, "not EABI 5: {e_flags:#x}");
-    assert_ne!(e_flags & 0x400, 0, "not hard-float (EF_ARM_ABI_FLOAT_HARD): {e_flags:#x}");
+    assert_eq!(
+        e_flags & 0xff00_0000,
+        0x0500_0000,
+        "not EABI 5: {e_flags:#x}"
+    );
+    assert_ne!(
+        e_flags & 0x400,
+        0,
+        "not hard-float (EF_ARM_ABI_FLOAT_HARD): {e_flags:#x}"
+    );
 
     let _one = one_board();
     let mut rig = GenuineRig::start_on(Path::new(&launcher), "30.0.2", true);

@@ -84,7 +84,12 @@ impl Path {
     }
 
     /// The vehicle's configuration file for this path.
-    fn config(self, arm: &Arm, stop: &Arc<AtomicBool>, threads: &mut Vec<JoinHandle<()>>) -> anyhow::Result<String> {
+    fn config(
+        self,
+        arm: &Arm,
+        stop: &Arc<AtomicBool>,
+        threads: &mut Vec<JoinHandle<()>>,
+    ) -> anyhow::Result<String> {
         let size = format!("width = {WIDTH}\nheight = {HEIGHT}\nfps = {FPS}\n");
         Ok(match self {
             Path::MjpegPage => {
@@ -94,7 +99,9 @@ impl Path {
                 threads.push(t);
                 format!("[camera]\nsource = \"url\"\nurl = \"http://{cam}/?action=stream\"\n{size}")
             }
-            Path::SyntheticPage | Path::SyntheticRtp => format!("[camera]\nsource = \"synthetic\"\n{size}"),
+            Path::SyntheticPage | Path::SyntheticRtp => {
+                format!("[camera]\nsource = \"synthetic\"\n{size}")
+            }
             Path::H264Passthrough => {
                 let clip = arm.dir.path().join("camera.mp4");
                 if !clip.is_file() {
@@ -102,7 +109,16 @@ impl Path {
                         .args(["-hide_banner", "-loglevel", "error", "-y", "-f", "lavfi"])
                         .arg("-i")
                         .arg(format!("testsrc2=size={WIDTH}x{HEIGHT}:rate={FPS}"))
-                        .args(["-t", "30", "-c:v", "libx264", "-preset", "ultrafast", "-g", "10"])
+                        .args([
+                            "-t",
+                            "30",
+                            "-c:v",
+                            "libx264",
+                            "-preset",
+                            "ultrafast",
+                            "-g",
+                            "10",
+                        ])
                         .args(["-pix_fmt", "yuv420p"])
                         .arg(&clip)
                         .status()
@@ -131,7 +147,13 @@ pub struct Frames {
 
 /// Counts frames received: `/video.mjpg` (JPEG start markers) or RTP
 /// (packets with the marker bit: the last of a frame).
-fn consumer(path: Path, http: SocketAddr, rtp: Option<UdpSocket>, stop: Arc<AtomicBool>, frames: Arc<AtomicU64>) -> JoinHandle<()> {
+fn consumer(
+    path: Path,
+    http: SocketAddr,
+    rtp: Option<UdpSocket>,
+    stop: Arc<AtomicBool>,
+    frames: Arc<AtomicU64>,
+) -> JoinHandle<()> {
     std::thread::spawn(move || {
         let run = || -> anyhow::Result<()> {
             if let Some(sock) = rtp {
@@ -149,7 +171,10 @@ fn consumer(path: Path, http: SocketAddr, rtp: Option<UdpSocket>, stop: Arc<Atom
             }
             let mut s = TcpStream::connect(http)?;
             s.set_read_timeout(Some(Duration::from_millis(200)))?;
-            write!(s, "GET /video.mjpg HTTP/1.1\r\nHost: {http}\r\nAccept: */*\r\n\r\n")?;
+            write!(
+                s,
+                "GET /video.mjpg HTTP/1.1\r\nHost: {http}\r\nAccept: */*\r\n\r\n"
+            )?;
             let mut buf = vec![0u8; 64 * 1024];
             let mut tail: Vec<u8> = Vec::new();
             while !stop.load(Ordering::Relaxed) {
@@ -162,7 +187,11 @@ fn consumer(path: Path, http: SocketAddr, rtp: Option<UdpSocket>, stop: Arc<Atom
                         let keep = tail.len().saturating_sub(2);
                         tail.drain(..keep);
                     }
-                    Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {}
+                    Err(e)
+                        if matches!(
+                            e.kind(),
+                            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                        ) => {}
                     Err(e) => return Err(e.into()),
                 }
             }
@@ -175,7 +204,12 @@ fn consumer(path: Path, http: SocketAddr, rtp: Option<UdpSocket>, stop: Arc<Atom
 }
 
 /// Waits until `frames` reaches `n` or `limit` passes; false on the limit.
-fn wait_frames(frames: &AtomicU64, n: u64, limit: Duration, vehicle: &mut Vehicle) -> anyhow::Result<bool> {
+fn wait_frames(
+    frames: &AtomicU64,
+    n: u64,
+    limit: Duration,
+    vehicle: &mut Vehicle,
+) -> anyhow::Result<bool> {
     let end = Instant::now() + limit;
     while frames.load(Ordering::Relaxed) < n {
         if Instant::now() >= end {
@@ -197,7 +231,11 @@ pub fn measure(path: Path, arm: &Arm, k: &Knobs, idle_raw_per_s: f64) -> anyhow:
         std::fs::write(&config, path.config(arm, &stop, &mut threads)?)?;
         let (board, pty) = children::board(&arm.host_bin, dir.path())?;
         let (_gcs, port) = Gcs::bind()?;
-        let rtp = if path.rtp() { Some(UdpSocket::bind("127.0.0.1:0")?) } else { None };
+        let rtp = if path.rtp() {
+            Some(UdpSocket::bind("127.0.0.1:0")?)
+        } else {
+            None
+        };
         let video_rtp = match &rtp {
             Some(s) => format!("--video-rtp=udp://{}", s.local_addr()?),
             None => "--video-rtp=off".into(),
@@ -216,18 +254,43 @@ pub fn measure(path: Path, arm: &Arm, k: &Knobs, idle_raw_per_s: f64) -> anyhow:
         ];
         let argv: Vec<&str> = args.iter().map(String::as_str).collect();
         let mut vehicle = Vehicle::spawn(&launcher, &argv, dir.path(), "")?;
-        let http = vehicle.http_addr(Duration::from_secs(120)).context("the HMI's address")?;
+        let http = vehicle
+            .http_addr(Duration::from_secs(120))
+            .context("the HMI's address")?;
         let frames = Arc::new(AtomicU64::new(0));
-        threads.push(consumer(path, http, rtp, Arc::clone(&stop), Arc::clone(&frames)));
+        threads.push(consumer(
+            path,
+            http,
+            rtp,
+            Arc::clone(&stop),
+            Arc::clone(&frames),
+        ));
         // Frames flowing first (the encoder's start is not a frame's cost).
         if !wait_frames(&frames, 2, Duration::from_secs(300), &mut vehicle)? {
-            bail!("{}: no frame within 300 s:\n{}", path.name(), vehicle.stderr_tail());
+            bail!(
+                "{}: no frame within 300 s:\n{}",
+                path.name(),
+                vehicle.stderr_tail()
+            );
         }
-        let (c0, f0, t0) = (tracer.totals.counts(), frames.load(Ordering::Relaxed), Instant::now());
-        if !wait_frames(&frames, f0 + k.frames, Duration::from_secs(600), &mut vehicle)? {
+        let (c0, f0, t0) = (
+            tracer.totals.counts(),
+            frames.load(Ordering::Relaxed),
+            Instant::now(),
+        );
+        if !wait_frames(
+            &frames,
+            f0 + k.frames,
+            Duration::from_secs(600),
+            &mut vehicle,
+        )? {
             bail!("{}: not {} frames within 600 s", path.name(), k.frames);
         }
-        let (c1, f1, wall) = (tracer.totals.counts(), frames.load(Ordering::Relaxed), t0.elapsed().as_secs_f64());
+        let (c1, f1, wall) = (
+            tracer.totals.counts(),
+            frames.load(Ordering::Relaxed),
+            t0.elapsed().as_secs_f64(),
+        );
         drop(vehicle);
         drop(board);
         tracer.finish()?;

@@ -82,8 +82,11 @@ pub struct Tracer {
 impl Tracer {
     /// Makes the FIFO `fifo` and a thread that reads it once qemu opens it.
     pub fn start(fifo: &Path) -> anyhow::Result<Self> {
-        nix::unistd::mkfifo(fifo, nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR)
-            .with_context(|| format!("mkfifo {}", fifo.display()))?;
+        nix::unistd::mkfifo(
+            fifo,
+            nix::sys::stat::Mode::S_IRUSR | nix::sys::stat::Mode::S_IWUSR,
+        )
+        .with_context(|| format!("mkfifo {}", fifo.display()))?;
         let totals = Arc::new(Totals::default());
         let path = fifo.to_path_buf();
         let t = Arc::clone(&totals);
