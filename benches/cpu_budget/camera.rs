@@ -226,89 +226,108 @@ pub fn measure(path: Path, arm: &Arm, k: &Knobs, idle_raw_per_s: f64) -> anyhow:
     let dir = tempfile::tempdir()?;
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
-    let result = (|| {
-        let config = dir.path().join("neptunus.toml");
-        std::fs::write(&config, path.config(arm, &stop, &mut threads)?)?;
-        let (board, pty) = children::board(&arm.host_bin, dir.path())?;
-        let (_gcs, port) = Gcs::bind()?;
-        let rtp = if path.rtp() {
-            Some(UdpSocket::bind("127.0.0.1:0")?)
-        } else {
-            None
-        };
-        let video_rtp = match &rtp {
-            Some(s) => format!("--video-rtp=udp://{}", s.local_addr()?),
-            None => "--video-rtp=off".into(),
-        };
-        let name = format!("camera-{}", path.name());
-        let fifo = arm.fifo(&name);
-        let tracer = Tracer::start(&fifo)?;
-        let launcher = arm.launcher(&name, Some(&fifo))?;
-        let args = [
-            "--serial".to_owned(),
-            pty,
-            format!("--mavlink=udpout:127.0.0.1:{port}"),
-            format!("--config={}", config.display()),
-            video_rtp,
-            "--webrtc=off".into(),
-        ];
-        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
-        let mut vehicle = Vehicle::spawn(&launcher, &argv, dir.path(), "")?;
-        let http = vehicle
-            .http_addr(Duration::from_secs(120))
-            .context("the HMI's address")?;
-        let frames = Arc::new(AtomicU64::new(0));
-        threads.push(consumer(
-            path,
-            http,
-            rtp,
-            Arc::clone(&stop),
-            Arc::clone(&frames),
-        ));
-        // Frames flowing first (the encoder's start is not a frame's cost).
-        if !wait_frames(&frames, 2, Duration::from_secs(300), &mut vehicle)? {
-            bail!(
-                "{}: no frame within 300 s:\n{}",
-                path.name(),
-                vehicle.stderr_tail()
-            );
-        }
-        let (c0, f0, t0) = (
-            tracer.totals.counts(),
-            frames.load(Ordering::Relaxed),
-            Instant::now(),
-        );
-        if !wait_frames(
-            &frames,
-            f0 + k.frames,
-            Duration::from_secs(600),
-            &mut vehicle,
-        )? {
-            bail!("{}: not {} frames within 600 s", path.name(), k.frames);
-        }
-        let (c1, f1, wall) = (
-            tracer.totals.counts(),
-            frames.load(Ordering::Relaxed),
-            t0.elapsed().as_secs_f64(),
-        );
-        drop(vehicle);
-        drop(board);
-        tracer.finish()?;
-        let d = c1 - c0;
-        let n = (f1 - f0) as f64;
-        Ok(Frames {
-            path,
-            frames: f1 - f0,
-            insns_per_frame: (d.insns as f64 - idle_raw_per_s * wall).max(0.0) / n,
-            syscalls_per_frame: d.syscalls as f64 / n,
-            seconds_per_frame: wall / n,
-        })
-    })();
+    let result = run(
+        path,
+        arm,
+        k,
+        idle_raw_per_s,
+        dir.path(),
+        &stop,
+        &mut threads,
+    );
     stop.store(true, Ordering::Relaxed);
     for t in threads {
         let _ = t.join();
     }
     result
+}
+
+/// One counted run of `path` (see [`measure`]).
+fn run(
+    path: Path,
+    arm: &Arm,
+    k: &Knobs,
+    idle_raw_per_s: f64,
+    dir: &std::path::Path,
+    stop: &Arc<AtomicBool>,
+    threads: &mut Vec<JoinHandle<()>>,
+) -> anyhow::Result<Frames> {
+    let config = dir.join("neptunus.toml");
+    std::fs::write(&config, path.config(arm, stop, threads)?)?;
+    let (board, pty) = children::board(&arm.host_bin, dir)?;
+    let (_gcs, port) = Gcs::bind()?;
+    let rtp = if path.rtp() {
+        Some(UdpSocket::bind("127.0.0.1:0")?)
+    } else {
+        None
+    };
+    let video_rtp = match &rtp {
+        Some(s) => format!("--video-rtp=udp://{}", s.local_addr()?),
+        None => "--video-rtp=off".into(),
+    };
+    let name = format!("camera-{}", path.name());
+    let fifo = arm.fifo(&name);
+    let tracer = Tracer::start(&fifo)?;
+    let launcher = arm.launcher(&name, Some(&fifo))?;
+    let args = [
+        "--serial".to_owned(),
+        pty,
+        format!("--mavlink=udpout:127.0.0.1:{port}"),
+        format!("--config={}", config.display()),
+        video_rtp,
+        "--webrtc=off".into(),
+    ];
+    let argv: Vec<&str> = args.iter().map(String::as_str).collect();
+    let mut vehicle = Vehicle::spawn(&launcher, &argv, dir, "")?;
+    let http = vehicle
+        .http_addr(Duration::from_secs(120))
+        .context("the HMI's address")?;
+    let frames = Arc::new(AtomicU64::new(0));
+    threads.push(consumer(
+        path,
+        http,
+        rtp,
+        Arc::clone(&stop),
+        Arc::clone(&frames),
+    ));
+    // Frames flowing first (the encoder's start is not a frame's cost).
+    if !wait_frames(&frames, 2, Duration::from_secs(300), &mut vehicle)? {
+        bail!(
+            "{}: no frame within 300 s:\n{}",
+            path.name(),
+            vehicle.stderr_tail()
+        );
+    }
+    let (c0, f0, t0) = (
+        tracer.totals.counts(),
+        frames.load(Ordering::Relaxed),
+        Instant::now(),
+    );
+    if !wait_frames(
+        &frames,
+        f0 + k.frames,
+        Duration::from_secs(600),
+        &mut vehicle,
+    )? {
+        bail!("{}: not {} frames within 600 s", path.name(), k.frames);
+    }
+    let (c1, f1, wall) = (
+        tracer.totals.counts(),
+        frames.load(Ordering::Relaxed),
+        t0.elapsed().as_secs_f64(),
+    );
+    drop(vehicle);
+    drop(board);
+    tracer.finish()?;
+    let d = c1 - c0;
+    let n = (f1 - f0) as f64;
+    Ok(Frames {
+        path,
+        frames: f1 - f0,
+        insns_per_frame: (d.insns as f64 - idle_raw_per_s * wall).max(0.0) / n,
+        syscalls_per_frame: d.syscalls as f64 / n,
+        seconds_per_frame: wall / n,
+    })
 }
 
 pub fn print(rows: &[Frames], k: &Knobs) {

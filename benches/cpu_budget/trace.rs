@@ -16,7 +16,8 @@
 //! fixed program.
 
 use std::collections::HashMap;
-use std::io::{BufRead as _, BufReader};
+use std::io::BufReader;
+use std::os::unix::fs::OpenOptionsExt as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -74,7 +75,7 @@ impl Totals {
 
 /// The reader of one qemu log FIFO.
 pub struct Tracer {
-    pub fifo: PathBuf,
+    fifo: PathBuf,
     pub totals: Arc<Totals>,
     thread: Option<JoinHandle<anyhow::Result<()>>>,
 }
@@ -106,6 +107,13 @@ impl Tracer {
 
     /// Waits for qemu to close the log (it has exited) and returns the totals.
     pub fn finish(mut self) -> anyhow::Result<Counts> {
+        // A reader still waiting for qemu to open the FIFO (qemu never
+        // started) is let go by a writer that opens and closes it; with
+        // qemu's end open, this adds nothing.
+        let _ = std::fs::OpenOptions::new()
+            .write(true)
+            .custom_flags(nix::fcntl::OFlag::O_NONBLOCK.bits())
+            .open(&self.fifo);
         if let Some(t) = self.thread.take() {
             t.join()
                 .map_err(|_| anyhow::anyhow!("the qemu log reader panicked"))??;
@@ -228,11 +236,4 @@ fn read_log(mut r: impl std::io::BufRead, totals: &Totals) -> anyhow::Result<()>
         }
         parser.line(&line, totals);
     }
-}
-
-/// Counts a whole log from a reader (the method check's recorded runs).
-pub fn count(r: impl std::io::Read) -> anyhow::Result<Counts> {
-    let totals = Totals::default();
-    read_log(BufReader::new(r), &totals)?;
-    Ok(totals.counts())
 }
