@@ -57,10 +57,18 @@ mod common;
 
 #[path = "cpu_budget/camera.rs"]
 mod camera;
+#[allow(
+    dead_code,
+    reason = "shared with the footprint bench, which uses the rest"
+)]
 #[path = "footprint/children.rs"]
 mod children;
 #[path = "footprint/load.rs"]
 mod load;
+#[allow(
+    dead_code,
+    reason = "shared with the footprint bench, which uses the rest"
+)]
 #[path = "footprint/scenario.rs"]
 mod scenario;
 #[path = "cpu_budget/trace.rs"]
