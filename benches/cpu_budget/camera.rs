@@ -287,7 +287,7 @@ fn run(
         path,
         http,
         rtp,
-        Arc::clone(&stop),
+        Arc::clone(stop),
         Arc::clone(&frames),
     ));
     // Frames flowing first (the encoder's start is not a frame's cost).
