@@ -197,7 +197,11 @@ fn consumer(
             }
             Ok(())
         };
-        if let Err(e) = run() {
+        // An error after the stop (the vehicle ending its stream as it
+        // exits) is the end of the run, not a failure of the path.
+        if let Err(e) = run()
+            && !stop.load(Ordering::Relaxed)
+        {
             println!("{}: consumer: {e:#}", path.name());
         }
     })
@@ -316,6 +320,8 @@ fn run(
         frames.load(Ordering::Relaxed),
         t0.elapsed().as_secs_f64(),
     );
+    // The consumer stops before the vehicle ends its stream under it.
+    stop.store(true, Ordering::Relaxed);
     drop(vehicle);
     drop(board);
     tracer.finish()?;
