@@ -20,8 +20,9 @@
 //!   logging and the inputs it still handled in full (25 Hz sticks, board
 //!   lines) are charged to fewer outputs — the figure errs high.
 //! - **camera paths**: a fixed number of frames through each path, the
-//!   instructions over them less the idle rate of the logged idle run, per
-//!   frame received by the path's consumer (`cpu_budget/camera.rs`).
+//!   instructions and system calls over them less the logged idle run's
+//!   rates, per frame received by the path's consumer
+//!   (`cpu_budget/camera.rs`).
 //!
 //! Shares of the BeagleBone: instructions per second / (IPC × 1 GHz). The
 //! IPC is an assumption (`CPU_BUDGET_IPC`, default 0.5: half the Cortex-A8's
@@ -226,10 +227,13 @@ fn main() -> anyhow::Result<()> {
         rows.push(scenario_budget(s, &arm, &k)?);
     }
     print_scenarios(&rows, &k);
-    let idle_raw_per_s = rows[0].raw_per_s;
+    let idle = camera::Idle {
+        insns_per_s: rows[0].raw_per_s,
+        syscalls_per_s: rows[0].raw_syscalls_per_s,
+    };
     let mut frames = Vec::new();
     for &p in &k.paths {
-        frames.push(camera::measure(p, &arm, &k, idle_raw_per_s)?);
+        frames.push(camera::measure(p, &arm, &k, &idle)?);
     }
     camera::print(&frames, &k);
     Ok(())
@@ -339,6 +343,8 @@ struct Row {
     syscalls_per_unit: f64,
     /// Instructions per wall second in the logged run (for the camera paths' baseline).
     raw_per_s: f64,
+    /// System calls per wall second in the logged run (the same baseline).
+    raw_syscalls_per_s: f64,
     insns_per_s: f64,
     syscalls_per_s: f64,
 }
@@ -397,6 +403,7 @@ fn scenario_budget(s: Scenario, arm: &Arm, k: &Knobs) -> anyhow::Result<Row> {
         insns_per_unit,
         syscalls_per_unit,
         raw_per_s: counted.insns as f64 / wall,
+        raw_syscalls_per_s: counted.syscalls as f64 / wall,
         insns_per_s: insns_per_unit * units_per_s,
         syscalls_per_s: syscalls_per_unit * units_per_s,
     })

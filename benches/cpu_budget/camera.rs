@@ -136,6 +136,13 @@ impl Path {
     }
 }
 
+/// The logged idle run's rates per wall second: what the vehicle does
+/// besides the camera, taken off each path's count over the same time.
+pub struct Idle {
+    pub insns_per_s: f64,
+    pub syscalls_per_s: f64,
+}
+
 /// One path's figures.
 pub struct Frames {
     path: Path,
@@ -226,19 +233,11 @@ fn wait_frames(
 }
 
 /// Runs `path` under qemu's logs for `k.frames` frames.
-pub fn measure(path: Path, arm: &Arm, k: &Knobs, idle_raw_per_s: f64) -> anyhow::Result<Frames> {
+pub fn measure(path: Path, arm: &Arm, k: &Knobs, idle: &Idle) -> anyhow::Result<Frames> {
     let dir = tempfile::tempdir()?;
     let stop = Arc::new(AtomicBool::new(false));
     let mut threads = Vec::new();
-    let result = run(
-        path,
-        arm,
-        k,
-        idle_raw_per_s,
-        dir.path(),
-        &stop,
-        &mut threads,
-    );
+    let result = run(path, arm, k, idle, dir.path(), &stop, &mut threads);
     stop.store(true, Ordering::Relaxed);
     for t in threads {
         let _ = t.join();
@@ -251,7 +250,7 @@ fn run(
     path: Path,
     arm: &Arm,
     k: &Knobs,
-    idle_raw_per_s: f64,
+    idle: &Idle,
     dir: &std::path::Path,
     stop: &Arc<AtomicBool>,
     threads: &mut Vec<JoinHandle<()>>,
@@ -330,15 +329,15 @@ fn run(
     Ok(Frames {
         path,
         frames: f1 - f0,
-        insns_per_frame: (d.insns as f64 - idle_raw_per_s * wall).max(0.0) / n,
-        syscalls_per_frame: d.syscalls as f64 / n,
+        insns_per_frame: (d.insns as f64 - idle.insns_per_s * wall).max(0.0) / n,
+        syscalls_per_frame: (d.syscalls as f64 - idle.syscalls_per_s * wall).max(0.0) / n,
         seconds_per_frame: wall / n,
     })
 }
 
 pub fn print(rows: &[Frames], k: &Knobs) {
     println!(
-        "\ncamera paths at {WIDTH}×{HEIGHT}, per frame (the idle scenario's instructions over the same time taken off)"
+        "\ncamera paths at {WIDTH}×{HEIGHT}, per frame (the idle scenario's instructions and system calls over the same time taken off)"
     );
     println!(
         "{:<17} {:>7} {:>13} {:>10} {:>12} {:>12} {:>11}  path",
