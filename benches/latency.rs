@@ -32,21 +32,20 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use std::collections::HashMap;
 use std::io::Write as _;
 use std::net::UdpSocket;
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc as std_mpsc;
 use std::thread;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
+use common::stick::{
+    Outcome, Sent, collect_frames, go_text, line_busy, paced_send, watch_go_frames,
+};
 use common::{Gcs, Vehicle, free_udp_port, gcs_heartbeat, manual_control, pct_ms};
 use neptunus::firmware::codec::{self, Framing};
-use neptunus::firmware::emulator::{BoardRecord, PtyBoard};
-use neptunus::mavlink::frame::encode_v2;
 
 const TARGET_ADDED_P99_MS: f64 = 0.2;
 const TARGET_CPU_PCT: f64 = 2.0;
@@ -116,198 +115,6 @@ fn main() -> anyhow::Result<()> {
 // The ground station side (the binary, the process and the station itself
 // are in tests/common, shared with the other end-to-end tests and benches)
 // ---------------------------------------------------------------------------
-
-/// One datagram sent: when, and the MAVLink sequence number it carried.
-#[derive(Clone, Copy)]
-struct Sent {
-    at: Instant,
-    seq: u8,
-    stick: usize,
-}
-
-/// Sends `count` MANUAL_CONTROL datagrams on a fixed schedule (a late one
-/// does not make the next ones early), cycling through `sticks`, with a GCS
-/// heartbeat each second if `heartbeats`.
-fn paced_send(
-    gcs: &mut Gcs,
-    sticks: &[i16],
-    count: usize,
-    period: Duration,
-    heartbeats: bool,
-) -> anyhow::Result<Vec<Sent>> {
-    let mut sent = Vec::with_capacity(count);
-    let start = Instant::now() + period;
-    let mut next_hb = start;
-    for i in 0..count {
-        let due = start + period * i as u32;
-        if heartbeats && Instant::now() >= next_hb {
-            next_hb += Duration::from_secs(1);
-            gcs.send(&gcs_heartbeat())?;
-        }
-        let now = Instant::now();
-        if due > now {
-            thread::sleep(due - now);
-        }
-        let stick = i % sticks.len();
-        let bytes = encode_v2(255, 190, gcs.seq, &manual_control(sticks[stick]));
-        let at = Instant::now();
-        gcs.sock.send(&bytes)?;
-        sent.push(Sent {
-            at,
-            seq: gcs.seq,
-            stick,
-        });
-        gcs.seq = gcs.seq.wrapping_add(1);
-    }
-    Ok(sent)
-}
-
-// ---------------------------------------------------------------------------
-// Timing go() frames at the emulator
-// ---------------------------------------------------------------------------
-
-/// A `go()` frame's text without its CRC byte and padding, e.g. `go(1300,1500,1700)`.
-fn go_text(frame: &[u8]) -> Option<String> {
-    let text = frame.get(1..)?;
-    if !text.starts_with(b"go(") {
-        return None;
-    }
-    let s: String = String::from_utf8_lossy(text)
-        .chars()
-        .filter(|c| !c.is_whitespace() && *c != ';')
-        .collect();
-    Some(s)
-}
-
-/// Forwards every `go()` frame the board reads, with the time the emulator
-/// woke to read it, to a std channel (so blocking code can consume it).
-fn watch_go_frames(
-    rt: &tokio::runtime::Runtime,
-    board: &PtyBoard,
-) -> std_mpsc::Receiver<(Instant, String)> {
-    common::forward_records(rt, board, |r| match r {
-        BoardRecord::Frame(f) => go_text(f),
-        BoardRecord::Executed(_) => None,
-    })
-}
-
-/// Latencies of one path.
-struct Outcome {
-    latencies: Vec<Duration>,
-    /// Latencies of datagrams sent at least [`line_busy`] after the one
-    /// before: the serial line was free, nothing waited for pacing.
-    line_free: Vec<Duration>,
-    sent: usize,
-    /// No `go()` of its own, but the next datagram's arrived: superseded
-    /// while waiting for the line (the link's coalescing).
-    coalesced: usize,
-    /// No `go()` and the next datagram's did not arrive either.
-    lost: usize,
-}
-
-impl Outcome {
-    /// Matches every send with the first frame of its content that arrived
-    /// after it and before the next send of the same content.
-    fn match_up(
-        sent: &[Sent],
-        key: impl Fn(&Sent) -> String,
-        frames: &[(Instant, String)],
-    ) -> Self {
-        let mut arrivals: HashMap<&str, Vec<Instant>> = HashMap::new();
-        for (at, text) in frames {
-            arrivals.entry(text.as_str()).or_default().push(*at);
-        }
-        for v in arrivals.values_mut() {
-            v.sort();
-        }
-        let keys: Vec<String> = sent.iter().map(&key).collect();
-        let mut next_same: Vec<Option<Instant>> = vec![None; sent.len()];
-        let mut last_seen: HashMap<&str, usize> = HashMap::new();
-        for (i, k) in keys.iter().enumerate().rev() {
-            if let Some(&j) = last_seen.get(k.as_str()) {
-                next_same[i] = Some(sent[j].at);
-            }
-            last_seen.insert(k.as_str(), i);
-        }
-        let matched: Vec<Option<Duration>> = sent
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                let times = arrivals.get(keys[i].as_str())?;
-                let first = times.partition_point(|t| *t < s.at);
-                let t = *times.get(first)?;
-                if next_same[i].is_some_and(|limit| t >= limit) {
-                    return None;
-                }
-                Some(t - s.at)
-            })
-            .collect();
-        let busy = line_busy();
-        let mut out = Outcome {
-            latencies: matched.iter().flatten().copied().collect(),
-            line_free: (1..sent.len())
-                .filter(|&i| sent[i].at - sent[i - 1].at >= busy)
-                .filter_map(|i| matched[i])
-                .collect(),
-            sent: sent.len(),
-            coalesced: 0,
-            lost: 0,
-        };
-        for i in 0..matched.len() {
-            if matched[i].is_some() {
-                continue;
-            }
-            // Superseded if a newer command made it to the board soon after:
-            // the link wrote the newest one instead (by design).
-            let superseded = (i + 1..matched.len())
-                .take_while(|&j| sent[j].at - sent[i].at < Duration::from_millis(100))
-                .any(|j| matched[j].is_some());
-            if superseded {
-                out.coalesced += 1;
-            } else {
-                out.lost += 1;
-            }
-        }
-        out.latencies.sort();
-        out.line_free.sort();
-        out
-    }
-
-    fn pct_ms(&self, q: f64) -> f64 {
-        pct_ms(&self.latencies, q)
-    }
-
-    fn print(&self, name: &str) {
-        println!(
-            "  {name}: {} of {} matched, p50 {:.3} ms, p99 {:.3} ms, max {:.3} ms; coalesced {}, lost {}",
-            self.latencies.len(),
-            self.sent,
-            self.pct_ms(0.5),
-            self.pct_ms(0.99),
-            self.pct_ms(1.0),
-            self.coalesced,
-            self.lost
-        );
-    }
-}
-
-/// How long the link keeps the serial line after writing a `go()` frame
-/// (its wire time at 115200 baud plus the frame gap): a datagram arriving
-/// sooner after the previous one waits for the line.
-fn line_busy() -> Duration {
-    let link = neptunus::firmware::link::LinkConfig::new("/dev/null");
-    let go = codec::encoded(&floor_go(0), Framing::Crc8);
-    link.wire_time(go.len()) + link.frame_gap
-}
-
-/// Waits for frames to stop arriving, then takes everything received.
-fn collect_frames(rx: &std_mpsc::Receiver<(Instant, String)>) -> Vec<(Instant, String)> {
-    let mut frames = Vec::new();
-    while let Ok(f) = rx.recv_timeout(Duration::from_millis(300)) {
-        frames.push(f);
-    }
-    frames
-}
 
 // ---------------------------------------------------------------------------
 // 1. Floor

@@ -18,7 +18,11 @@
 //!    H.264 clip read in real time stands for a camera that gives H.264;
 //!    CPU of this process and of the ffmpeg child that copies it into RTP,
 //!    next to the encode at the same size and rate.
-//! 4. **Nobody watching**: the vehicle binary (`$NEPTUNUS_BIN`, else
+//! 4. **The camera's own H.264** (`source = "v4l2"`): the same clip as an
+//!    Annex B stream in a file in the device's place, played at 15 fps:
+//!    CPU of this process, which reads, cuts and packetizes it (no child
+//!    process runs).
+//! 5. **Nobody watching**: the vehicle binary (`$NEPTUNUS_BIN`, else
 //!    target/release, else target/debug) with `--sim --video-rtp off`, its
 //!    CPU over the soak without a viewer and then with one `/video.mjpg`
 //!    viewer reading.
@@ -104,7 +108,7 @@ async fn encode_path(fps: f64, soak: Duration) -> anyhow::Result<Row> {
     let (_scene_tx, scene) = watch::channel(Scene::default());
     let camera = Camera::start_on_demand(cfg.clone(), scene);
     let (_station_tx, station) = watch::channel(None);
-    let rtp = RtpVideo::start(&cfg, &camera, station, None);
+    let rtp = RtpVideo::start(&cfg, &camera, station, Vec::new());
     let mut stream = rtp.stream();
     tokio::time::timeout(Duration::from_secs(20), stream.wait_for(|s| s.is_some()))
         .await
@@ -211,7 +215,7 @@ async fn passthrough_path(soak: Duration) -> anyhow::Result<(f64, f64, usize)> {
     let (_scene_tx, scene) = watch::channel(Scene::default());
     let camera = Camera::start_on_demand(cfg.clone(), scene);
     let (_station_tx, station) = watch::channel(None);
-    let rtp = RtpVideo::start(&cfg, &camera, station, None);
+    let rtp = RtpVideo::start(&cfg, &camera, station, Vec::new());
     let mut stream = rtp.stream();
     tokio::time::timeout(Duration::from_secs(20), stream.wait_for(|s| s.is_some()))
         .await
@@ -237,6 +241,69 @@ async fn passthrough_path(soak: Duration) -> anyhow::Result<(f64, f64, usize)> {
         (ff1 - ff0) / wall * 100.0,
         packets,
     ))
+}
+
+/// CPU of the camera's-own-H.264 path (this process only: no child runs)
+/// over `soak`, and the RTP packets received.
+async fn camera_h264_path(soak: Duration) -> anyhow::Result<(f64, usize)> {
+    let dir = tempfile::tempdir()?;
+    let clip = dir.path().join("camera.h264");
+    let secs = (soak.as_secs() + 30).to_string();
+    let made = std::process::Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-y", "-f", "lavfi"])
+        .args(["-i", "testsrc2=size=640x480:rate=15", "-t", &secs])
+        .args(["-c:v", "libx264", "-preset", "ultrafast", "-g", "15"])
+        .args([
+            "-profile:v",
+            "baseline",
+            "-pix_fmt",
+            "yuv420p",
+            "-b:v",
+            "1000k",
+        ])
+        .args(["-f", "h264"])
+        .arg(&clip)
+        .status()?;
+    if !made.success() {
+        bail!("ffmpeg could not make the camera's clip");
+    }
+    let rx = tokio::net::UdpSocket::bind("127.0.0.1:0").await?;
+    let port = rx.local_addr()?.port();
+    let mut cfg: CameraConfig = toml::from_str(&format!(
+        "source = \"v4l2\"\nfps = 15\n[v4l2]\ndevice = {:?}\nformat = \"h264\"\n",
+        clip.display().to_string()
+    ))?;
+    cfg.rtp = vec![RtpDest::Udp {
+        host: "127.0.0.1".into(),
+        port,
+    }];
+    let (_scene_tx, scene) = watch::channel(Scene::default());
+    let camera = Camera::start_on_demand(cfg.clone(), scene);
+    let (_station_tx, station) = watch::channel(None);
+    let rtp = RtpVideo::start(&cfg, &camera, station, Vec::new());
+    let mut stream = rtp.stream();
+    tokio::time::timeout(Duration::from_secs(20), stream.wait_for(|s| s.is_some()))
+        .await
+        .context("the camera's H.264 did not start in 20 s")??;
+    if let Some(pid) = rtp.pid() {
+        bail!("a child ({pid}) runs for the camera's own H.264");
+    }
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let mut buf = [0u8; 2048];
+    while rx.try_recv(&mut buf).is_ok() {}
+    let (cpu0, wall0) = (self_cpu_s()?, Instant::now());
+    let mut packets = 0;
+    while wall0.elapsed() < soak {
+        if let Ok(Ok(_)) = tokio::time::timeout(Duration::from_millis(200), rx.recv(&mut buf)).await
+        {
+            packets += 1;
+        }
+    }
+    let wall = wall0.elapsed().as_secs_f64();
+    let cpu1 = self_cpu_s()?;
+    rtp.shutdown().await;
+    camera.shutdown().await;
+    Ok(((cpu1 - cpu0) / wall * 100.0, packets))
 }
 
 /// The vehicle process's CPU share over `soak`, with or without one
@@ -305,6 +372,10 @@ fn main() -> anyhow::Result<()> {
     let (own, ff, packets) = rt.block_on(passthrough_path(soak))?;
     println!(
         "| 15 fps pass-through (`-c:v copy`) | {own:.1} % | {ff:.1} % | — | — | {packets} RTP packets |"
+    );
+    let (own, packets) = rt.block_on(camera_h264_path(soak))?;
+    println!(
+        "| 15 fps the camera's own H.264 (`v4l2`, no child) | {own:.1} % | — | — | — | {packets} RTP packets |"
     );
     let (idle, watched, bin) = vehicle_cpu(soak)?;
     println!();

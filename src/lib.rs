@@ -10,9 +10,12 @@
 //! - [`dialect`]: the generated `neptunus` MAVLink dialect.
 //! - [`config`]: command line and configuration file.
 //! - [`doctor`]: `neptunus doctor`, the pool-side checks of the machine.
+//! - [`durable`]: the one atomic, synced write of the files that must survive a power cut.
 //! - [`wallclock`]: the logs' clock (set by the station in control when the ROV's is wrong).
 //! - [`eventlog`]: the operator's event log (JSON lines in the data directory).
 //! - [`logfile`]: `neptunus.log`, rotated by size.
+//! - [`files`]: the files served over MAVLink (log download, FTP): the
+//!   virtual tree, the component metadata, the disk worker thread.
 //! - [`app`]: wiring of tasks and shutdown.
 //! - [`hmi`]: the browser HMI (HTTP, WebSocket sessions as in-process ground stations).
 //! - [`vehicle`]: the vehicle core (state machine, modes, driving, authority,
@@ -34,8 +37,12 @@ pub mod camera;
 pub mod config;
 pub mod dialect;
 pub mod doctor;
+pub mod durable;
 pub mod eventlog;
+pub mod files;
 pub mod firmware;
+#[doc(hidden)]
+pub mod fuzzing;
 #[cfg(feature = "hil")]
 pub mod hil;
 pub mod hmi;

@@ -271,9 +271,11 @@ fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result
     }
     writeln!(
         out,
-        "camera:    {} (rotation {}°)",
+        "camera:    {} (rotation {}°), encode {} ({} on this build)",
         s.camera.source.as_str(),
-        s.camera.rotation_deg
+        s.camera.rotation_deg,
+        s.camera.encode.as_str(),
+        s.camera.encode.resolve().as_str()
     )?;
     let w = &s.camera.webrtc;
     let signalling = neptunus::camera::webrtc::SignallingAddr::resolve(w.signalling, s.hmi.http);
@@ -290,6 +292,13 @@ fn check_summary(args: &config::RunArgs, s: &config::Settings) -> anyhow::Result
             w.ice_servers.len()
         )?,
     }
+    writeln!(
+        out,
+        "storage:   recordings in {} stop below {} MiB free or at {} MiB of logs and recordings",
+        neptunus::camera::record::recordings_dir(&s.data_dir).display(),
+        s.storage.min_free_mb,
+        s.storage.total_mb
+    )?;
     Ok(())
 }
 

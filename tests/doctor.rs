@@ -68,7 +68,9 @@ fn config(dir: &Path, serial: &Path, framing: &str, extra: &str) -> PathBuf {
             .and_then(|l| l.local_addr())
             .map(|a| a.port())
             .expect("a free port");
-        format!("{text}\n[camera.webrtc]\nsignalling = \"127.0.0.1:{free}\"\n")
+        format!(
+            "{text}\n[camera.webrtc]\nsignalling = \"127.0.0.1:{free}\"\nstreams = \"127.0.0.1:0\"\n"
+        )
     };
     let path = dir.join("neptunus.toml");
     std::fs::write(&path, text).expect("config written");
@@ -143,7 +145,7 @@ fn every_check_passes_against_the_emulated_board() {
     let text = stdout(&o);
     assert!(o.status.success(), "doctor failed:\n{text}");
     for name in [
-        "config", "serial", "board", "camera", "ports", "data_dir", "clock",
+        "config", "serial", "board", "camera", "video", "ports", "data_dir", "clock",
     ] {
         assert!(
             text.lines()
@@ -153,7 +155,7 @@ fn every_check_passes_against_the_emulated_board() {
     }
     assert!(text.contains("crc8"), "{text}");
     let v = report(&cfg);
-    assert_eq!(v["checks"].as_array().map(Vec::len), Some(7), "{v}");
+    assert_eq!(v["checks"].as_array().map(Vec::len), Some(8), "{v}");
     // A plain (December 2014) board passes when the configuration says plain.
     let plain = Board::start("plain");
     let cfg = config(
@@ -253,6 +255,69 @@ fn the_other_framing_fails_with_its_fix() {
     assert_fails(&cfg, "board", "framing = \"crc8\"");
 }
 
+/// The `video` check: a camera in V4L2's place (a recording of MJPEG, as
+/// the OpenROV camera gives) with nothing to be encoded warns that
+/// QGroundControl gets no video, with the fix; a recording of H.264 passes
+/// through and passes; a raw camera's format with nothing encoded fails.
+#[test]
+fn the_video_check_says_which_path_and_gives_the_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    let board = Board::start("crc8");
+    let clip = dir.path().join("camera.rec");
+    std::fs::write(&clip, b"recorded").unwrap();
+    let cam = |format: &str, encode: &str| {
+        format!(
+            "[camera]\nsource = \"v4l2\"\nencode = \"{encode}\"\n[camera.v4l2]\ndevice = \"{}\"\nformat = \"{format}\"\n",
+            clip.display()
+        )
+    };
+    let cfg = config(dir.path(), &board.path, "crc8", &cam("mjpeg", "never"));
+    let o = doctor(&cfg, false);
+    let text = stdout(&o);
+    assert!(o.status.success(), "a warning is not a failure:\n{text}");
+    let lines: Vec<&str> = text.lines().collect();
+    let at = lines
+        .iter()
+        .position(|l| l.starts_with("warn") && l.split_whitespace().nth(1) == Some("video"))
+        .unwrap_or_else(|| panic!("no warn line for video:\n{text}"));
+    assert!(lines[at].contains("JPEG from the camera"), "{text}");
+    let fix = lines[at + 1..]
+        .iter()
+        .find(|l| l.trim_start().starts_with("fix:"))
+        .unwrap();
+    assert!(
+        fix.contains("QGroundControl gets no video: the camera offers MJPEG only; set [camera] encode = \"when-needed\"")
+            && fix.contains("or use an H.264 UVC camera"),
+        "{text}"
+    );
+    assert!(text.contains("read as a recorded mjpeg stream"), "{text}");
+    let cfg = config(dir.path(), &board.path, "crc8", &cam("h264", "never"));
+    let v = report(&cfg);
+    let c = check(&v, "video");
+    assert_eq!(
+        (c["ok"].as_bool(), c["warning"].as_bool()),
+        (Some(true), Some(false)),
+        "{v}"
+    );
+    assert!(
+        c["detail"]
+            .as_str()
+            .unwrap()
+            .contains("H.264 from the camera"),
+        "{v}"
+    );
+    assert!(
+        c["detail"]
+            .as_str()
+            .unwrap()
+            .contains("no decode, no encode"),
+        "{v}"
+    );
+    // A recording cannot be asked what it holds: auto is refused.
+    let cfg = config(dir.path(), &board.path, "crc8", &cam("auto", "never"));
+    assert_fails(&cfg, "video", "camera.v4l2.format = \"h264\"");
+}
+
 #[test]
 fn camera_ports_and_data_dir_fail_with_their_fixes() {
     let dir = tempfile::tempdir().unwrap();
@@ -308,7 +373,7 @@ fn a_signalling_port_in_use_is_a_warning_the_vehicle_starts_without_it() {
         &board.path,
         "crc8",
         &format!(
-            "[camera]\nsource = \"synthetic\"\n[camera.webrtc]\nsignalling = \"127.0.0.1:{port}\"\n"
+            "[camera]\nsource = \"synthetic\"\n[camera.webrtc]\nsignalling = \"127.0.0.1:{port}\"\nstreams = \"127.0.0.1:0\"\n"
         ),
     );
     let o = doctor(&cfg, false);
@@ -336,5 +401,62 @@ fn a_signalling_port_in_use_is_a_warning_the_vehicle_starts_without_it() {
         (true.into(), true.into()),
         "{v}"
     );
+    drop(held);
+}
+
+/// The service binds port 80 with a capability `sudo -u neptunus … doctor`
+/// does not have: there, the port is free when nothing answers on it, and
+/// taken when something does — never "in use" for want of the capability.
+#[test]
+fn port_80_is_judged_by_who_answers_there_not_by_this_users_rights() {
+    use std::os::unix::fs::PermissionsExt as _;
+    if !nix::unistd::geteuid().is_root() {
+        // Only root can make an unprivileged user here (and bind port 80
+        // for the second half); the test command runs as root.
+        panic!("this test starts doctor as nobody: run it as root, as the test command does");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::set_permissions(dir.path(), std::fs::Permissions::from_mode(0o777)).unwrap();
+    let board = Board::start("crc8");
+    std::fs::set_permissions(&board.path, std::fs::Permissions::from_mode(0o666)).unwrap();
+    let ip = format!("127.0.{}.9", rand::random::<u8>() % 200 + 20);
+    let cfg = config(
+        dir.path(),
+        &board.path,
+        "crc8",
+        "[camera]\nsource = \"none\"\n",
+    );
+    // The HMI on port 80 of an address of its own.
+    let text = std::fs::read_to_string(&cfg)
+        .unwrap()
+        .replace("http = \"127.0.0.1:0\"", &format!("http = \"{ip}:80\""));
+    std::fs::write(&cfg, text).unwrap();
+    std::fs::set_permissions(&cfg, std::fs::Permissions::from_mode(0o644)).unwrap();
+    let as_nobody = || {
+        let o = Command::new("setpriv")
+            .args([
+                "--reuid=65534",
+                "--regid=65534",
+                "--clear-groups",
+                BIN,
+                "--config",
+            ])
+            .arg(&cfg)
+            .args(["doctor", "--json"])
+            .output()
+            .unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout)
+            .unwrap_or_else(|e| panic!("--json does not parse ({e}): {}", stdout(&o)));
+        check(&v, "ports").clone()
+    };
+    let free = as_nobody();
+    assert_eq!(free["ok"], true, "port 80 with nothing there: {free}");
+    let held = std::net::TcpListener::bind(format!("{ip}:80")).unwrap();
+    let taken = as_nobody();
+    assert_eq!(
+        taken["ok"], false,
+        "port 80 with something answering: {taken}"
+    );
+    assert!(taken.to_string().contains(&format!("{ip}:80")), "{taken}");
     drop(held);
 }

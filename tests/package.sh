@@ -84,8 +84,10 @@ sed "s#/usr/bin/neptunus#$bin#g" "$unit" >"$work/unit/neptunus.service"
 verify=$(cd "$work/unit" && systemd-analyze verify ./neptunus.service 2>&1) || fail "systemd-analyze verify: $verify"
 [ -z "$verify" ] || fail "systemd-analyze verify warns: $verify"
 echo "systemd-analyze verify: clean"
+# One capability, the one that binds port 80 (Cockpit's vehicle address).
 for want in 'Type=notify' 'WatchdogSec=' 'Restart=always' 'NoNewPrivileges=yes' 'ProtectSystem=strict' \
-    'ProtectHome=yes' 'PrivateTmp=yes' 'CapabilityBoundingSet=$' 'StateDirectory=neptunus' 'User=neptunus' \
+    'ProtectHome=yes' 'PrivateTmp=yes' 'CapabilityBoundingSet=CAP_NET_BIND_SERVICE$' \
+    'AmbientCapabilities=CAP_NET_BIND_SERVICE$' 'StateDirectory=neptunus' 'User=neptunus' \
     'MemoryMax=' 'TasksMax='; do
     grep -Eq "^$want" "$unit" || fail "the unit lacks $want"
 done
@@ -96,6 +98,7 @@ awk -v s="$score" 'BEGIN { exit !(s <= 2.0) }' || fail "exposure $score is above
 
 echo "== package: the packaged configuration"
 "$bin" --config "$conf" --check || fail "the packaged configuration does not parse"
+grep -q '^http = "0.0.0.0:80"$' "$conf" || fail "the packaged configuration does not put the HMI on port 80 (Cockpit's vehicle address)"
 # Its commented examples ([camera.ffmpeg], [camera.h264], [camera.webrtc]) parse once uncommented.
 sed 's/^# \(\[camera\.\|input_args\|passthrough\|enabled\|ice_servers\)/\1/' "$conf" >"$work/examples.toml"
 cmp -s "$conf" "$work/examples.toml" && fail "no commented example found in the packaged configuration"
@@ -126,4 +129,51 @@ child=""
 [ "$status" = 0 ] || { tail -20 "$work/stderr" >&2; fail "exit status $status after SIGTERM"; }
 grep -q 'thrusters to neutral' "$work/stderr" || fail "no 'thrusters to neutral' at shutdown"
 ls "$data"/tlogs/neptunus-*.tlog >/dev/null || fail "no tlog in the temporary data directory"
+echo "== package: with the service's one capability, an unprivileged user binds port 80"
+# As systemd starts it (User=neptunus, AmbientCapabilities=CAP_NET_BIND_SERVICE,
+# NoNewPrivileges): the packaged binary and configuration, as nobody, with
+# the HMI on port 80 of a loopback address of its own; then without the
+# capability, which must fail and say why.
+if [ "$(id -u)" != 0 ] || ! command -v setpriv >/dev/null; then
+    fail "this step needs root and setpriv (util-linux) to start the binary as an unprivileged user"
+fi
+chmod 755 "$work"
+addr="127.0.0.$(( (RANDOM % 200) + 20 ))"
+data80="$work/data80"
+mkdir "$data80"
+chown nobody "$data80"
+# exec: in the background (&) the function's subshell becomes the vehicle,
+# so $! is the vehicle's own process id.
+as_service() {
+    exec setpriv --reuid=nobody --regid="$(id -g nobody)" --clear-groups --no-new-privs "$@" -- \
+        "$bin" --config "$conf" --sim --data-dir "$data80" --mavlink udpin:127.0.0.1:0 \
+        --http "$addr:80" --video-rtp off --webrtc off
+}
+as_service --inh-caps=-all,+net_bind_service --ambient-caps=-all,+net_bind_service \
+    --bounding-set=-all,+net_bind_service >"$work/stdout80" 2>"$work/stderr80" &
+child=$!
+up=""
+for _ in $(seq 1 300); do
+    if ! kill -0 "$child" 2>/dev/null; then
+        cat "$work/stderr80" >&2
+        fail "the packaged binary as nobody with CAP_NET_BIND_SERVICE exited"
+    fi
+    if grep -qx "$addr:80" "$data80/http.addr" 2>/dev/null; then up=1; break; fi
+    sleep 0.1
+done
+[ -n "$up" ] || { tail -20 "$work/stderr80" >&2; fail "no HMI on $addr:80 within 30 s"; }
+exec 3<>"/dev/tcp/$addr/80"
+printf 'GET /bag/v1.0/get/cockpit/cockpit-vehicle-id HTTP/1.0\r\nHost: %s\r\n\r\n' "$addr" >&3
+reply=$(cat <&3)
+exec 3<&-
+grep -q '"Invalid path"' <<<"$reply" || fail "port 80 does not answer the settings bag: $reply"
+kill -TERM "$child"
+wait "$child" || true
+kill -0 "$child" 2>/dev/null && fail "the vehicle on port 80 did not stop on SIGTERM"
+child=""
+status=0
+(as_service --inh-caps=-all --ambient-caps=-all --bounding-set=-all) >/dev/null 2>"$work/stderr80" || status=$?
+[ "$status" != 0 ] || fail "the binary bound port 80 without the capability"
+grep -q 'CAP_NET_BIND_SERVICE' "$work/stderr80" || { cat "$work/stderr80" >&2; fail "refused port 80 without saying which capability it needs"; }
+echo "port 80: bound with CAP_NET_BIND_SERVICE as nobody, refused without it (and the error names the capability)"
 echo "package: 1 passed, 0 failed"

@@ -87,6 +87,15 @@ echo "== tests"
 status=0
 cargo test --all-targets --locked --features hil --no-fail-fast 2>&1 | tee target/test-output.txt || status=1
 
+echo "== fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
+# libFuzzer (built by libfuzzer-sys) needs a C++ compiler.
+if ! command -v c++ >/dev/null 2>&1; then
+    as_root apt-get update -q && as_root apt-get install -y -q g++
+fi
+# Its own build in fuzz/target; FUZZ_SECONDS per target, two at a time. A
+# crash fails the run with the input's path and how to run it again.
+FUZZ_SECONDS="${FUZZ_SECONDS:-20}" bash fuzz/run.sh || status=1
+
 echo "== interoperability tests (real ground-station clients against the binary)"
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
 venv=target/interop-venv
@@ -191,6 +200,9 @@ PY
 read -r py_pass py_fail py_skip < <(junit_counts target/interop-junit.xml)
 read -r hil_pass hil_fail hil_skip < <(junit_counts target/interop-hil-junit.xml)
 py_pass=$((py_pass + hil_pass)); py_fail=$((py_fail + hil_fail)); py_skip=$((py_skip + hil_skip))
+# Each fuzz target counts as one test (fuzz/run.sh's summary).
+fz_pass=$(grep -c ' ok$' fuzz/target/fuzz-logs/summary.txt 2>/dev/null || true)
+fz_fail=$(grep -c ' failed$' fuzz/target/fuzz-logs/summary.txt 2>/dev/null || true)
 read -r br_pass br_fail br_skip < <(junit_counts target/browser-junit.xml)
 read -r brh_pass brh_fail brh_skip < <(junit_counts target/browser-hil-junit.xml)
 br_pass=$((br_pass + brh_pass)); br_fail=$((br_fail + brh_fail)); br_skip=$((br_skip + brh_skip))
@@ -231,7 +243,8 @@ PY
 }
 failure_details target/test-output.txt target/interop-junit.xml target/interop-hil-junit.xml \
     target/browser-junit.xml target/browser-hil-junit.xml target/armhf-junit.xml
-awk -v pp="$((py_pass + br_pass + pk_pass + ah_pass))" -v pf="$((py_fail + br_fail + pk_fail + ah_fail))" -v ps="$((py_skip + br_skip))" \
+cat fuzz/target/fuzz-logs/failures.txt 2>/dev/null || true
+awk -v pp="$((py_pass + br_pass + pk_pass + ah_pass + ${fz_pass:-0}))" -v pf="$((py_fail + br_fail + pk_fail + ah_fail + ${fz_fail:-0}))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
 exit "$status"

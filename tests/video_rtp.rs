@@ -5,7 +5,9 @@
 //! socket sending GCS HEARTBEATs) from one loopback address to another; a
 //! killed ffmpeg restarted; no destination, no ffmpeg child; a camera
 //! that gives H.264 itself passed through (`-c:v copy`) to two receivers,
-//! one joining late; `auto` never drawn to a station that may not control
+//! one joining late; a camera read through V4L2 (a named pipe in the
+//! device's place) whose own H.264 reaches QGC's pipeline with no process
+//! decoding or encoding it; `auto` never drawn to a station that may not control
 //! (an unsigned stranger with the pilot's id while signing is on, a
 //! stranger's id on UDP while the pilot is on TCP).
 //!
@@ -300,6 +302,172 @@ fn a_camera_giving_h264_is_passed_through_to_every_receiver_and_a_late_one_decod
         rtp_packets(&early_rx, Duration::from_secs(1)) > 0,
         "the second receiver stopped getting RTP"
     );
+}
+
+/// The process ids of every child of `pid` (any program), from /proc.
+fn children(pid: u32) -> Vec<(u32, String)> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(child) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{child}/stat")) else {
+            continue;
+        };
+        let (Some(open), Some((head, tail))) = (stat.find('('), stat.rsplit_once(')')) else {
+            continue;
+        };
+        let ppid = tail.split_whitespace().nth(1).and_then(|p| p.parse().ok());
+        if ppid == Some(pid) {
+            out.push((child, head[open + 1..].to_owned()));
+        }
+    }
+    out
+}
+
+/// `GET path` on the vehicle's HMI, the body as JSON.
+fn get_json(addr: std::net::SocketAddr, path: &str) -> serde_json::Value {
+    use std::io::Write as _;
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(GENEROUS)).unwrap();
+    write!(s, "GET {path} HTTP/1.0\r\nHost: {addr}\r\n\r\n").unwrap();
+    let mut reply = String::new();
+    s.read_to_string(&mut reply).unwrap();
+    let body = reply.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("{path}: {e}: {reply}"))
+}
+
+/// A camera that encodes H.264 itself, read by Neptunus through V4L2 — a
+/// named pipe in the device's place, fed what such a camera gives: an
+/// Annex B stream of access units (libx264 from testsrc, 640×480 at
+/// 15 fps, constrained baseline, SPS/PPS only at its start, a keyframe
+/// every second) in real time. QGroundControl's pipeline, joining seconds
+/// in, decodes it (the vehicle puts the SPS/PPS before every keyframe);
+/// the vehicle runs no child process at all — nothing decodes or encodes —
+/// and `/api/video` says the camera's H.264 goes out as it came.
+#[test]
+fn a_v4l2_camera_giving_h264_reaches_qgc_with_no_encoder_running() {
+    need("ffmpeg", &["-version"], "apt install ffmpeg");
+    need(
+        "gst-inspect-1.0",
+        &["avdec_h264"],
+        "apt install gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav",
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let device = dir.path().join("video0");
+    nix::unistd::mkfifo(&device, nix::sys::stat::Mode::from_bits_truncate(0o600)).unwrap();
+    // The camera: writes to the pipe once the vehicle opens it.
+    let mut camera = Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-re", "-f", "lavfi"])
+        .args(["-i", "testsrc2=size=640x480:rate=15", "-t", "60"])
+        .args([
+            "-c:v",
+            "libx264",
+            "-preset",
+            "ultrafast",
+            "-profile:v",
+            "baseline",
+        ])
+        .args(["-g", "15", "-pix_fmt", "yuv420p", "-f", "h264", "-y"])
+        .arg(&device)
+        .stdin(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let (late, early) = (free_udp_port().unwrap(), free_udp_port().unwrap());
+    let early_rx = UdpSocket::bind(("127.0.0.1", early)).unwrap();
+    let mav = free_udp_port().unwrap();
+    let cfg = dir.path().join("neptunus.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "[camera]\nsource = \"v4l2\"\nfps = 15\nrtp = [\"udp://127.0.0.1:{late}\", \"udp://127.0.0.1:{early}\"]\n\
+             [camera.v4l2]\ndevice = {:?}\nformat = \"h264\"\n",
+            device.to_str().unwrap()
+        ),
+    )
+    .unwrap();
+    let mav_url = format!("udpin:127.0.0.1:{mav}");
+    let args = [
+        "--sim",
+        "--mavlink",
+        &mav_url,
+        "--config",
+        cfg.to_str().unwrap(),
+    ];
+    let mut v = Vehicle::spawn(bin(), &args, dir.path(), "").unwrap();
+    let http = v.http_addr(GENEROUS).unwrap();
+    wait_for("RTP from the camera at the first destination", &v, || {
+        rtp_packets(&early_rx, Duration::from_millis(200)) > 0
+    });
+    let info = get_json(http, "/api/video");
+    assert_eq!(info["path"]["h264"], "camera", "{info}");
+    assert_eq!(info["path"]["capture"]["fourcc"], "H264", "{info}");
+    assert_eq!(info["h264"]["route"], "camera", "{info}");
+    assert_eq!(info["h264"]["pid"], serde_json::Value::Null, "{info}");
+    assert_eq!(info["encoder_running"], false, "{info}");
+    assert_eq!(info["mjpeg"], false, "{info}");
+    // The camera's own profile, read from its SPS: libx264's baseline.
+    assert!(
+        info["h264_profile"]
+            .as_str()
+            .is_some_and(|p| p.starts_with("constrained baseline 42c0")),
+        "{info}"
+    );
+    assert!(
+        info["path"]["why"]
+            .as_str()
+            .unwrap()
+            .contains("as it came (no decode, no encode)"),
+        "{info}"
+    );
+    std::thread::sleep(Duration::from_secs(3));
+    let caps = "application/x-rtp,media=video,clock-rate=90000,encoding-name=H264";
+    let mut gst = Command::new("gst-launch-1.0")
+        .args([
+            "-v",
+            "udpsrc",
+            &format!("port={late}"),
+            &format!("caps={caps}"),
+        ])
+        .args(["!", "rtph264depay", "!", "h264parse", "!", "avdec_h264"])
+        .args([
+            "!",
+            "identity",
+            "silent=false",
+            "!",
+            "fakesink",
+            "sync=false",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("gst-launch-1.0");
+    // While QGC watches, the vehicle has no child: no encoder, no ffmpeg.
+    let end = Instant::now() + Duration::from_secs(13);
+    while Instant::now() < end {
+        let kids = children(v.pid());
+        assert!(kids.is_empty(), "the vehicle started {kids:?}");
+        std::thread::sleep(Duration::from_millis(250));
+    }
+    let _ = gst.kill();
+    let mut log = String::new();
+    gst.stdout.take().unwrap().read_to_string(&mut log).unwrap();
+    let _ = gst.wait();
+    let _ = camera.kill();
+    let _ = camera.wait();
+    let (in_window, total) = frames_in_ten_seconds(&log);
+    eprintln!(
+        "QGC's pipeline decoded {in_window} frames of the camera's H.264 in 10 s at 15 fps ({total} in all)"
+    );
+    assert!(
+        in_window >= 30,
+        "{in_window} frames decoded in 10 s ({total} in all), want ≥ 30 of the 150 sent\n{}",
+        v.stderr_tail()
+    );
+    let status = get_json(http, "/camera/status");
+    assert_eq!(status["source"], "v4l2", "{status}");
+    assert!(status["frames_total"].as_u64().unwrap() >= 150, "{status}");
 }
 
 /// A bare UDP ground station: system id 255 (SYSID_MYGCS) unless told,

@@ -10,7 +10,7 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use neptunus::camera::webrtc::depay::{AccessUnit, Depay};
+use neptunus::camera::h264::depay::{AccessUnit, Depay};
 use neptunus::camera::webrtc::peer::{Datagram, Peer};
 use proptest::prelude::*;
 use str0m::change::SdpOffer;

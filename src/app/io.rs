@@ -1,6 +1,8 @@
 //! Carries the core's outputs out: frames to the stations (one send path:
 //! encode → sequence → sign → route), commands to the board link or the
-//! built-in simulator, parameter saves, event-log records, the signing key.
+//! built-in simulator, parameter saves, event-log records, the signing key,
+//! the recorder's controls and telemetry, requests to the disk worker of
+//! the file transfers.
 //! Decides nothing about the vehicle.
 
 use std::time::Duration;
@@ -29,11 +31,15 @@ pub(super) struct Io {
     pub(super) params: ParamSaver,
     pub(super) events: EventLog,
     pub(super) signing: LinkSigning,
+    /// The file transfers' disk worker (log download, MAVLink FTP).
+    pub(super) files: crate::files::FileWorker,
     /// The built-in simulator while the run mode is SIMULATOR.
     pub(super) simulator: Option<BuiltinSim>,
     pub(super) simulator_opts: EmulatorOptions,
     /// The wall clock the logs and the core use (set by the station in control).
     pub(super) clock: std::sync::Arc<crate::wallclock::WallClock>,
+    /// Recording on the vehicle (None: the camera cannot record).
+    recorder: Option<crate::camera::record::RecorderHandle>,
     seq: u8,
     last_healthy: Option<Duration>,
     /// Per outlet, what this pass delivers (handed over at its end).
@@ -41,6 +47,8 @@ pub(super) struct Io {
 }
 
 impl Io {
+    // One argument per thing it carries outputs to.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn new(
         hmi: [crate::hmi::Outlet; 2],
         router: RouterHandle,
@@ -48,6 +56,7 @@ impl Io {
         params: ParamSaver,
         events: EventLog,
         signing: LinkSigning,
+        files: crate::files::FileWorker,
         simulator_opts: EmulatorOptions,
     ) -> Self {
         Self {
@@ -57,9 +66,11 @@ impl Io {
             params,
             events,
             signing,
+            files,
             simulator: None,
             simulator_opts,
             clock: crate::wallclock::WallClock::system(),
+            recorder: None,
             seq: 0,
             last_healthy: None,
             delivered: Default::default(),
@@ -72,9 +83,19 @@ impl Io {
         self
     }
 
+    /// Where the core's recording controls and samples go.
+    pub(super) fn with_recorder(
+        mut self,
+        recorder: Option<crate::camera::record::RecorderHandle>,
+    ) -> Self {
+        self.recorder = recorder;
+        self
+    }
+
     /// A message from component `compid` to the in-process stations it is
-    /// for (the browser sessions hear the autopilot alone, mavlink2rest
-    /// every component), and on the wire to the endpoints it is for.
+    /// for (the browser sessions hear the autopilot and the camera's
+    /// recording, mavlink2rest every component), and on the wire to the
+    /// endpoints it is for.
     fn send_message(
         &mut self,
         to: To,
@@ -124,6 +145,15 @@ impl Io {
                         target_component,
                     )
                 }),
+                // File data: on the wire only, never into the telemetry log.
+                Output::Bulk { to, msg } => {
+                    if !self.local_only(to) {
+                        self.send_frame_unlogged(to, now, |seq| {
+                            encode_v2(sysid, COMPONENT_ID, seq, &msg)
+                        });
+                    }
+                }
+                Output::Files(req) => self.files.send(req),
                 Output::Board(cmd) => self.link.send(cmd),
                 Output::SimBoard(cmd) => {
                     if let Some(sim) = self.simulator.as_mut() {
@@ -168,6 +198,16 @@ impl Io {
                     // What follows (the event line saying so) carries the new time.
                     now.unix_us = self.clock.unix_us();
                 }
+                Output::Record(c) => {
+                    if let Some(r) = &self.recorder {
+                        r.control(c);
+                    }
+                }
+                Output::RecordSample(sample) => {
+                    if let Some(r) = &self.recorder {
+                        r.sample(sample);
+                    }
+                }
                 Output::Healthy => {
                     // The link only needs to hear this every few hundred ms.
                     if self
@@ -195,6 +235,17 @@ impl Io {
         self.seq = self.seq.wrapping_add(1);
         self.signing.sign(&mut bytes, now);
         self.router.send(Outbound {
+            route: route(to),
+            bytes: bytes.into(),
+        });
+    }
+
+    /// As [`Io::send_frame`], for file data: not written to the telemetry log.
+    fn send_frame_unlogged(&mut self, to: To, now: Now, encode: impl FnOnce(u8) -> Vec<u8>) {
+        let mut bytes = encode(self.seq);
+        self.seq = self.seq.wrapping_add(1);
+        self.signing.sign(&mut bytes, now);
+        self.router.send_unlogged(Outbound {
             route: route(to),
             bytes: bytes.into(),
         });

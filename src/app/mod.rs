@@ -96,7 +96,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
         tokio::select! {
             () = &mut shutdown => break,
             expired = wake.expired() => match expired {
-                Ok(()) => vehicle.tick(),
+                Ok(()) => vehicle.wake(),
                 Err(e) => {
                     failed = Some(e);
                     break;
@@ -104,6 +104,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             },
             input = t.hmi.recv() => vehicle.handle(input),
             Some(result) = t.saved.recv() => vehicle.handle(Input::ParamsSaved(result)),
+            Some(reply) = t.file_replies.recv() => vehicle.handle(Input::Files(reply)),
             ev = t.link_events.recv() => match ev {
                 None => break,
                 Some(ev) => vehicle.link_event(ev),
@@ -116,6 +117,7 @@ pub async fn run(settings: Settings, shutdown: impl Future<Output = ()>) -> Resu
             _ = t.report.tick() => vehicle.report(),
             Ok(()) = hmi_heard.1.changed() => vehicle.listeners(hmi_heard.0, &mut hmi_heard.1),
             Ok(()) = m2r_heard.1.changed() => vehicle.listeners(m2r_heard.0, &mut m2r_heard.1),
+            Some(ev) = t.recorder_events.recv() => vehicle.handle(Input::Recorder(ev)),
             Ok(()) = video_stream.changed() => {
                 let stream = video_stream.borrow_and_update().clone().map(video_stream_info);
                 vehicle.handle(Input::VideoStream(stream));

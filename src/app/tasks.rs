@@ -28,6 +28,8 @@ pub(super) struct Tasks {
     pub(super) saved: mpsc::UnboundedReceiver<Result<(), String>>,
     pub(super) link_events: mpsc::Receiver<LinkEvent>,
     pub(super) inbound: mpsc::Receiver<Inbound>,
+    /// The disk worker's answers to the file transfers.
+    pub(super) file_replies: mpsc::UnboundedReceiver<crate::files::FileReply>,
     /// The simulated vehicle's ground truth (`--sim`, `--hil`); None on a
     /// real board.
     pub(super) truth: Option<TruthFeed>,
@@ -36,8 +38,12 @@ pub(super) struct Tasks {
     /// [`stream`](crate::camera::rtp::RtpVideo::stream) is what the
     /// MAVLink camera component announces.
     pub(super) rtp: crate::camera::rtp::RtpVideo,
-    /// The WebRTC viewers (Cockpit, the page), fed by the same encode.
+    /// The WebRTC viewers (Cockpit, the page), fed by the one H.264 stream.
     webrtc: Option<crate::camera::webrtc::WebRtc>,
+    /// Recording on the vehicle, fed by the one H.264 stream.
+    recorder: Option<crate::camera::record::Recorder>,
+    /// What the recorder tells the core.
+    pub(super) recorder_events: mpsc::UnboundedReceiver<crate::vehicle::machine::RecorderEvent>,
     router: RouterHandle,
     event_log: EventLog,
     board: Option<SimulatedBoard>,
@@ -146,10 +152,13 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     // sessions and for the mavlink2rest API (Cockpit).
     let hmi_ep = endpoints.len();
     let z_centered = crate::hmi::z_centered_by(profiles.clone());
+    // Which way the video goes: a V4L2 camera is asked what it offers.
+    let plan = crate::camera::plan::initial(&settings.camera);
     let mut vehicle = Vehicle::new(settings.mavlink.identity, store, hmi_ep + 2)
+        .with_transfer_rates(transfer_rates(endpoints))
         .with_profiles(profiles)
         .with_hmi_sysids(settings.hmi.sysid_min, settings.hmi.sysid_max)
-        .with_camera(camera_spec(&settings.camera))
+        .with_camera(camera_spec(&settings.camera, &plan))
         .with_wall_clock(
             crate::wallclock::system_sync(),
             crate::wallclock::BUILD_UNIX_S * 1_000_000,
@@ -168,16 +177,28 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         vehicle.set_storage_problem(Some(problem));
     }
     let t0 = Instant::now();
+    let (recorder_tx, recorder_events) = mpsc::unbounded_channel();
+    let recorder = start_recorder(&settings, &plan, &clock, t0, recorder_tx);
+    let vehicle = vehicle.with_recording(recorder.is_some());
     // The camera: its picture follows the vehicle (the synthetic source draws it).
     let (scene_tx, scene_rx) = watch::channel(crate::camera::Scene::default());
     // It runs only while a browser watches or RTP video has a destination.
     let (video_to, station_rx) = watch::channel(None);
     let (camera, rtp, webrtc) = {
         let _side = side.handle().enter();
-        let camera = crate::camera::Camera::start_on_demand(settings.camera.clone(), scene_rx);
-        let webrtc = start_webrtc(&settings);
-        let feed = webrtc.as_ref().map(crate::camera::webrtc::WebRtc::feed);
-        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx, feed);
+        let camera = crate::camera::Camera::start_on_demand_planned(
+            settings.camera.clone(),
+            scene_rx,
+            plan.clone(),
+        );
+        let webrtc = start_webrtc(&settings, &plan);
+        let taps = webrtc
+            .as_ref()
+            .map(crate::camera::webrtc::WebRtc::feed)
+            .into_iter()
+            .chain(recorder.as_ref().map(crate::camera::record::Recorder::feed))
+            .collect();
+        let rtp = crate::camera::rtp::RtpVideo::start(&settings.camera, &camera, station_rx, taps);
         (camera, rtp, webrtc)
     };
     let hmi = {
@@ -187,11 +208,16 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             routes: camera.routes(),
             webrtc: webrtc.is_some(),
             signalling: None,
+            streams: None,
+            info: Some(video_info(&camera, &rtp)),
         };
         if let Some(w) = &webrtc {
             video.routes = video.routes.merge(w.routes());
             let at = SignallingAddr::resolve(settings.camera.webrtc.signalling, settings.hmi.http);
             video.signalling = at.map(|addr| (addr, w.signalling_routes()));
+            let streams = SignallingAddr::resolve_streams(settings.camera.webrtc.streams, at);
+            video.streams =
+                streams.map(|addr| (addr, w.streams_routes(rtp.stream(), rtp.running())));
         }
         side.handle()
             .spawn(async move {
@@ -209,9 +235,21 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
             .map_err(|e| AppError::Side(std::io::Error::other(e.to_string())))??
     };
     if let Some(w) = &webrtc {
-        w.set_signalling_addr(hmi.beside_addr());
+        w.set_beside_addrs(
+            hmi.beside_addr(crate::hmi::BesideKind::Signalling),
+            hmi.beside_addr(crate::hmi::BesideKind::Streams),
+        );
     }
     let (saved_tx, saved) = mpsc::unbounded_channel();
+    let (files_tx, file_replies) = mpsc::unbounded_channel();
+    let files = crate::files::FileWorker::spawn(
+        crate::files::WorkerConfig {
+            data_dir: settings.data_dir.clone(),
+            running: router.tlog_run(),
+        },
+        files_tx,
+    )
+    .map_err(AppError::Side)?;
     let io = Io::new(
         [hmi.outlet(), hmi.m2r_outlet()],
         router.clone(),
@@ -219,9 +257,15 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         ParamSaver::spawn(param_file, saved_tx),
         event_log.clone(),
         signing,
+        files,
         settings.simulator.clone(),
     )
-    .with_clock(clock);
+    .with_clock(clock)
+    .with_recorder(
+        recorder
+            .as_ref()
+            .map(crate::camera::record::Recorder::handle),
+    );
     let report = tokio::time::interval_at(
         Instant::now() + Duration::from_secs(1),
         Duration::from_secs(5),
@@ -235,10 +279,13 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
         saved,
         link_events,
         inbound,
+        file_replies,
         truth,
         camera,
         rtp,
         webrtc,
+        recorder,
+        recorder_events,
         router,
         event_log,
         board,
@@ -246,6 +293,24 @@ pub(super) async fn start(mut settings: Settings) -> Result<(Tasks, VehicleTask)
     };
     let vt = VehicleTask::new(vehicle, io, t0, scene_tx, watched, trusted, video_to);
     Ok((tasks, vt))
+}
+
+/// Bytes per second file transfers may use over each endpoint: the
+/// network's rate over UDP and TCP, half the line over a serial port (the
+/// rest stays for telemetry and control), none over the two in-process
+/// endpoints after them (the browser sessions have `/api/logs`).
+fn transfer_rates(endpoints: &[crate::mavlink::endpoint::EndpointUrl]) -> Vec<u32> {
+    use crate::mavlink::EndpointSpec as E;
+    use crate::vehicle::machine::NETWORK_RATE;
+    let mut rates: Vec<u32> = endpoints
+        .iter()
+        .map(|e| match &e.spec {
+            E::Serial { baud, .. } => baud / 10 / 2,
+            E::UdpIn(_) | E::UdpOut(_) | E::TcpIn(_) | E::TcpOut(_) => NETWORK_RATE,
+        })
+        .collect();
+    rates.extend([0, 0]);
+    rates
 }
 
 /// The simulated vehicle's next ground truth; never, on a real board (or
@@ -336,9 +401,15 @@ impl Tasks {
         if let Some(w) = self.webrtc {
             w.shutdown().await;
         }
+        // A recording ends synced, before its video stops.
+        if let Some(r) = self.recorder {
+            let _ = tokio::task::spawn_blocking(move || r.shutdown()).await;
+        }
         self.rtp.shutdown().await;
         self.camera.shutdown().await;
         self.router.shutdown().await;
+        let mut files = vehicle_task.io.files;
+        let _ = tokio::task::spawn_blocking(move || files.stop()).await;
         vehicle_task.io.signing.persist();
         let event_log = self.event_log;
         let _ = tokio::task::spawn_blocking(move || event_log.shutdown()).await;
@@ -376,41 +447,88 @@ async fn neutral_written(
 
 /// The WebRTC viewers' side, when the camera gives a picture, WebRTC is
 /// on and the HMI (which serves the signalling) runs.
-fn start_webrtc(settings: &Settings) -> Option<crate::camera::webrtc::WebRtc> {
+fn start_webrtc(
+    settings: &Settings,
+    plan: &crate::camera::VideoPlan,
+) -> Option<crate::camera::webrtc::WebRtc> {
     use crate::camera::webrtc;
     let cfg = &settings.camera;
     if !cfg.webrtc.enabled {
         tracing::info!("WebRTC video off (--webrtc off)");
         return None;
     }
-    let stream = webrtc::stream_of(cfg, webrtc::new_stream_id())?;
+    let Some(stream) = webrtc::stream_of(cfg, plan, webrtc::new_stream_id()) else {
+        if cfg.source != crate::camera::SourceKind::None {
+            tracing::info!("WebRTC video off: no H.264 — {}", plan.why);
+        }
+        return None;
+    };
     if settings.hmi.http.is_none() {
         tracing::info!(
             "WebRTC video off: its signalling is served with the browser HMI (--http off)"
         );
         return None;
     }
-    match webrtc::WebRtc::start(&cfg.webrtc, Some(stream)) {
-        Ok(w) => Some(w),
+    Some(webrtc::WebRtc::start(&cfg.webrtc, Some(stream)))
+}
+
+/// Recording on the vehicle, when there is a camera: its own thread, fed
+/// by the one H.264 stream; None (and the camera cannot record) when its
+/// thread cannot be started.
+fn start_recorder(
+    settings: &Settings,
+    plan: &crate::camera::VideoPlan,
+    clock: &std::sync::Arc<crate::wallclock::WallClock>,
+    t0: Instant,
+    events: mpsc::UnboundedSender<crate::vehicle::machine::RecorderEvent>,
+) -> Option<crate::camera::record::Recorder> {
+    use crate::camera::record::{RecordConfig, Recorder};
+    camera_spec(&settings.camera, plan)?;
+    let cfg = RecordConfig {
+        data_dir: settings.data_dir.clone(),
+        storage: settings.storage,
+        clock: clock.clone(),
+        vehicle_t0: t0.into_std(),
+    };
+    match Recorder::start(cfg, events) {
+        Ok(r) => Some(r),
         Err(e) => {
-            tracing::error!("WebRTC video off: cannot bind its loopback port: {e}");
+            tracing::error!("recording on the vehicle is off: {e}");
             None
         }
     }
 }
 
+/// What `GET /api/video` adds: the paths (the plan as it is now), whether
+/// `/video.mjpg` has pictures, and what the H.264 sender runs.
+fn video_info(
+    camera: &crate::camera::Camera,
+    rtp: &crate::camera::rtp::RtpVideo,
+) -> crate::hmi::VideoInfo {
+    let plan = camera.plan();
+    let running = rtp.running();
+    let status = camera.status_handle();
+    std::sync::Arc::new(move || {
+        crate::camera::api_json(&plan.borrow(), *running.borrow(), status().h264_profile)
+    })
+}
+
 /// The MAVLink camera component exists when a camera source is configured
-/// or the camera's own H.264 is passed through to RTP; its nominal picture
-/// is the configured size and rate (the running stream's, once the stream
-/// reports it).
-fn camera_spec(c: &crate::camera::CameraConfig) -> Option<crate::vehicle::machine::CameraSpec> {
+/// or H.264 comes from elsewhere; its nominal picture is the camera's as
+/// chosen, or the configured size and rate (the running stream's, once the
+/// stream reports it).
+fn camera_spec(
+    c: &crate::camera::CameraConfig,
+    plan: &crate::camera::VideoPlan,
+) -> Option<crate::vehicle::machine::CameraSpec> {
+    use crate::camera::H264Route;
     use crate::camera::rtp::RtpDest;
-    let passthrough = !c.h264.passthrough.is_empty()
-        && (c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off));
-    let (width, height, fps) = if passthrough {
-        c.h264.passthrough_shape()
-    } else {
-        (c.width, c.height, c.fps)
+    let sent = c.webrtc.enabled || !c.rtp.iter().all(|d| *d == RtpDest::Off);
+    let passthrough = plan.h264 == H264Route::FfmpegCopy && sent;
+    let (width, height, fps) = match &plan.capture {
+        Some(cap) => (cap.width, cap.height, cap.fps()),
+        None if passthrough => c.h264.passthrough_shape(),
+        None => (c.width, c.height, c.fps),
     };
     (c.source != crate::camera::SourceKind::None || passthrough).then(|| {
         crate::vehicle::machine::CameraSpec {

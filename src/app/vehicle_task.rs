@@ -93,7 +93,7 @@ impl VehicleTask {
     /// ([`Vehicle::next_tick`]), every [`BUSY_TICK`] while the built-in
     /// simulator runs, and every [`SCENE_PERIOD`] while someone watches the
     /// camera.
-    pub(super) fn next_wake(&self) -> Instant {
+    fn tick_due(&self) -> Duration {
         let mut at = self.vehicle.next_tick();
         if self.io.simulator.is_some() {
             at = at.min(self.last_tick + BUSY_TICK);
@@ -101,13 +101,37 @@ impl VehicleTask {
         if *self.watched.borrow() > 0 {
             at = at.min(self.last_scene.map_or(Duration::ZERO, |t| t + SCENE_PERIOD));
         }
+        at
+    }
+
+    /// When the loop must wake: the next tick, or the file transfers' next
+    /// pass ([`Vehicle::next_transfer`]) if sooner.
+    pub(super) fn next_wake(&self) -> Instant {
+        let at = self.tick_due();
+        let at = self.vehicle.next_transfer().map_or(at, |t| at.min(t));
         self.t0 + at
+    }
+
+    /// The timer fired: the tick if it is due, and the transfers' pass if
+    /// theirs is (a pass never moves the tick, whose timing is its own).
+    pub(super) fn wake(&mut self) {
+        let elapsed = self.t0.elapsed();
+        if self.tick_due() <= elapsed {
+            self.tick();
+        }
+        if self
+            .vehicle
+            .next_transfer()
+            .is_some_and(|t| t <= self.t0.elapsed())
+        {
+            self.handle(Input::Transfer);
+        }
     }
 
     /// A tick: the built-in simulator (run mode SIMULATOR) steps on it,
     /// then the core; the camera's scene and the `auto` video destination
     /// follow.
-    pub(super) fn tick(&mut self) {
+    fn tick(&mut self) {
         let now = self.clock();
         self.last_tick = now.mono;
         if let Some(sim) = self.io.simulator.as_mut() {
@@ -140,6 +164,7 @@ impl VehicleTask {
         match ev {
             LinkEvent::State { state, reason } => self.handle(Input::Link { state, reason }),
             LinkEvent::Telemetry(ev) => self.handle(Input::Board(ev)),
+            LinkEvent::Quality(q) => self.handle(Input::LinkQuality(q)),
         }
     }
 
@@ -220,6 +245,9 @@ impl VehicleTask {
             telemetry_age_ms = s.telemetry_age_ms.unwrap_or(u64::MAX),
             rejected = s.decode.rejected_total(),
             crc_fail = s.crc_failures_echoed,
+            echoes_missed = s.echoes_missed,
+            thrust_resent = s.thrust_resent,
+            line_drop_pct = f64::from(s.drop_rate_cpct) / 100.0,
             "telemetry"
         );
     }

@@ -10,7 +10,9 @@ use std::time::Duration;
 use axum::http::Uri;
 use serde::{Deserialize, Serialize};
 
+use super::encode::EncodeSetting;
 use super::rtp::config::{H264Config, RtpDest, check_dests};
+use super::v4l2::V4l2Config;
 use super::webrtc::config::WebRtcConfig;
 
 /// Where the camera's frames come from.
@@ -30,6 +32,9 @@ pub enum SourceKind {
     MjpgStreamer,
     /// An existing MJPEG HTTP stream (`multipart/x-mixed-replace`).
     Url,
+    /// A V4L2 camera read by Neptunus itself (`[camera.v4l2]`): its own
+    /// H.264 or JPEG passed through, chosen from what it offers.
+    V4l2,
 }
 
 impl SourceKind {
@@ -40,6 +45,7 @@ impl SourceKind {
             SourceKind::Ffmpeg => "ffmpeg",
             SourceKind::MjpgStreamer => "mjpg-streamer",
             SourceKind::Url => "url",
+            SourceKind::V4l2 => "v4l2",
         }
     }
 }
@@ -57,13 +63,19 @@ impl fmt::Display for SourceKind {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CameraConfig {
-    /// `none`, `synthetic`, `ffmpeg`, `mjpg-streamer` or `url`.
+    /// `none`, `synthetic`, `ffmpeg`, `mjpg-streamer`, `url` or `v4l2`.
     pub source: SourceKind,
-    /// Synthetic frame width in pixels.
+    /// Whether Neptunus may encode video itself: `auto` (never on a
+    /// 32-bit ARM build, the BeagleBone; when needed elsewhere), `never`,
+    /// `when-needed`. A camera's own H.264 is never encoded again.
+    pub encode: EncodeSetting,
+    /// Synthetic frame width in pixels (and the size asked of a `v4l2`
+    /// camera: the nearest it offers).
     pub width: u32,
     /// Synthetic frame height in pixels.
     pub height: u32,
-    /// Synthetic frame rate.
+    /// Synthetic frame rate (and the rate asked of a `v4l2` camera, or a
+    /// recorded stream's).
     pub fps: f64,
     /// Synthetic JPEG quality, 1–100.
     pub jpeg_quality: u8,
@@ -91,6 +103,8 @@ pub struct CameraConfig {
     /// The stream read by `source = "url"`, e.g.
     /// `http://rov.local:8080/?action=stream`.
     pub url: Option<String>,
+    /// The camera `source = "v4l2"` reads.
+    pub v4l2: V4l2Config,
     /// Where H.264 over RTP goes: `auto`, `off` or `udp://HOST:PORT`
     /// entries (`--video-rtp`).
     pub rtp: Vec<RtpDest>,
@@ -105,6 +119,7 @@ impl Default for CameraConfig {
     fn default() -> Self {
         CameraConfig {
             source: SourceKind::default(),
+            encode: EncodeSetting::default(),
             width: 640,
             height: 480,
             fps: 10.0,
@@ -117,6 +132,7 @@ impl Default for CameraConfig {
             ffmpeg: FfmpegConfig::default(),
             mjpg_streamer: MjpgStreamerConfig::default(),
             url: None,
+            v4l2: V4l2Config::default(),
             rtp: vec![RtpDest::Auto],
             h264: H264Config::default(),
             webrtc: WebRtcConfig::default(),
@@ -206,6 +222,11 @@ impl CameraConfig {
                     return Err(CameraConfigError::UrlMissing);
                 };
                 StreamUrl::parse(url)?;
+            }
+            SourceKind::V4l2 => {
+                if self.v4l2.device.trim().is_empty() {
+                    return Err(CameraConfigError::V4l2Device);
+                }
             }
         }
         Ok(())
@@ -345,6 +366,10 @@ pub enum CameraConfigError {
         "camera.mjpg_streamer.stream_path = {0:?} must start with '/' (default \"/?action=stream\")"
     )]
     StreamPath(String),
+    #[error(
+        "camera.v4l2.device is empty — name the camera's device, e.g. \"/dev/video0\" (`v4l2-ctl --list-devices` lists them)"
+    )]
+    V4l2Device,
     #[error(
         "camera.source = \"url\" needs camera.url — set it to an MJPEG stream such as \"http://rov.local:8080/?action=stream\""
     )]

@@ -80,6 +80,18 @@ pub enum SourceError {
         what: String,
         error: String,
     },
+    #[error("camera source {kind}: {why} — {fix}")]
+    Unusable {
+        kind: SourceKind,
+        why: String,
+        fix: String,
+    },
+    #[error("camera source {kind}: {device}: {error}")]
+    Device {
+        kind: SourceKind,
+        device: String,
+        error: String,
+    },
     #[error(transparent)]
     Render(#[from] RenderError),
 }
@@ -98,6 +110,8 @@ impl SourceError {
             SourceError::NotMjpeg { .. } => "not-mjpeg",
             SourceError::StreamEnded { .. } => "stream-ended",
             SourceError::Read { .. } => "read",
+            SourceError::Unusable { .. } => "unusable",
+            SourceError::Device { .. } => "device",
             SourceError::Render(_) => "render",
         }
     }

@@ -97,7 +97,15 @@ fn unavailable(c: &CameraRoutes) -> Option<Response> {
             status.last_error.as_deref().unwrap_or("invalid configuration")
         ),
         (_, CameraState::Stopped) => "the camera was shut down".to_owned(),
-        _ => return None,
+        _ => {
+            // A camera that streams H.264 gives no JPEG pictures.
+            let plan = c.shared.plan();
+            let plan = plan.borrow();
+            if plan.jpeg != crate::camera::plan::JpegRoute::None {
+                return None;
+            }
+            format!("no JPEG pictures: {}", plan.why)
+        }
     };
     Some(error_response(&status.source, status.state, &reason))
 }
@@ -222,7 +230,8 @@ mod tests {
 
     #[tokio::test]
     async fn a_slow_viewer_gets_the_newest_frame_not_a_backlog() {
-        let shared = Arc::new(Shared::new(&CameraConfig::synthetic()));
+        let cfg = CameraConfig::synthetic();
+        let shared = Arc::new(Shared::new(&cfg, crate::camera::plan::initial(&cfg)));
         let (tx, rx) = watch::channel(None);
         let mut stream = Box::pin(mjpeg_stream(rx, shared.clone()));
         assert_eq!(shared.lock().viewers, 1);

@@ -10,7 +10,17 @@
 //!   exponential backoff when it exits, stalls or cannot be found;
 //! - `url`: an MJPEG HTTP stream elsewhere, reconnected with the same
 //!   backoff;
+//! - `v4l2`: a camera read by Neptunus itself ([`v4l2`]): its own H.264
+//!   or JPEG passed through as it comes, the format chosen from what it
+//!   offers ([`plan`]);
 //! - `none`: no camera.
+//!
+//! The choice of paths — the camera's H.264 or an encoder for RTP and
+//! WebRTC, the camera's JPEG or an encoder for the page — is [`plan`]'s,
+//! published as a `watch` of [`VideoPlan`] ([`Camera::plan`]). The camera's
+//! own H.264 pictures go out on a broadcast ([`Camera::units`]) that the
+//! RTP sender and the WebRTC viewers read; JPEG pictures on the `watch`
+//! below.
 //!
 //! The latest frame lives in a `watch` channel: every viewer and
 //! [`Camera::latest`] see the newest frame, and a slow viewer skips frames
@@ -25,13 +35,17 @@
 mod backoff;
 mod client;
 mod config;
+mod encode;
 mod error;
 mod font;
 mod frame;
+pub mod h264;
 mod http;
 mod meter;
+pub mod plan;
 mod process;
 mod publisher;
+pub mod record;
 mod render;
 pub mod rtp;
 mod shared;
@@ -39,6 +53,7 @@ mod source;
 pub mod splitter;
 mod synthetic;
 pub mod timecode;
+pub mod v4l2;
 pub mod webrtc;
 
 use std::sync::Arc;
@@ -55,6 +70,7 @@ pub use config::{
 pub use error::SourceError;
 pub use frame::{Frame, Scene};
 pub use meter::FPS_WINDOW;
+pub use plan::{Encode, EncodeSetting, H264Route, JpegRoute, VideoPlan};
 pub use render::{RenderError, SyntheticRenderer};
 pub use shared::{CameraState, CameraStatus, DemandGuard};
 pub use splitter::{JpegFrame, JpegSplitter, SplitterStats};
@@ -106,8 +122,34 @@ impl Camera {
         Camera::start_with(cfg, scene, true)
     }
 
+    /// Like [`start_on_demand`](Camera::start_on_demand), with the paths
+    /// already chosen ([`plan::initial`]) by the caller.
+    ///
+    /// # Panics
+    /// Outside a tokio runtime.
+    pub fn start_on_demand_planned(
+        cfg: CameraConfig,
+        scene: watch::Receiver<Scene>,
+        plan: VideoPlan,
+    ) -> Camera {
+        Camera::start_with_plan(cfg, scene, true, plan)
+    }
+
     fn start_with(cfg: CameraConfig, scene: watch::Receiver<Scene>, on_demand: bool) -> Camera {
-        let shared = Arc::new(Shared::new(&cfg));
+        let plan = plan::initial(&cfg);
+        Camera::start_with_plan(cfg, scene, on_demand, plan)
+    }
+
+    fn start_with_plan(
+        cfg: CameraConfig,
+        scene: watch::Receiver<Scene>,
+        on_demand: bool,
+        plan: VideoPlan,
+    ) -> Camera {
+        if cfg.validate().is_ok() {
+            tracing::info!("{plan}");
+        }
+        let shared = Arc::new(Shared::new(&cfg, plan));
         let (tx, frames) = watch::channel(None);
         let task = match cfg.validate() {
             Err(e) => {
@@ -148,6 +190,12 @@ impl Camera {
         self.shared.status(Instant::now())
     }
 
+    /// [`status`](Camera::status) without the camera's lifetime.
+    pub fn status_handle(&self) -> impl Fn() -> CameraStatus + Send + Sync + 'static {
+        let shared = self.shared.clone();
+        move || shared.status(Instant::now())
+    }
+
     pub fn telemetry(&self) -> CameraTelemetry {
         let s = self.status();
         CameraTelemetry {
@@ -156,6 +204,19 @@ impl Camera {
             frame_age_ms: s.frame_age_ms,
             frames_total: s.frames_total,
         }
+    }
+
+    /// The paths chosen and why, as they change (each start of a `v4l2`
+    /// camera asks it again).
+    pub fn plan(&self) -> watch::Receiver<VideoPlan> {
+        self.shared.plan()
+    }
+
+    /// The camera's own H.264 pictures as they come (none unless the
+    /// camera gives H.264); a reader that falls behind by more than the
+    /// backlog is told how many it missed.
+    pub fn units(&self) -> tokio::sync::broadcast::Receiver<Arc<h264::AccessUnit>> {
+        self.shared.units()
     }
 
     /// The newest frame, if any arrived.
@@ -215,6 +276,14 @@ impl CameraHandle {
     pub(crate) fn subscribe(&self) -> watch::Receiver<Option<Frame>> {
         self.frames.clone()
     }
+
+    pub(crate) fn plan(&self) -> watch::Receiver<VideoPlan> {
+        self.shared.plan()
+    }
+
+    pub(crate) fn units(&self) -> tokio::sync::broadcast::Receiver<Arc<h264::AccessUnit>> {
+        self.shared.units()
+    }
 }
 
 impl Drop for Camera {
@@ -224,4 +293,23 @@ impl Drop for Camera {
         }
         self.shared.stopped();
     }
+}
+
+/// The JSON `GET /api/video` adds: `path` (the plan), `mjpeg` (whether
+/// `/video.mjpg` has pictures: not while the camera streams H.264),
+/// `h264` (what the sender runs now: its route and child, or `null`),
+/// `encoder_running` (a libx264 encoder runs now) and `h264_profile` (the
+/// camera's own H.264, from its SPS).
+pub fn api_json(
+    plan: &VideoPlan,
+    running: Option<rtp::Running>,
+    h264_profile: Option<String>,
+) -> serde_json::Value {
+    serde_json::json!({
+        "mjpeg": !matches!(plan.jpeg, plan::JpegRoute::None),
+        "path": plan,
+        "h264": running,
+        "encoder_running": running.is_some_and(|r| r.route == plan::H264Route::Encoder && r.pid.is_some()),
+        "h264_profile": h264_profile,
+    })
 }

@@ -5,14 +5,20 @@
 //! The lock is held only to copy or bump a few fields, never across an
 //! `.await`.
 
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard};
 
 use serde::Serialize;
-use tokio::sync::watch;
+use tokio::sync::{broadcast, watch};
 use tokio::time::Instant;
 
 use super::config::{CameraConfig, SourceKind};
+use super::h264::AccessUnit;
 use super::meter::FpsMeter;
+use super::plan::VideoPlan;
+
+/// Pictures the H.264 bus holds for a reader that fell behind; a reader
+/// further behind skips to the next keyframe.
+const UNITS_BACKLOG: usize = 64;
 
 /// What the camera is doing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -61,6 +67,9 @@ pub struct CameraStatus {
     pub retry_in_ms: Option<u64>,
     /// Open `/video.mjpg` streams.
     pub viewers: u64,
+    /// The camera's own H.264, when it gives it: its profile and
+    /// `profile-level-id` from its SPS (`constrained baseline 42c01e`).
+    pub h264_profile: Option<String>,
 }
 
 /// What the source task, the routes and [`Camera`](super::Camera) share: counters and the
@@ -73,6 +82,13 @@ pub(crate) struct Shared {
     /// How many want frames now: open `/video.mjpg` streams and
     /// [`DemandGuard`]s (an RTP stream with a destination).
     demand: watch::Sender<usize>,
+    /// The paths chosen ([`super::plan`]): set at the start, and again
+    /// each time the camera is asked what it offers.
+    plan: watch::Sender<VideoPlan>,
+    /// The camera's own H.264 pictures, for RTP and WebRTC.
+    units: broadcast::Sender<Arc<AccessUnit>>,
+    /// The 90 kHz media clock's zero.
+    pub(crate) epoch: Instant,
 }
 
 /// Wants the camera's frames for as long as it lives (see
@@ -105,10 +121,11 @@ pub(crate) struct Inner {
     pub size: Option<(u32, u32)>,
     pub retry_at: Option<Instant>,
     pub viewers: u64,
+    pub h264_profile: Option<String>,
 }
 
 impl Shared {
-    pub(super) fn new(cfg: &CameraConfig) -> Self {
+    pub(super) fn new(cfg: &CameraConfig, plan: VideoPlan) -> Self {
         Shared {
             source: cfg.source,
             rotation_deg: cfg.rotation_deg,
@@ -127,9 +144,41 @@ impl Shared {
                 size: None,
                 retry_at: None,
                 viewers: 0,
+                h264_profile: None,
             }),
             demand: watch::Sender::new(0),
+            plan: watch::Sender::new(plan),
+            units: broadcast::Sender::new(UNITS_BACKLOG),
+            epoch: Instant::now(),
         }
+    }
+
+    pub(crate) fn plan(&self) -> watch::Receiver<VideoPlan> {
+        self.plan.subscribe()
+    }
+
+    /// A new choice: logged when it differs from the last.
+    pub(crate) fn set_plan(&self, plan: &VideoPlan) {
+        let changed = self.plan.send_if_modified(|p| {
+            if p == plan {
+                false
+            } else {
+                *p = plan.clone();
+                true
+            }
+        });
+        if changed {
+            tracing::info!("{plan}");
+        }
+    }
+
+    pub(crate) fn units(&self) -> broadcast::Receiver<Arc<AccessUnit>> {
+        self.units.subscribe()
+    }
+
+    pub(crate) fn send_unit(&self, unit: Arc<AccessUnit>) {
+        // Nobody listening is fine: the picture is counted all the same.
+        let _ = self.units.send(unit);
     }
 
     /// How many want frames, as it changes.
@@ -176,6 +225,7 @@ impl Shared {
                 _ => None,
             },
             viewers: s.viewers,
+            h264_profile: s.h264_profile.clone(),
         }
     }
 }

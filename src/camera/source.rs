@@ -80,7 +80,7 @@ pub(crate) async fn run(cfg: CameraConfig, scene: watch::Receiver<Scene>, out: &
             // validate() already refused these.
             _ => return,
         },
-        SourceKind::Ffmpeg | SourceKind::MjpgStreamer => None,
+        SourceKind::Ffmpeg | SourceKind::MjpgStreamer | SourceKind::V4l2 => None,
     };
     let mut backoff = Backoff::from_config(&cfg.backoff);
     loop {
@@ -91,6 +91,7 @@ pub(crate) async fn run(cfg: CameraConfig, scene: watch::Receiver<Scene>, out: &
                 client::run_url(url, cfg.stall_timeout(), out).await
             }
             (None, SourceKind::Ffmpeg) => process::run_ffmpeg(&cfg, out).await,
+            (None, SourceKind::V4l2) => super::v4l2::run::run(&cfg, out).await,
             (None, _) => process::run_mjpg_streamer(&cfg, out).await,
         };
         let wait = backoff.after_run(started.elapsed());

@@ -193,13 +193,22 @@ impl JpegSplitter {
                         continue;
                     }
                     let rest = self.buf.get(self.pos..)?;
+                    // Waiting for more of a frame already over the limit
+                    // would make what is dropped, and when, depend on how
+                    // the bytes were cut: it is dropped now.
                     let Some(off) = rest.iter().position(|&b| b == 0xFF) else {
                         self.pos = self.buf.len();
+                        if self.pos > self.max_frame_bytes {
+                            continue;
+                        }
                         return None;
                     };
                     let i = self.pos + off;
                     let Some(&next) = self.buf.get(i + 1) else {
                         self.pos = i;
+                        if self.pos > self.max_frame_bytes {
+                            continue;
+                        }
                         return None;
                     };
                     match next {

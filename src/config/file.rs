@@ -31,6 +31,9 @@ pub struct FileConfig {
     /// `[camera]`: the video source (default: `synthetic` with `--sim`,
     /// mjpg-streamer on the vehicle).
     pub camera: Option<crate::camera::CameraConfig>,
+    /// `[storage]`: the free-space floor and the total cap of logs and
+    /// recordings.
+    pub storage: crate::camera::record::StorageConfig,
 }
 
 /// `[hmi]` section: the browser HMI.
@@ -139,6 +142,7 @@ impl FileConfig {
                 ));
             }
         }
+        self.storage.validate()?;
         if self.board.baud == Some(0) {
             return Err("board.baud = 0 — use the board's baud rate, 115200".into());
         }

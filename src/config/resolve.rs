@@ -62,6 +62,8 @@ pub struct Settings {
     pub simulator: EmulatorOptions,
     pub hmi: crate::hmi::HmiSettings,
     pub camera: crate::camera::CameraConfig,
+    /// The free-space floor and total cap of logs and recordings.
+    pub storage: crate::camera::record::StorageConfig,
 }
 
 /// Resolves flags over the file over defaults.
@@ -178,6 +180,7 @@ pub fn resolve(args: &RunArgs) -> Result<Settings, ConfigError> {
                 .map_err(|e| ConfigError::Invalid(format!("camera: {e}")))?;
             camera
         },
+        storage: file.storage,
     })
 }
 

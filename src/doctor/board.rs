@@ -7,6 +7,12 @@
 //! frame with `crc:fail`. A plain (December 2014) board answers a plain
 //! `ping` with `pong` and cannot parse a crc8 frame. `rcap()` is not sent:
 //! the mid-2015 firmware blocks for 5 s on it.
+//!
+//! A board that answers then gets [`LINE_PINGS`] more pings, and the line's
+//! quality is judged ([`judge_line`]): pings unanswered, frames its CRC
+//! rejected, lines from it that arrived damaged. A damaged line is a
+//! warning with its fix (the vehicle writes again what the board did not
+//! take, but a cable that damages bytes wants looking at).
 
 use std::io::{Read as _, Write as _};
 use std::path::Path;
@@ -22,6 +28,43 @@ const LISTEN: Duration = Duration::from_millis(800);
 const ANSWER: Duration = Duration::from_millis(1500);
 /// The number in the probe's `ping(n)`.
 const PING_ARG: u32 = 4242;
+/// Pings of the line-quality probe, one every [`LINE_PING_GAP`].
+const LINE_PINGS: u32 = 20;
+const LINE_PING_GAP: Duration = Duration::from_millis(50);
+
+/// What the line-quality probe saw.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
+pub struct LineHeard {
+    pub pings: u32,
+    pub pongs: u32,
+    /// `crc:fail` answers: frames the board read damaged.
+    pub crc_fails: u32,
+    /// Lines from the board, and those that arrived damaged.
+    pub lines: u64,
+    pub bad_lines: u64,
+}
+
+/// The board check of a board that answered, with the line's quality.
+pub fn judge_line(answered: Check, line: &LineHeard) -> Check {
+    let lost = line.pings.saturating_sub(line.pongs);
+    if lost == 0 && line.crc_fails == 0 && line.bad_lines == 0 {
+        return Check::pass(
+            answered.name,
+            format!(
+                "{}; the line is clean ({} of {} pings answered, no damaged frame or line)",
+                answered.detail, line.pongs, line.pings
+            ),
+        );
+    }
+    Check::warn(
+        answered.name,
+        format!(
+            "{}; but the line damages bytes: {lost} of {} pings unanswered, {} frames rejected by the board's CRC, {} of {} lines from the board damaged",
+            answered.detail, line.pings, line.crc_fails, line.bad_lines, line.lines
+        ),
+        "check the cable and connectors between the BeagleBone and the board (a long, wet or loose one damages bytes), their ground, and the baud rate; the vehicle writes again what the board did not take, and the line's quality shows as SYS_STATUS drop_rate_comm and on the page's board pill".to_owned(),
+    )
+}
 
 /// What the board said in each phase of the probe.
 #[derive(Debug, Default, Clone, PartialEq)]
@@ -167,35 +210,72 @@ pub fn probe(cfg: &LinkConfig) -> Check {
     };
     let mut decoder = LineDecoder::new();
     let mut heard = Heard::default();
-    let mut read_for =
-        |port: &mut Box<dyn tokio_serial::SerialPort>, d: Duration, stop_on_answer: bool| {
-            let mut events = Vec::new();
-            let end = Instant::now() + d;
-            let mut buf = [0u8; 512];
-            while Instant::now() < end {
-                match port.read(&mut buf) {
-                    Ok(n) => decoder.push(&buf[..n], &mut events),
-                    Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
-                    Err(_) => break,
-                }
-                if stop_on_answer && answered(&events) {
-                    break;
-                }
-            }
-            events
-        };
     let ping = |port: &mut Box<dyn tokio_serial::SerialPort>, framing: Framing| {
         let _ = port.write_all(&encoded(&Command::Ping(PING_ARG), framing));
         let _ = port.flush();
     };
-    heard.listening = read_for(&mut port, LISTEN, false);
+    heard.listening = read_for(&mut port, &mut decoder, LISTEN, false);
     ping(&mut port, cfg.framing);
-    heard.configured = read_for(&mut port, ANSWER, true);
+    heard.configured = read_for(&mut port, &mut decoder, ANSWER, true);
     if !answered(&heard.configured) && !crc_failed(&heard.configured) {
         ping(&mut port, other(cfg.framing));
-        heard.other = Some(read_for(&mut port, ANSWER, true));
+        heard.other = Some(read_for(&mut port, &mut decoder, ANSWER, true));
     }
-    judge(&cfg.device, cfg.baud, cfg.framing, &heard)
+    let check = judge(&cfg.device, cfg.baud, cfg.framing, &heard);
+    if !check.ok {
+        return check;
+    }
+    // The line's quality: more pings, what came back.
+    let before = decoder.stats().clone();
+    let mut line = LineHeard::default();
+    for n in 0..LINE_PINGS {
+        let _ = port.write_all(&encoded(&Command::Ping(n), cfg.framing));
+        let _ = port.flush();
+        line.pings += 1;
+        let events = read_for(&mut port, &mut decoder, LINE_PING_GAP, false);
+        count_line(&events, &mut line);
+    }
+    count_line(
+        &read_for(&mut port, &mut decoder, ANSWER / 2, false),
+        &mut line,
+    );
+    let after = decoder.stats();
+    line.bad_lines = after.rejected_total() - before.rejected_total();
+    line.lines = after.lines_accepted - before.lines_accepted + line.bad_lines;
+    judge_line(check, &line)
+}
+
+/// What `port` says for `d` (until an answer to a ping, if asked).
+fn read_for(
+    port: &mut Box<dyn tokio_serial::SerialPort>,
+    decoder: &mut LineDecoder,
+    d: Duration,
+    stop_on_answer: bool,
+) -> Vec<Event> {
+    let mut events = Vec::new();
+    let end = Instant::now() + d;
+    let mut buf = [0u8; 512];
+    while Instant::now() < end {
+        match port.read(&mut buf) {
+            Ok(n) => decoder.push(&buf[..n], &mut events),
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => {}
+            Err(_) => break,
+        }
+        if stop_on_answer && answered(&events) {
+            break;
+        }
+    }
+    events
+}
+
+fn count_line(events: &[Event], line: &mut LineHeard) {
+    for e in events {
+        match e {
+            Event::Pong(_) => line.pongs += 1,
+            Event::CrcFail { .. } => line.crc_fails += 1,
+            _ => {}
+        }
+    }
 }
 
 #[cfg(test)]
@@ -245,6 +325,35 @@ mod tests {
                     .unwrap_or("")
                     .contains("framing = \"plain\"")
         );
+    }
+
+    #[test]
+    fn a_damaging_line_is_a_warning_with_its_fix_and_a_clean_one_says_so() {
+        let answered = || Check::pass("board", "a board answers on /dev/ttyO1");
+        let clean = LineHeard {
+            pings: 20,
+            pongs: 20,
+            lines: 40,
+            ..LineHeard::default()
+        };
+        let c = judge_line(answered(), &clean);
+        assert!(c.ok && !c.warning && c.detail.contains("clean"), "{c:?}");
+        let noisy = LineHeard {
+            pings: 20,
+            pongs: 18,
+            crc_fails: 1,
+            lines: 40,
+            bad_lines: 3,
+        };
+        let c = judge_line(answered(), &noisy);
+        assert!(c.ok && c.warning, "{c:?}");
+        assert!(
+            c.detail.contains("2 of 20 pings unanswered")
+                && c.detail.contains("1 frames rejected")
+                && c.detail.contains("3 of 40 lines"),
+            "{c:?}"
+        );
+        assert!(c.fix.as_deref().unwrap_or("").contains("cable"), "{c:?}");
     }
 
     #[test]

@@ -17,7 +17,7 @@ use crate::wallclock::{BUILD_UNIX_S, ClockSync, system_sync, system_unix_us};
 const MIN_FREE_BYTES: u64 = 100 * 1024 * 1024;
 
 /// `name` on PATH (or as a path).
-fn find_program(name: &str) -> Option<PathBuf> {
+pub(super) fn find_program(name: &str) -> Option<PathBuf> {
     if name.contains('/') {
         return Path::new(name).is_file().then(|| PathBuf::from(name));
     }
@@ -112,6 +112,7 @@ pub fn camera(c: &CameraConfig) -> Check {
                 ),
             );
         }
+        SourceKind::V4l2 => return v4l2_camera(c),
         SourceKind::Ffmpeg => (c.ffmpeg.program.as_str(), "sudo apt install ffmpeg"),
         SourceKind::MjpgStreamer => (
             c.mjpg_streamer.program.as_str(),
@@ -217,12 +218,72 @@ pub fn camera(c: &CameraConfig) -> Check {
     }
 }
 
+/// `source = "v4l2"`: the device is there, this user may use it, and it
+/// answers what it offers (`v4l2-ctl --list-formats-ext`).
+fn v4l2_camera(c: &CameraConfig) -> Check {
+    use crate::camera::v4l2::{Node, node, probe};
+    let name = "camera";
+    let dev = Path::new(&c.v4l2.device);
+    match node(dev) {
+        Node::Missing => {
+            return Check::fail(
+                name,
+                format!("camera device {} does not exist", dev.display()),
+                "plug in the USB camera (`v4l2-ctl --list-devices` lists the devices) or name the right one in camera.v4l2.device".to_owned(),
+            );
+        }
+        Node::File | Node::Pipe => {
+            return Check::pass(
+                name,
+                format!(
+                    "{} is not a device: read as a recorded {} stream (camera.v4l2.format)",
+                    dev.display(),
+                    c.v4l2.format
+                ),
+            );
+        }
+        Node::Device => {}
+    }
+    use nix::unistd::{AccessFlags, access};
+    if let Err(e) = access(dev, AccessFlags::R_OK | AccessFlags::W_OK) {
+        return Check::fail(
+            name,
+            format!("camera device {} is not usable by this user: {e}", dev.display()),
+            "add the user to the video group (`sudo adduser USER video`); the service's user neptunus is in it".to_owned(),
+        );
+    }
+    match probe(dev) {
+        Ok(caps) => Check::pass(
+            name,
+            format!(
+                "{} is {} ({}), offers {}",
+                dev.display(),
+                caps.card,
+                caps.driver,
+                if caps.formats.is_empty() {
+                    "no format".to_owned()
+                } else {
+                    caps.fourccs().join(", ")
+                }
+            ),
+        ),
+        Err(e @ crate::camera::v4l2::ProbeError::NoTool { .. }) => {
+            Check::fail(name, e.to_string(), "sudo apt install v4l-utils".to_owned())
+        }
+        Err(e) => Check::fail(
+            name,
+            e.to_string(),
+            "is it the camera's capture node? A camera often has a second node for metadata: name the right one in camera.v4l2.device (`v4l2-ctl --list-devices`)".to_owned(),
+        ),
+    }
+}
+
 /// The addresses the vehicle will listen on are free.
 pub fn ports(settings: &Settings) -> Check {
     let name = "ports";
     let mut listens: Vec<(String, Result<(), std::io::Error>)> = Vec::new();
     let udp = |a: SocketAddr| UdpSocket::bind(a).map(drop);
-    let tcp = |a: SocketAddr| TcpListener::bind(a).map(drop);
+    let tcp = tcp_free;
     for url in &settings.mavlink.endpoints {
         match &url.spec {
             EndpointSpec::UdpIn(a) => listens.push((format!("udpin:{a}"), udp(*a))),
@@ -233,13 +294,18 @@ pub fn ports(settings: &Settings) -> Check {
     if let Some(a) = settings.hmi.http {
         listens.push((format!("HMI http {a}"), tcp(a)));
     }
-    // The signalling port beside the HMI is optional: the vehicle starts
-    // without it (a warning), and viewers still have /webrtc on the HMI.
-    let mut optional: Option<(String, Result<(), std::io::Error>)> = None;
+    // The camera manager's ports beside the HMI are optional: the vehicle
+    // starts without them (a warning), and viewers still have /webrtc on
+    // the HMI.
+    let mut optional: Vec<(String, Result<(), std::io::Error>)> = Vec::new();
     let w = &settings.camera.webrtc;
     if w.enabled {
-        if let Some(a) = SignallingAddr::resolve(w.signalling, settings.hmi.http) {
-            optional = Some((format!("WebRTC signalling {a}"), tcp(a)));
+        let signalling = SignallingAddr::resolve(w.signalling, settings.hmi.http);
+        if let Some(a) = signalling {
+            optional.push((format!("WebRTC signalling {a}"), tcp(a)));
+        }
+        if let Some(a) = SignallingAddr::resolve_streams(w.streams, signalling) {
+            optional.push((format!("camera streams {a}"), tcp(a)));
         }
         if w.udp_port != 0 {
             let a = SocketAddr::from(([0, 0, 0, 0], w.udp_port));
@@ -250,14 +316,15 @@ pub fn ports(settings: &Settings) -> Check {
         r.as_ref().err().map(|e| format!("{what}: {e}"))
     };
     let mut taken: Vec<String> = listens.iter().filter_map(in_use).collect();
-    let signalling_taken = optional.as_ref().and_then(in_use);
-    if taken.is_empty()
-        && let Some(busy) = &signalling_taken
-    {
+    let signalling_taken: Vec<String> = optional.iter().filter_map(in_use).collect();
+    if taken.is_empty() && !signalling_taken.is_empty() {
         return Check::warn(
             name,
-            format!("in use: {busy}; the vehicle starts without it, and Cockpit then finds no video there (or another program's)"),
-            "stop the program listening there (mavlink-camera-manager, or another neptunus: `systemctl status neptunus`), or set [camera.webrtc] signalling to another address or off".to_owned(),
+            format!(
+                "in use: {}; the vehicle starts without it, and Cockpit then finds no video there (or another program's)",
+                signalling_taken.join("; ")
+            ),
+            "stop the program listening there (mavlink-camera-manager, or another neptunus: `systemctl status neptunus`), or set [camera.webrtc] signalling / streams to another address or off".to_owned(),
         );
     }
     // With a required address taken too, the signalling's is named with it.
@@ -282,6 +349,38 @@ pub fn ports(settings: &Settings) -> Check {
             format!("in use: {}", taken.join("; ")),
             "another program listens there — is neptunus (or mavlink-camera-manager, on 6021) already running (`systemctl status neptunus`; stop it to run doctor)? Otherwise change [mavlink] endpoints, [hmi] http or [camera.webrtc] signalling and udp_port".to_owned(),
         )
+    }
+}
+
+/// Whether a TCP address is free. A port below 1024 this user may not bind
+/// (the service binds port 80 with CAP_NET_BIND_SERVICE, which `sudo -u
+/// neptunus … doctor` does not have) is free when nothing answers there.
+fn tcp_free(a: SocketAddr) -> Result<(), std::io::Error> {
+    match TcpListener::bind(a) {
+        Ok(_) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied && a.port() < 1024 => {
+            let ip = match a.ip() {
+                std::net::IpAddr::V4(v4) if v4.is_unspecified() => {
+                    std::net::Ipv4Addr::LOCALHOST.into()
+                }
+                std::net::IpAddr::V6(v6) if v6.is_unspecified() => {
+                    std::net::Ipv6Addr::LOCALHOST.into()
+                }
+                ip => ip,
+            };
+            let probe = SocketAddr::new(ip, a.port());
+            match std::net::TcpStream::connect_timeout(
+                &probe,
+                std::time::Duration::from_millis(500),
+            ) {
+                Ok(_) => Err(std::io::Error::new(
+                    std::io::ErrorKind::AddrInUse,
+                    "Address already in use (something answers there)",
+                )),
+                Err(_) => Ok(()),
+            }
+        }
+        Err(e) => Err(e),
     }
 }
 

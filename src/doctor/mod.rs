@@ -6,7 +6,8 @@
 //! The checks: the configuration parses (`config`); the serial device
 //! exists and this user may use it (`serial`); a board answers on it in the
 //! configured framing (`board`, `board.rs`); the camera's program, device
-//! and formats (`camera`); the ports the vehicle listens on are free
+//! and formats (`camera`); which path the video takes and, when a viewer
+//! gets none, the fix (`video`, `video.rs`); the ports the vehicle listens on are free
 //! (`ports`); the data directory is writable with room (`data_dir`); the
 //! clock is plausible (`clock`) — the last four in `host.rs`.
 //!
@@ -16,6 +17,7 @@
 
 mod board;
 mod host;
+mod video;
 
 use serde::Serialize;
 
@@ -23,6 +25,7 @@ use crate::config::{BoardSource, RunArgs, resolve};
 
 pub use board::{Heard, judge};
 pub use host::parse_formats;
+pub use video::judge as judge_video;
 
 /// One check's outcome.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize)]
@@ -130,7 +133,9 @@ pub fn run(args: &RunArgs) -> Report {
                 e.to_string(),
                 "correct the file (the message names the line and the setting); `neptunus --config FILE --check` checks it alone",
             )];
-            for name in ["serial", "board", "camera", "ports", "data_dir", "clock"] {
+            for name in [
+                "serial", "board", "camera", "video", "ports", "data_dir", "clock",
+            ] {
                 checks.push(Check::fail(
                     name,
                     "not checked: the configuration does not parse",
@@ -182,6 +187,7 @@ pub fn run(args: &RunArgs) -> Report {
         });
     }
     checks.push(host::camera(&settings.camera));
+    checks.push(video::video(&settings.camera));
     checks.push(host::ports(&settings));
     checks.push(host::data_dir(&settings.data_dir));
     checks.push(host::clock());

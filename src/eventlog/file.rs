@@ -179,7 +179,7 @@ impl EventFile {
 }
 
 /// `n` of a file named exactly `events.{n}.jsonl`, n ≥ 1.
-fn rotated_index(name: &str) -> Option<usize> {
+pub(super) fn rotated_index(name: &str) -> Option<usize> {
     let digits = name.strip_prefix("events.")?.strip_suffix(".jsonl")?;
     let n: usize = digits.parse().ok()?;
     (n >= 1 && rotated_file_name(n) == name).then_some(n)

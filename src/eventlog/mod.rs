@@ -127,6 +127,12 @@ pub enum EventLogError {
 /// The file being written; the rotated ones are `events.{n}.jsonl`.
 pub const FILE_NAME: &str = "events.jsonl";
 
+/// Whether `name` is the event log's file or one of its rotations (what
+/// the events folder holds of ours).
+pub fn is_event_log_name(name: &str) -> bool {
+    name == FILE_NAME || file::rotated_index(name).is_some()
+}
+
 /// `events.{n}.jsonl`: `n` = 1 is the newest rotated file.
 pub fn rotated_file_name(n: usize) -> String {
     format!("events.{n}.jsonl")

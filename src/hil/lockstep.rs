@@ -165,7 +165,7 @@ impl HilRig {
                 match e {
                     LinkEvent::State { state, .. } => up = state == LinkState::Up,
                     LinkEvent::Telemetry(Event::Nav(_)) => navigating = up,
-                    LinkEvent::Telemetry(_) => {}
+                    LinkEvent::Telemetry(_) | LinkEvent::Quality(_) => {}
                 }
             }
         }

@@ -23,6 +23,8 @@
 //!   and the records tests and benches read.
 //! - [`surroundings`]: the simulated vehicle around the board (ESC pulses
 //!   in, sensor inputs out, on the board's time), sans-IO.
+//! - [`relay`]: [`NoisyRelay`], a damaging serial line (a pty relay that
+//!   flips bits and drops bytes, seeded) between the vehicle and a board.
 //! - [`rov`]: [`HilRov`], the loop closed at real time for `neptunus --hil`.
 //! - [`lockstep`]: the loop closed on a scenario's simulated time for
 //!   `neptunus sim-report --hil`.
@@ -38,6 +40,7 @@ pub mod compile;
 pub mod lockstep;
 pub mod ms5803;
 pub mod pins;
+pub mod relay;
 pub mod rov;
 pub mod runner;
 pub mod surroundings;
@@ -48,6 +51,7 @@ pub use bno055::Attitude;
 pub use compile::{BUILD_PACKAGES, BuildError, Firmware, SIMAVR_PACKAGES, prepare};
 pub use ms5803::Water;
 pub use pins::{Output, PinsReport, PulseChange};
+pub use relay::{Damage, DamageCount, NoisyRelay, RelayError};
 pub use rov::{HilError, HilRov};
 pub use runner::{
     GenuineBoard, GenuineControl, GenuineError, GenuineSnapshot, SerialChunk, TimedChange,

@@ -87,7 +87,7 @@ pub fn response(path: &str, request: &HeaderMap) -> Response {
 
 /// `W/"<first 128 bits of the SHA-256 in hex>"`: unique enough for a
 /// handful of files, and short on every request and 304.
-fn etag(sha256: &[u8; 32]) -> HeaderValue {
+pub(crate) fn etag(sha256: &[u8; 32]) -> HeaderValue {
     use std::fmt::Write as _;
     let mut tag = String::with_capacity(38);
     tag.push_str("W/\"");
@@ -102,7 +102,7 @@ fn etag(sha256: &[u8; 32]) -> HeaderValue {
 /// Whether `If-None-Match` names `tag` (weak comparison, RFC 9110 13.1.2:
 /// `W/` is ignored on both sides) or is `*`. A header that is not text, or
 /// a list with nothing matching, is a miss: the file is sent.
-fn matches(request: &HeaderMap, tag: &HeaderValue) -> bool {
+pub(crate) fn matches(request: &HeaderMap, tag: &HeaderValue) -> bool {
     let Ok(tag) = tag.to_str() else {
         return false;
     };

@@ -206,10 +206,13 @@ async fn guard(shared: &Shared, page_port: Option<u16>, req: Request, next: Next
 /// `/api/params`, `/api/video`, mavlink2rest's GET and WebSocket) — is open
 /// to every client the Host and Origin checks admit, as it is to any
 /// MAVLink station that listens; the vehicle's records (`/api/logs`: tlogs,
-/// the event log with its client addresses, `neptunus.log`) are for those
-/// who may pilot ([`may_pilot`]), like every request that acts.
+/// the event log with its client addresses, `neptunus.log`;
+/// `/api/recordings`: the video recorded on the vehicle) are for those who
+/// may pilot ([`may_pilot`]), like every request that acts.
 pub(crate) fn is_record(path: &str) -> bool {
-    path == "/api/logs" || path.starts_with("/api/logs/")
+    ["/api/logs", "/api/recordings"]
+        .iter()
+        .any(|p| path == *p || path.strip_prefix(p).is_some_and(|r| r.starts_with('/')))
 }
 
 /// The outcome of one pilot login attempt.
@@ -402,6 +405,52 @@ pub(crate) async fn login(State(shared): State<Arc<Shared>>, req: Request<Body>)
         }
         Login::NoPassword => json(StatusCode::CONFLICT, false, outcome.message()),
     }
+}
+
+/// `POST /api/cockpit-link`: for a logged-in page, a Cockpit link (see
+/// [`auth::Tokens::issue_link`]) and the mavlink2rest URL that carries it,
+/// on the address and port the page itself reached.
+pub(crate) async fn cockpit_link(State(shared): State<Arc<Shared>>, req: Request) -> Response {
+    let link = login_token(req.headers()).and_then(|login| {
+        shared
+            .tokens
+            .lock()
+            .ok()
+            .and_then(|mut t| t.issue_link(login, Instant::now()))
+    });
+    let Some(token) = link else {
+        return json(
+            StatusCode::UNAUTHORIZED,
+            false,
+            "log in with the pilot password first: the link opens Cockpit with this login".into(),
+        );
+    };
+    let host = req
+        .headers()
+        .get(header::HOST)
+        .and_then(|h| h.to_str().ok())
+        .filter(|h| super::headers::plain_host(h))
+        .unwrap_or("localhost")
+        .to_owned();
+    let scheme = if is_tls(req.extensions()) {
+        "wss"
+    } else {
+        "ws"
+    };
+    tracing::info!(
+        "browser HMI: a Cockpit link made for {} (good for its first use within {} s)",
+        client_ip(req.extensions()).map_or_else(|| "an unknown address".into(), |i| i.to_string()),
+        auth::LINK_FIRST_USE.as_secs()
+    );
+    (
+        StatusCode::OK,
+        axum::Json(serde_json::json!({
+            "ok": true,
+            "mavlink": format!("{scheme}://{host}/mavlink2rest/ws/mavlink?token={token}"),
+            "first_use_within_s": auth::LINK_FIRST_USE.as_secs(),
+        })),
+    )
+        .into_response()
 }
 
 /// `POST /api/logout`: forgets the token and clears the cookie.

@@ -30,20 +30,25 @@
 pub mod assets;
 pub mod auth;
 mod beside;
+pub mod blueos;
+mod cors;
 pub mod guard;
 pub mod headers;
 pub mod m2r;
 pub mod model;
 pub mod outlet;
 pub mod protocol;
+mod recordings;
 pub mod rest;
 pub mod server;
 pub mod session;
+mod start;
 pub mod tls;
 
-pub use beside::{Beside, VideoRoutes};
+pub use beside::{Beside, BesideKind, VideoInfo, VideoRoutes};
 pub(crate) use outlet::queued;
 pub use outlet::{Deliveries, Delivery, Outlet};
+pub use start::Hmi;
 
 use std::collections::BTreeSet;
 use std::future::Future;
@@ -80,6 +85,15 @@ pub enum HmiError {
         addr: SocketAddr,
         source: std::io::Error,
     },
+    #[error(
+        "cannot listen for the browser HMI on {addr}: {source} — a port below 1024 needs the capability CAP_NET_BIND_SERVICE, \
+         which the packaged service has (sudo systemctl start neptunus); run by hand, use --http 0.0.0.0:8080 \
+         (Cockpit then needs the MAVLink URL: see the guide's Cockpit page)"
+    )]
+    Privileged {
+        addr: SocketAddr,
+        source: std::io::Error,
+    },
     #[error("cannot write the HMI address file {path}: {source}")]
     AddrFile {
         path: PathBuf,
@@ -91,17 +105,15 @@ pub enum HmiError {
     Tls(#[from] tls::TlsError),
 }
 
-/// One start-up line saying who may pilot from the browser.
-fn log_access_policy(settings: &HmiSettings, password: bool, signing: bool) {
-    let who = match (signing, password, settings.open_control) {
-        (true, true, _) => "MAVLink signing is on: only sessions logged in with the pilot password may pilot".to_owned(),
-        (true, false, _) => "MAVLink signing is on and no pilot password is set: no browser session may pilot — set one with `neptunus hmi set-password`".to_owned(),
-        (false, _, auth::OpenControl::None) if !password => "no pilot password is set and open_control = \"none\": no browser session may pilot — set one with `neptunus hmi set-password`".to_owned(),
-        (false, _, auth::OpenControl::None) => "sessions must log in with the pilot password to pilot".to_owned(),
-        (false, true, oc) => format!("sessions from {oc} addresses may pilot without logging in (open_control = \"{oc}\"), others must log in with the pilot password"),
-        (false, false, oc) => format!("sessions from {oc} addresses may pilot (open_control = \"{oc}\"); others may only watch until a pilot password is set with `neptunus hmi set-password`"),
-    };
-    tracing::info!("browser HMI: {who}");
+impl HmiError {
+    /// The error for a port that cannot be bound, with the fix that fits.
+    pub fn bind(addr: SocketAddr, source: std::io::Error) -> HmiError {
+        if source.kind() == std::io::ErrorKind::PermissionDenied && addr.port() < 1024 {
+            HmiError::Privileged { addr, source }
+        } else {
+            HmiError::Bind { addr, source }
+        }
+    }
 }
 
 /// HMI settings, resolved from `--http` and the `[hmi]` section.
@@ -181,9 +193,12 @@ pub struct HmiContext {
     pub transport: server::Transport,
     /// WebRTC runs: `/webrtc` and `/api/webrtc` are among `extra_routes`.
     pub webrtc: bool,
-    /// A port beside the HMI's with routes of its own (the WebRTC
-    /// signalling, where Cockpit looks for it), under the same guard.
-    pub beside: Option<Beside>,
+    /// Ports beside the HMI's with routes of their own (the camera
+    /// manager's: the WebRTC signalling and `/streams`, where Cockpit looks
+    /// for them), under the same guard.
+    pub beside: Vec<Beside>,
+    /// The video paths for `GET /api/video`.
+    pub video_info: Option<VideoInfo>,
 }
 
 /// State shared by the server's handlers and sessions.
@@ -213,6 +228,7 @@ pub(crate) struct Shared {
     pub video: bool,
     /// WebRTC's routes are merged: `/api/webrtc` exists.
     pub webrtc: bool,
+    pub video_info: Option<VideoInfo>,
     pub free_sysids: Mutex<BTreeSet<u8>>,
     pub sysid_range: (u8, u8),
     pub next_session: AtomicU64,
@@ -222,6 +238,8 @@ pub(crate) struct Shared {
     pub status: watch::Receiver<rest::ServerView>,
     /// The mavlink2rest API's clients and REST view.
     pub m2r: Arc<m2r::Hub>,
+    /// Cockpit's settings bag (`/bag/v1.0/`).
+    pub bag: blueos::bag::BagService,
 }
 
 /// A system id lent to one session; back in the pool when dropped, whatever
@@ -305,6 +323,14 @@ pub async fn serve(
     );
     let (status_tx, status_rx) = watch::channel(rest::ServerView::default());
     let hostname = auth::machine_hostname();
+    let bag = {
+        let dir = ctx.data_dir.clone();
+        tokio::task::spawn_blocking(move || {
+            blueos::bag::BagService::load(&dir, blueos::bag::Limits::default())
+        })
+        .await
+        .map_err(std::io::Error::other)?
+    };
     // Peer ids: sessions and mavlink2rest clients count from 2; 1 is REST POSTs.
     let m2r_hub = Arc::new(m2r::Hub::new(
         ctx.m2r_outlet.clone(),
@@ -334,6 +360,7 @@ pub async fn serve(
         data_dir: ctx.data_dir,
         video: ctx.extra_routes.is_some(),
         webrtc: ctx.webrtc,
+        video_info: ctx.video_info,
         free_sysids: Mutex::new((lo..=hi).collect()),
         sysid_range: (lo, hi),
         next_session: AtomicU64::new(2),
@@ -341,6 +368,7 @@ pub async fn serve(
         last_bad_report: Mutex::new(None),
         status: status_rx,
         m2r: Arc::clone(&m2r_hub),
+        bag,
     });
     let fan_out = tokio::spawn(m2r::fan_out(
         ctx.m2r_outlet.subscribe(),
@@ -352,7 +380,9 @@ pub async fn serve(
     // longer ask (a watcher may not change rates).
     session::request_rates(&shared).await;
     let sweeper = tokio::spawn(guard::sweep(Arc::clone(&shared)));
-    let mut app = rest::routes(Arc::clone(&shared)).merge(m2r::routes(Arc::clone(&shared)));
+    let mut app = rest::routes(Arc::clone(&shared))
+        .merge(m2r::routes(Arc::clone(&shared)))
+        .merge(blueos::routes(Arc::clone(&shared)));
     if let Some(extra) = ctx.extra_routes {
         app = app.merge(extra);
     }
@@ -367,10 +397,12 @@ pub async fn serve(
             let _ = rx.wait_for(|s| *s).await;
         }
     };
-    let beside = ctx.beside.map(|b| {
-        let page_port = listener.local_addr().map_or(0, |a| a.port());
-        b.spawn(&shared, page_port, ctx.transport.clone(), stopped())
-    });
+    let page_port = listener.local_addr().map_or(0, |a| a.port());
+    let beside: Vec<_> = ctx
+        .beside
+        .into_iter()
+        .map(|b| b.spawn(&shared, page_port, ctx.transport.clone(), stopped()))
+        .collect();
     let main = server::run(listener, app, ctx.transport, stopped());
     tokio::pin!(main);
     let result = tokio::select! {
@@ -381,218 +413,11 @@ pub async fn serve(
         }
     };
     let _ = stop_tx.send(true);
-    if let Some(b) = beside {
+    for b in beside {
         let _ = b.await;
     }
     watcher.abort();
     sweeper.abort();
     fan_out.abort();
     result
-}
-
-/// A pilot password crossing the network in clear text: say so at start
-/// (the loopback interface never leaves the machine).
-fn warn_plaintext(password_set: bool, local: SocketAddr) {
-    if password_set && !local.ip().is_loopback() {
-        tracing::warn!(
-            "browser HMI on {local} without TLS: the pilot password and the session cross the network in clear text — \
-             set [hmi] tls = \"self-signed\" (or --tls self-signed) unless the tether is a private point-to-point link"
-        );
-    }
-}
-
-/// The app's handle on a running HMI: the inputs its sessions produce.
-pub struct Hmi {
-    inputs: Option<mpsc::Receiver<Input>>,
-    /// Where the port beside listens, when it does.
-    beside: Option<SocketAddr>,
-    outlet: Outlet,
-    m2r_outlet: Outlet,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    task: Option<tokio::task::JoinHandle<()>>,
-}
-
-impl Hmi {
-    /// Binds and starts the HMI server for endpoint index `endpoint` (its
-    /// mavlink2rest API is endpoint `endpoint + 1`) (or does nothing with
-    /// `--http off`). The bound address is logged
-    /// and written to `DATA_DIR/http.addr` (`ADDR`, or `https://ADDR/` with
-    /// TLS on). With TLS, the certificate is loaded (or made) first: a bad
-    /// certificate or key file is an error naming it. `video`: the camera's
-    /// routes, and the WebRTC signalling's own port under the same guard
-    /// and TLS.
-    pub async fn start(
-        settings: &HmiSettings,
-        endpoint: usize,
-        vehicle_sysid: u8,
-        z_centered: Arc<dyn Fn(u8) -> bool + Send + Sync>,
-        data_dir: PathBuf,
-        video: Option<VideoRoutes>,
-    ) -> Result<Self, HmiError> {
-        let (extra_routes, webrtc, beside) = match video {
-            Some(v) => (Some(v.routes), v.webrtc, v.signalling),
-            None => (None, false, None),
-        };
-        let outlet = Outlet::new(endpoint);
-        let m2r_outlet = Outlet::every_component(endpoint + 1);
-        let off = Self {
-            inputs: None,
-            beside: None,
-            outlet: outlet.clone(),
-            m2r_outlet: m2r_outlet.clone(),
-            stop: None,
-            task: None,
-        };
-        let addr_file = data_dir.join("http.addr");
-        let _ = std::fs::remove_file(&addr_file);
-        let Some(addr) = settings.http else {
-            tracing::info!("browser HMI off (--http off)");
-            return Ok(off);
-        };
-        let listener = match TcpListener::bind(addr).await {
-            Ok(l) => l,
-            Err(source) if !settings.http_explicit => {
-                tracing::warn!(
-                    "{} — the browser HMI is off",
-                    HmiError::Bind { addr, source }
-                );
-                return Ok(off);
-            }
-            Err(source) => return Err(HmiError::Bind { addr, source }),
-        };
-        let local = listener.local_addr().unwrap_or(addr);
-        let password = auth::PasswordStore::new(&data_dir).load()?;
-        let signing = crate::mavlink::signing::SigningStore::new(&data_dir)
-            .load_key_checked()
-            .is_ok_and(|(k, _)| k.is_some());
-        let tls = tls::load(&settings.tls, &data_dir)?;
-        let url = match &tls {
-            Some(t) => {
-                if t.generated {
-                    tracing::info!(
-                        "browser HMI: self-signed TLS certificate made in {}",
-                        t.cert_path.display()
-                    );
-                }
-                tracing::info!(
-                    "browser HMI TLS certificate {}: SHA-256 fingerprint {} — check that the browser shows the same \
-                     (also printed by `neptunus hmi tls-fingerprint`)",
-                    t.cert_path.display(),
-                    t.fingerprint
-                );
-                format!("https://{local}/")
-            }
-            None => {
-                warn_plaintext(password.is_some(), local);
-                format!("http://{local}/")
-            }
-        };
-        // Plain HTTP keeps the bare address (what scripts already read).
-        let addr_text = if tls.is_some() {
-            url.clone()
-        } else {
-            local.to_string()
-        };
-        // A read-only data directory must not keep the pilot from the page:
-        // the address is in the log line below too.
-        if let Err(source) = std::fs::write(&addr_file, format!("{addr_text}\n")) {
-            tracing::warn!(
-                "{}",
-                HmiError::AddrFile {
-                    path: addr_file.clone(),
-                    source,
-                }
-            );
-        }
-        tracing::info!(addr = %local, "browser HMI listening on {url}");
-        log_access_policy(settings, password.is_some(), signing);
-        let beside = match beside {
-            Some((addr, routes)) => Beside::bind(addr, routes, tls.is_some()).await,
-            None => None,
-        };
-        let beside_addr = beside.as_ref().and_then(|b| b.listener.local_addr().ok());
-        let (tx, rx) = mpsc::channel(1024);
-        let ctx = HmiContext {
-            outlet: outlet.clone(),
-            m2r_outlet: m2r_outlet.clone(),
-            inputs: tx,
-            vehicle_sysid,
-            sysid_min: settings.sysid_min,
-            sysid_max: settings.sysid_max,
-            z_centered,
-            password,
-            open_control: settings.open_control,
-            allowed_origins: settings.allowed_origins.clone(),
-            max_watchers: settings.max_watchers,
-            signing,
-            camera_rotation_deg: settings.camera_rotation_deg,
-            data_dir,
-            extra_routes,
-            webrtc,
-            transport: server::Transport {
-                limits: settings.limits,
-                tls: tls.map(|t| t.config),
-            },
-            beside,
-        };
-        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-        let task = tokio::spawn(async move {
-            let shutdown = async move {
-                let _ = stop_rx.await;
-            };
-            if let Err(e) = serve(listener, ctx, shutdown).await {
-                tracing::error!("browser HMI server stopped: {e}");
-            }
-        });
-        Ok(Self {
-            inputs: Some(rx),
-            beside: beside_addr,
-            outlet,
-            m2r_outlet,
-            stop: Some(stop_tx),
-            task: Some(task),
-        })
-    }
-
-    /// The next input from a session (pending forever when the HMI is off).
-    pub async fn recv(&mut self) -> Input {
-        match self.inputs.as_mut() {
-            Some(rx) => match rx.recv().await {
-                Some(input) => input,
-                None => std::future::pending().await,
-            },
-            None => std::future::pending().await,
-        }
-    }
-
-    /// Where the port beside the HMI's listens (the WebRTC signalling).
-    pub fn beside_addr(&self) -> Option<SocketAddr> {
-        self.beside
-    }
-
-    /// The vehicle task's side of the hub.
-    pub fn outlet(&self) -> Outlet {
-        self.outlet.clone()
-    }
-
-    /// The mavlink2rest API's side of the hub.
-    pub fn m2r_outlet(&self) -> Outlet {
-        self.m2r_outlet.clone()
-    }
-
-    /// Stops the server; sessions' sockets close.
-    pub async fn shutdown(mut self) {
-        if let Some(stop) = self.stop.take() {
-            let _ = stop.send(());
-        }
-        if let Some(mut task) = self.task.take() {
-            // Sessions with open sockets keep a graceful shutdown waiting; do not hang on them.
-            if tokio::time::timeout(Duration::from_millis(500), &mut task)
-                .await
-                .is_err()
-            {
-                task.abort();
-            }
-        }
-    }
 }

@@ -19,7 +19,7 @@ use tokio::time::Instant;
 
 use super::HUB_CAPACITY;
 use crate::dialect::neptunus::MavMessage;
-use crate::vehicle::machine::{COMPONENT_ID, To, Topic};
+use crate::vehicle::machine::{CAMERA_COMPONENT_ID, COMPONENT_ID, To, Topic};
 
 /// One message from the vehicle to HMI sessions.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,7 +60,8 @@ pub struct Outlet {
     endpoint: usize,
     /// Whether it hears the vehicle's other components (the camera) as well
     /// as its autopilot: mavlink2rest does, as on the wire; the browser
-    /// sessions talk to the autopilot alone.
+    /// sessions talk to the autopilot, and hear of the camera only its
+    /// recording (capture status, acks).
     every_component: bool,
     hub: broadcast::Sender<Deliveries>,
     listeners: Arc<Listeners>,
@@ -130,7 +131,7 @@ impl Outlet {
         msg: &MavMessage,
         topic: Option<Topic>,
     ) -> Option<Delivery> {
-        if compid != COMPONENT_ID && !self.every_component {
+        if compid != COMPONENT_ID && !self.every_component && !for_sessions(compid, msg) {
             return None;
         }
         let peer = match to {
@@ -228,6 +229,19 @@ impl Outlet {
             }
         });
     }
+}
+
+/// What the browser sessions hear from the camera (component 100):
+/// whether it can record and does, and its answers to their requests —
+/// nothing that could pass for the autopilot's state.
+fn for_sessions(compid: u8, msg: &MavMessage) -> bool {
+    compid == CAMERA_COMPONENT_ID
+        && matches!(
+            msg,
+            MavMessage::CAMERA_INFORMATION(_)
+                | MavMessage::CAMERA_CAPTURE_STATUS(_)
+                | MavMessage::COMMAND_ACK(_)
+        )
 }
 
 /// The lock, also after a panic elsewhere while it was held (it guards a

@@ -24,6 +24,7 @@
 //! | `lights` | `level`: 0..255 | COMMAND_LONG 32 (ILLUMINATOR_CONFIGURE, percent) |
 //! | `laser` | `on`: bool | COMMAND_LONG 183 (DO_SET_SERVO 6, 1900/1100 µs) |
 //! | `tilt` | `deg`: −90..90 | COMMAND_LONG 205 (DO_MOUNT_CONTROL, centidegrees) |
+//! | `record` | `on`: bool | COMMAND_LONG 2500 / 2501 (VIDEO_START_CAPTURE / _STOP_CAPTURE) to the camera, component 100: recording on the vehicle |
 //! | `request_control` | `takeover_allowed` (optional bool) | COMMAND_LONG 32100 p1 1, p3 10 s |
 //! | `release_control` | — | COMMAND_LONG 32100 p1 0 |
 //! | `answer_request` | `accept`: bool | accept: 32100 p1 0 (release to the requester); refuse: COMMAND_ACK 32100 DENIED |
@@ -33,7 +34,7 @@
 //! |---|---|---|
 //! | `welcome` | on connect | `session`, `sysid` (null: none held yet), `watch_only_reason` (null: may pilot), `password_required` (log in to pilot), `password_set`, `pilot` (may pilot), `logged_in`, `vehicle_sysid`, `camera_rotation_deg`, `version`, `modes` (the modes to offer: `mode`, `name`, `label`, `thrusters`, `button`), `boot_mode` |
 //! | `identity` | the session's rights changed (logged in, took a system id) | `sysid`, `pilot`, `logged_in`, `watch_only_reason` |
-//! | `telemetry` | as the vehicle sends (one per pass of its loop), at least every 0.5 s | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, and `failsafes`: the plain-word reason of every active failsafe (empty: none) |
+//! | `telemetry` | as the vehicle sends (one per pass of its loop), at least every 0.5 s | see [`Telemetry`]; among its fields `ages_ms` {`heartbeat`, `attitude`, `depth`, `battery`, `estimate`}: ms since the vehicle last sent that data (null: never), so the page can grey out stale values, `failsafes`: the plain-word reason of every active failsafe (empty: none), and `recording` (null: the camera has not said): the camera's CAMERA_INFORMATION and CAMERA_CAPTURE_STATUS (each session asks for them at start) — `can` (it records), `on`, `time_ms`, `available_mib` |
 //! | `statustext` | at once | `severity` (0 emergency .. 7 debug), `text`, `category` (what it is about, chosen where the text is written: `stop`, `control`, `gain`, `ap_depth`, `ap_heading`, `failsafe`, `board_link` — the developer logger's categories — or `general`) |
 //! | `ack` | this session's command answered | `command`, `command_name`, `result`, `result_name`, `text` (plain words: "Arm/disarm: refused", "Lights: done") |
 //! | `request_pending` | this session's control request was passed to the owner (instead of its `ack`: MAVLink answers a forwarded request with FAILED, which is no failure) | `owner` (sysid asked), `timeout_s` (how long the owner has to answer) |
@@ -174,6 +175,10 @@ pub enum ClientMsg {
         level: f64,
     },
     Laser {
+        on: bool,
+    },
+    /// Recording on the vehicle: start (`true`) or stop.
+    Record {
         on: bool,
     },
     Tilt {
@@ -342,7 +347,7 @@ pub struct AutopilotView {
 }
 
 /// Health bits of SYS_STATUS that the operator needs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Default)]
 pub struct HealthView {
     /// Motor outputs healthy: the board link is up.
     pub board_link: bool,
@@ -355,6 +360,11 @@ pub struct HealthView {
     pub battery: bool,
     /// Pre-arm checks pass.
     pub prearm: bool,
+    /// The board's serial line: frames and lines damaged or lost (both
+    /// ways) over the last 10 s, percent (SYS_STATUS `drop_rate_comm`).
+    pub board_line_drop_pct: f64,
+    /// The same since the vehicle started, a count (`errors_comm`).
+    pub board_line_errors: u16,
 }
 
 /// How old each kind of data is: milliseconds between the arrival of the
@@ -419,6 +429,22 @@ pub struct Telemetry {
     /// Why the vehicle is in failsafe, one plain-word reason per active
     /// failsafe ("battery low 10.2 V"); empty when none is.
     pub failsafes: Vec<String>,
+    /// Recording on the vehicle, as its camera last said (None: it has not).
+    pub recording: Option<RecordingView>,
+}
+
+/// Recording on the vehicle: what its camera said (CAMERA_INFORMATION,
+/// CAMERA_CAPTURE_STATUS).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct RecordingView {
+    /// The camera can record (CAMERA_CAP_FLAGS_CAPTURE_VIDEO).
+    pub can: bool,
+    /// A recording runs (or is starting).
+    pub on: bool,
+    /// How long it has recorded.
+    pub time_ms: u32,
+    /// What the storage still takes for recordings.
+    pub available_mib: f32,
 }
 
 /// A message to the browser.
@@ -578,7 +604,7 @@ mod tests {
         assert!(t.starts_with(r#"{"type":"telemetry","t_ms":0"#), "{t}");
         assert!(
             t.ends_with(
-                r#""ages_ms":{"heartbeat":null,"attitude":null,"depth":null,"battery":null,"estimate":null},"failsafes":[]}"#
+                r#""ages_ms":{"heartbeat":null,"attitude":null,"depth":null,"battery":null,"estimate":null},"failsafes":[],"recording":null}"#
             ),
             "{t}"
         );

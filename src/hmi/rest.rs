@@ -1,6 +1,7 @@
 //! HTTP routes: the page and its assets, the WebSocket upgrade and the REST
 //! API (`/api/status`, `/api/params`, `/api/logs`, `/api/logs/{kind}/{name}`,
-//! `/api/login`, `/api/logout`). Who may use which is decided in front of
+//! `/api/recordings` and its files (`recordings.rs`), `/api/login`,
+//! `/api/logout`). Who may use which is decided in front of
 //! them by [`guard`].
 //!
 //! The server's own view of the vehicle ([`ServerView`]) is built like a
@@ -119,8 +120,11 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
         .route("/api/video", get(video))
         .route("/api/logs", get(logs))
         .route("/api/logs/{kind}/{name}", get(log_file))
+        .route("/api/recordings", get(super::recordings::list))
+        .route("/api/recordings/{name}", get(super::recordings::file))
         .route("/api/login", post(guard::login))
         .route("/api/logout", post(guard::logout))
+        .route("/api/cockpit-link", post(guard::cockpit_link))
         // Compression around the page's files only (see `assets`).
         .fallback(asset.layer(assets::compression()))
         .with_state(shared)
@@ -230,12 +234,21 @@ async fn status(State(shared): State<Arc<Shared>>) -> Json<StatusBody> {
 /// Whether the page should load `/video.mjpg`, and where WebRTC is
 /// described when it runs (asked first, so a vehicle without a camera or
 /// WebRTC costs the page no failed request).
+/// Whether the page has video and where; with a camera, the paths its
+/// video takes and why (`path`), whether `/video.mjpg` has pictures
+/// (`mjpeg`), and what the H.264 sender runs now (`h264`).
 async fn video(State(shared): State<Arc<Shared>>) -> Json<serde_json::Value> {
-    Json(serde_json::json!({
+    let mut v = serde_json::json!({
         "available": shared.video,
         "url": "/video.mjpg",
         "webrtc": shared.webrtc.then_some("/api/webrtc"),
-    }))
+    });
+    if let (Some(info), Some(map)) = (&shared.video_info, v.as_object_mut())
+        && let serde_json::Value::Object(extra) = info()
+    {
+        map.extend(extra);
+    }
+    Json(v)
 }
 
 #[derive(Serialize)]

@@ -15,6 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use crate::durable;
 use rustls::pki_types::pem::PemObject as _;
 use rustls::pki_types::{CertificateDer, PrivateKeyDer, ServerName};
 use sha2::{Digest as _, Sha256};
@@ -272,31 +273,25 @@ pub fn ensure_self_signed(data_dir: &Path, extra_names: &[String]) -> Result<boo
         source,
     })?;
     // The key first: a certificate without its key would be unusable.
-    write_atomically(&key_path, key.serialize_pem().as_bytes(), 0o600)?;
-    write_atomically(&cert_path, cert.pem().as_bytes(), 0o644)?;
+    write_atomically(
+        &key_path,
+        key.serialize_pem().as_bytes(),
+        durable::Mode::Exactly(0o600),
+    )?;
+    write_atomically(
+        &cert_path,
+        cert.pem().as_bytes(),
+        durable::Mode::LessUmask(0o644),
+    )?;
     Ok(true)
 }
 
-/// Writes `bytes` to `path.tmp` with `mode`, syncs, renames over `path`.
-fn write_atomically(path: &Path, bytes: &[u8], mode: u32) -> Result<(), TlsError> {
-    use std::io::Write as _;
-    use std::os::unix::fs::OpenOptionsExt as _;
-    let tmp = path.with_extension("pem.tmp");
-    let err = |source| TlsError::Write {
+/// Writes `bytes` to `path` with [`durable::write`].
+fn write_atomically(path: &Path, bytes: &[u8], mode: durable::Mode) -> Result<(), TlsError> {
+    durable::write(path, bytes, mode).map_err(|e| TlsError::Write {
         path: path.into(),
-        source,
-    };
-    let _ = std::fs::remove_file(&tmp);
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .mode(mode)
-        .open(&tmp)
-        .map_err(err)?;
-    f.write_all(bytes).map_err(err)?;
-    f.sync_all().map_err(err)?;
-    drop(f);
-    std::fs::rename(&tmp, path).map_err(err)
+        source: e.into(),
+    })
 }
 
 #[cfg(test)]

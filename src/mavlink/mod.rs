@@ -8,6 +8,8 @@
 //! - [`signing`]: MAVLink 2 signing (sans-IO signer and verifier) and the
 //!   key and timestamp files.
 //! - [`tlog`]: telemetry log files (pymavlink `.tlog` format).
+//! - [`ftp`]: MAVLink FTP payloads (requests, replies, directory entries,
+//!   the CRC-32), pure.
 //!
 //! Nothing here interprets a message or decides anything about the vehicle;
 //! the external `mavlink` crate is used only for CRCs, payload codecs and
@@ -16,6 +18,7 @@
 
 pub mod endpoint;
 pub mod frame;
+pub mod ftp;
 pub mod signing;
 pub mod tlog;
 

@@ -57,6 +57,29 @@ impl TlogConfig {
     }
 }
 
+/// The files this run of the vehicle has written its telemetry log to
+/// (every piece after rotations and a corrected clock): what LOG_ERASE
+/// must never delete. Shared between the log's thread and whoever asks.
+#[derive(Debug, Clone, Default)]
+pub struct TlogRun(Arc<Mutex<Vec<PathBuf>>>);
+
+impl TlogRun {
+    pub fn add(&self, path: PathBuf) {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(path);
+    }
+
+    pub fn contains(&self, path: &Path) -> bool {
+        self.0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .any(|p| p == path)
+    }
+}
+
 const SETUP_SIGNING_ID: u32 =
     <crate::dialect::neptunus::SETUP_SIGNING_DATA as mavlink_core::MessageData>::ID;
 /// `secret_key[32]` sits after `initial_timestamp` (u64), `target_system`
@@ -76,6 +99,8 @@ pub struct TlogWriter {
     path: PathBuf,
     file: BufWriter<File>,
     written: u64,
+    /// Where the files it opens are noted, if anywhere.
+    run: Option<TlogRun>,
 }
 
 impl TlogWriter {
@@ -97,7 +122,21 @@ impl TlogWriter {
             path,
             file: BufWriter::new(file),
             written: 0,
+            run: None,
         })
+    }
+
+    /// Notes in `run` the file being written now and every one after it.
+    pub fn note_files_in(&mut self, run: TlogRun) {
+        run.add(self.path.clone());
+        self.run = Some(run);
+    }
+
+    fn opened(&mut self, path: PathBuf) {
+        if let Some(run) = &self.run {
+            run.add(path.clone());
+        }
+        self.path = path;
     }
 
     /// Appends one record, rotating first if it would not fit.
@@ -129,7 +168,7 @@ impl TlogWriter {
         tracing::info!(path = %path.display(), "telemetry log goes on under the corrected time");
         self.session = session.to_owned();
         self.index = index;
-        self.path = path;
+        self.opened(path);
         self.file = BufWriter::new(file);
         self.written = 0;
         prune(
@@ -145,7 +184,7 @@ impl TlogWriter {
         let (index, path, file) = open_next(&self.dir, &self.session, self.index + 1)?;
         tracing::info!(path = %path.display(), "telemetry log rotated");
         self.index = index;
-        self.path = path;
+        self.opened(path);
         self.file = BufWriter::new(file);
         self.written = 0;
         prune(
@@ -299,6 +338,8 @@ impl TlogSender {
 
 pub(super) struct TlogHandle {
     pub(super) sender: TlogSender,
+    /// The files this run writes.
+    pub(super) run: TlogRun,
     thread: Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
@@ -307,7 +348,9 @@ impl TlogHandle {
     pub(super) fn spawn(cfg: &TlogConfig) -> io::Result<Self> {
         let clock = Arc::clone(&cfg.clock);
         let generation = clock.generation();
-        let writer = TlogWriter::create(cfg, &session_name(clock.unix_us()))?;
+        let mut writer = TlogWriter::create(cfg, &session_name(clock.unix_us()))?;
+        let run = TlogRun::default();
+        writer.note_files_in(run.clone());
         tracing::info!(path = %writer.path().display(), "telemetry log started");
         let (tx, rx) = std::sync::mpsc::sync_channel(TLOG_QUEUE);
         // A thread, not a task: file writes may block, and must not hold up
@@ -324,6 +367,7 @@ impl TlogHandle {
                 dropped: Arc::new(AtomicU64::new(0)),
                 clock,
             },
+            run,
             thread: Mutex::new(Some(thread)),
         })
     }

@@ -334,6 +334,7 @@ impl<R: Rig> Scenario<R> {
                 self.input(match ev {
                     LinkEvent::State { state, reason } => Input::Link { state, reason },
                     LinkEvent::Telemetry(ev) => Input::Board(ev),
+                    LinkEvent::Quality(q) => Input::LinkQuality(q),
                 });
             }
             self.input(Input::Tick);

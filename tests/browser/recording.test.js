@@ -1,11 +1,14 @@
-// Snapshot, video recording and log downloads, tested
-// against the real binary (`--sim`, whose synthetic camera streams MJPEG)
-// in Debian's headless Chromium. The files checked are the ones the
-// browser downloads. Waits poll a condition with a deadline.
+// Snapshot, video recording (in the browser, and on the vehicle with the
+// ROV button), log and recording downloads, tested against the real binary
+// (`--sim`, whose synthetic camera streams MJPEG and H.264) in Debian's
+// headless Chromium. The files checked are the ones the browser downloads.
+// Waits poll a condition with a deadline. The vehicle-recording test also
+// leaves screenshots at laptop and tablet sizes in target/screenshots/.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync } from 'node:fs';
-import { launchBrowser, openPage, telemetry, until, withVehicle } from './harness.js';
+import { mkdirSync, readFileSync } from 'node:fs';
+import { join } from 'node:path';
+import { REPO, launchBrowser, openPage, telemetry, until, withVehicle } from './harness.js';
 
 let browser;
 before(async () => { browser = await launchBrowser(); });
@@ -97,12 +100,66 @@ test('a watcher is told the logs are for the pilot, and the page asks the server
   const { page, context, problems } = await openPage(browser, v.url);
   await until(async () => /watching/.test(await page.textContent('[data-testid=me]')), 10000, 'a watching session');
   await until(async () => /log in/i.test(await page.textContent('[data-testid=logs]')), 5000, 'the note');
+  await until(async () => /log in/i.test(await page.textContent('[data-testid=recordings]')), 5000, 'the recordings note');
   assert.equal(await page.locator('[data-testid=logs-list] a').count(), 0);
   await page.click('[data-testid=logs-refresh]');
+  await page.click('[data-testid=recordings-refresh]');
   await page.waitForTimeout(300);
+  // The vehicle's record button is there, but not for a watcher.
+  await until(async () => (await telemetry(page)).recording?.can, 10000, 'the camera saying it records');
+  assert.ok(await page.isDisabled('[data-testid=vehicle-record]'));
+  assert.match(await page.getAttribute('[data-testid=vehicle-record]', 'title'), /log in/i);
   assert.deepEqual(problems, [], 'the page asked for nothing it may not have');
-  // The server's rule agrees: logs are the pilot's.
-  const status = await page.evaluate(async () => (await fetch('/api/logs')).status);
-  assert.equal(status, 401);
+  // The server's rule agrees: logs and recordings are the pilot's.
+  const status = await page.evaluate(async () => [(await fetch('/api/logs')).status, (await fetch('/api/recordings')).status]);
+  assert.deepEqual(status, [401, 401]);
   await context.close();
 }, [], { password: 'tide-pool-42', hmiToml: 'open_control = "none"' }));
+
+test('the ROV button records on the vehicle through its camera, shows ROV REC, and the recording is listed and downloads', () => withVehicle(async (v) => {
+  const shots = join(REPO, 'target', 'screenshots');
+  mkdirSync(shots, { recursive: true });
+  const { page, context, problems } = await openPage(browser, v.url, { width: 1366, height: 768 });
+  await until(() => page.evaluate(() => window.neptunus.video.frames > 2), 15000, 'video frames');
+  await until(async () => (await telemetry(page)).recording?.can, 10000, 'the camera saying it records');
+  const button = '[data-testid=vehicle-record]';
+  await until(() => page.isEnabled(button), 5000, 'the ROV button enabled for the pilot (nobody in control)');
+  assert.ok(await page.isHidden('[data-testid=vehicle-rec-indicator]'));
+  assert.equal(await page.getAttribute(button, 'aria-pressed'), 'false');
+  // Pressed: the page asks the vehicle; the vehicle's camera says it records.
+  await page.click(button);
+  await until(async () => (await telemetry(page)).recording?.on, 30000, 'the camera recording');
+  await until(() => page.isVisible('[data-testid=vehicle-rec-indicator]'), 5000, 'the ROV REC indicator');
+  assert.equal(await page.getAttribute(button, 'aria-pressed'), 'true');
+  await until(async () => /ROV REC 0:0[3-9]/.test(await page.textContent('[data-testid=vehicle-rec-indicator]')), 30000, 'three seconds recorded on the vehicle');
+  await page.screenshot({ path: join(shots, 'recording-laptop.png') });
+  // The tablet in portrait sees the same, from the vehicle (it is a pilot's page too).
+  const tablet = await openPage(browser, v.url, { width: 768, height: 1024 });
+  await until(async () => (await telemetry(tablet.page)).recording?.on, 10000, 'the tablet hearing it records');
+  await until(() => tablet.page.isVisible('[data-testid=vehicle-rec-indicator]'), 5000, 'the indicator on the tablet');
+  const box = await tablet.page.locator(button).boundingBox();
+  assert.ok(box && box.x >= 0 && box.x + box.width <= 768 && box.y + box.height <= 1024, `the ROV button on the tablet at ${JSON.stringify(box)}`);
+  await tablet.page.screenshot({ path: join(shots, 'recording-tablet.png') });
+  assert.deepEqual(tablet.problems, []);
+  await tablet.context.close();
+  // Pressed again: stopped, and the recording is listed.
+  await page.click(button);
+  await until(async () => !(await telemetry(page)).recording?.on, 15000, 'the recording stopped');
+  await until(() => page.isHidden('[data-testid=vehicle-rec-indicator]'), 5000, 'the indicator gone');
+  const list = '[data-testid=recordings-list]';
+  await until(async () => (await page.locator(`${list} a`).count()) >= 3, 10000, 'the recording in the list');
+  await page.locator('#recordings-box').scrollIntoViewIfNeeded();
+  await page.screenshot({ path: join(shots, 'recording-list-laptop.png') });
+  const api = await page.evaluate(async () => (await fetch('/api/recordings')).json());
+  const video = api.recordings.find((f) => f.kind === 'video');
+  const csv = api.recordings.find((f) => f.kind === 'telemetry');
+  assert.ok(video && csv && api.recordings.some((f) => f.kind === 'subtitles'), JSON.stringify(api));
+  const ts = await download(page, `${list} a[href="${video.url}"]`);
+  assert.equal(ts.name, video.name);
+  assert.ok(ts.bytes.length >= 188 * 10 && ts.bytes.length % 188 === 0, `${ts.bytes.length} bytes of MPEG-TS`);
+  for (let i = 0; i < ts.bytes.length; i += 188) assert.equal(ts.bytes[i], 0x47, `sync byte of packet ${i / 188}`);
+  const table = await download(page, `${list} a[href="${csv.url}"]`);
+  assert.match(table.bytes.toString('utf8'), /^time_s,utc,segment,segment_time_s,depth_m,heading_deg/);
+  assert.deepEqual(problems, []);
+  await context.close();
+}));

@@ -5,7 +5,9 @@
 // listed in [hmi] allowed_origins. Waits poll a condition with a deadline.
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFileSync, readdirSync } from 'node:fs';
+import { mkdtempSync, readFileSync, readdirSync, rmSync } from 'node:fs';
+import { spawnSync } from 'node:child_process';
+import { tmpdir } from 'node:os';
 import { createServer, request } from 'node:http';
 import { createSocket } from 'node:dgram';
 import { join } from 'node:path';
@@ -65,7 +67,8 @@ async function openViewer(ws) {
 
 const viewerState = (page) => page.evaluate(() => ({ ...window.viewer, offer: undefined }));
 
-/** The processes whose parent is `pid` and whose name is `name`. */
+/** The processes whose parent is `pid` and whose name is `name` (any
+ * name when `name` is null). */
 function children(pid, name) {
   const out = [];
   for (const d of readdirSync('/proc')) {
@@ -74,7 +77,7 @@ function children(pid, name) {
       const stat = readFileSync(`/proc/${d}/stat`, 'utf8');
       const comm = stat.slice(stat.indexOf('(') + 1, stat.lastIndexOf(')'));
       const ppid = Number(stat.slice(stat.lastIndexOf(')') + 2).split(' ')[1]);
-      if (ppid === pid && comm === name) out.push(Number(d));
+      if (ppid === pid && (name === null || comm === name)) out.push(Number(d));
     } catch { /* the process ended meanwhile */ }
   }
   return out;
@@ -320,3 +323,71 @@ test('with --webrtc off the page plays MJPEG at once and nothing listens for sig
   assert.deepEqual(problems, []);
   await context.close();
 }, ['--webrtc', 'off']));
+
+/** A camera that encodes H.264 itself, read through V4L2: a recording of
+ * what one gives (an Annex B stream of access units: libx264 from testsrc,
+ * 640×480 at 30 fps, constrained baseline, the SPS/PPS only at its start,
+ * a keyframe every second) in a file in the device's place, which the
+ * vehicle plays at 30 fps through the same path as a device's buffers. */
+test('a camera\'s own H.264 plays in a viewer and in the page, with no process on the vehicle encoding it', async () => {
+  const dir = mkdtempSync(join(tmpdir(), 'neptunus-h264-camera-'));
+  const clip = join(dir, 'camera.h264');
+  const made = spawnSync('ffmpeg', ['-hide_banner', '-loglevel', 'error', '-f', 'lavfi', '-i', `testsrc2=size=640x480:rate=${FPS}`,
+    '-t', '30', '-c:v', 'libx264', '-preset', 'ultrafast', '-profile:v', 'baseline', '-g', `${FPS}`, '-pix_fmt', 'yuv420p',
+    '-f', 'h264', '-y', clip]);
+  assert.equal(made.status, 0, `ffmpeg could not make the recording: ${made.stderr}`);
+  const v = await startVehicle(['--video-rtp', 'off', '--webrtc-signalling', '127.0.0.1:0'], {
+    toml: `[camera]\nsource = "v4l2"\nfps = ${FPS}\n[camera.v4l2]\ndevice = "${clip}"\nformat = "h264"\n`,
+    hmiToml: `allowed_origins = ["${origin}"]`,
+  });
+  try {
+    const video = await json(`${v.url}api/video`);
+    assert.equal(video.path.h264, 'camera', JSON.stringify(video));
+    assert.equal(video.mjpeg, false, 'no JPEG pictures from an H.264 camera');
+    const info = await json(`${v.url}api/webrtc`);
+    const stream = info.streams[0];
+    assert.deepEqual([stream.encode, stream.width, stream.height, stream.interval, stream.source],
+      ['H264', 640, 480, `1/${FPS}`, 'camera-h264']);
+    const page = await openViewer(`ws://127.0.0.1:${info.signalling_port}/`);
+    const first = await until(async () => {
+      const s = await viewerState(page);
+      return s.frames > 0 && s;
+    }, 20000, 'a first decoded frame of the camera\'s H.264');
+    console.log(`camera's own H.264: first frame ${first.firstFrameMs} ms after opening the viewer`);
+    const cam0 = (await json(`${v.url}camera/status`)).frames_total;
+    const dec0 = (await viewerState(page)).frames;
+    const t0 = Date.now();
+    // Ten seconds, the vehicle's children looked at throughout: none.
+    while (Date.now() - t0 < 10000) {
+      assert.deepEqual(children(v.pid, null), [], 'the vehicle runs no child process');
+      await new Promise((ok) => setTimeout(ok, 250));
+    }
+    const cam1 = (await json(`${v.url}camera/status`)).frames_total;
+    const s = await viewerState(page);
+    const decoded = s.frames - dec0;
+    const made = cam1 - cam0;
+    console.log(`10 s: the camera gave ${made} pictures, Chromium decoded ${decoded} (${(100 * decoded / made).toFixed(0)} %)`);
+    assert.ok(made >= 30, `the camera gave only ${made} pictures in 10 s`);
+    assert.ok(decoded >= 0.8 * made, `decoded ${decoded} of ${made} pictures`);
+    assert.equal(s.width, 640);
+    assert.equal(s.height, 480);
+    assert.deepEqual(s.errors, []);
+    const during = await json(`${v.url}api/video`);
+    assert.equal(during.encoder_running, false);
+    assert.deepEqual(during.h264, { route: 'camera', pid: null });
+    // The HMI page plays it over WebRTC and never asks for MJPEG.
+    const { page: hmi, context, problems } = await openPage(browser, v.url);
+    await until(() => hmi.evaluate(() => window.neptunus.video.transport === 'webrtc' && window.neptunus.video.frames > 20),
+      20000, 'the page playing the camera\'s H.264 over WebRTC');
+    assert.equal((await json(`${v.url}camera/status`)).viewers, 0, 'nobody reads /video.mjpg');
+    assert.deepEqual(children(v.pid, null), []);
+    assert.deepEqual(problems, []);
+    await context.close();
+  } catch (e) {
+    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
+    throw e;
+  } finally {
+    await v.stop();
+    rmSync(dir, { recursive: true, force: true });
+  }
+});

@@ -13,6 +13,7 @@
 )]
 
 pub mod core_rig;
+pub mod stick;
 
 use std::fs::File;
 use std::net::UdpSocket;

@@ -61,6 +61,8 @@ class Vehicle:
         self.proc: subprocess.Popen | None = None
         self.starts = 0
         self.stderr_paths: list[Path] = []
+        # More command-line arguments (a --config FILE).
+        self.extra_args: list[str] = []
 
     @property
     def control_url(self) -> str:
@@ -77,7 +79,7 @@ class Vehicle:
         # The board: the emulator (--sim), or the genuine firmware in simavr
         # (--hil) when NEPTUNUS_HIL_FIRMWARE names its built .elf.
         board = ["--hil", HIL_FIRMWARE] if HIL_FIRMWARE else ["--sim"]
-        args = [str(BIN), *board, "--data-dir", str(self.data_dir), "--http", "127.0.0.1:0"]
+        args = [str(BIN), *board, "--data-dir", str(self.data_dir), "--http", "127.0.0.1:0", *self.extra_args]
         for url in self.endpoints + [f"tcpin:127.0.0.1:{self.control_port}"]:
             args += ["--mavlink", url]
         env = dict(os.environ, NO_COLOR="1", RUST_LOG=os.environ.get("RUST_LOG", "info"))

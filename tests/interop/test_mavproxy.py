@@ -1,6 +1,6 @@
 """MAVProxy 1.8.75 against the vehicle's tcpin endpoint, driven through a
 pseudo-terminal (pexpect) exactly as a user types: connect, `param fetch`,
-`arm throttle`, `disarm`."""
+`arm throttle`, `disarm`; `log list`, `log download`."""
 
 from __future__ import annotations
 
@@ -94,3 +94,19 @@ def test_mavproxy_params_arm_disarm(mavproxy):
     # MAVProxy's fence module reads a clear GEOFENCE health bit as a breach.
     mp.log.flush()
     assert "fence breach" not in mp.log_path.read_text()
+
+
+def test_mavproxy_lists_and_downloads_the_log(mavproxy):
+    vehicle, mp = mavproxy
+    mp.expect(r"Detected vehicle 1:1", 60, "connect")
+    mp.expect(r"online system 1", 30, "connect")
+    mp.send("log list")
+    size = int(mp.expect(r"Log 1\s+numLogs 1 lastLog 1 size (\d+)", 30, "log list").group(1))
+    assert size > 0
+    out = Path(mp.log_path).parent / "log1.bin"
+    mp.send(f"log download 1 {out}")
+    got = int(mp.expect(r"Finished downloading \S+ \((\d+) bytes", 120, "log download").group(1))
+    # The log being written: what its entry said, as it was on the disk.
+    assert got == size
+    tlog = next((vehicle.data_dir / "tlogs").glob("*.tlog"))
+    assert out.read_bytes() == tlog.read_bytes()[:size]

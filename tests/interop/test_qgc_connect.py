@@ -15,7 +15,10 @@ MSG_AUTOPILOT_VERSION = 148
 MSG_AVAILABLE_MODES = 435
 MSG_COMPONENT_INFORMATION = 395
 MSG_COMPONENT_METADATA = 397
+FTP_TERMINATE_SESSION = 1
 FTP_OPEN_FILE_RO = 4
+FTP_BURST_READ_FILE = 15
+FTP_ACK = 128
 FTP_NAK = 129
 FTP_ERR_FILE_NOT_FOUND = 10
 
@@ -24,6 +27,48 @@ class Qgc:
     """A QGC-shaped client: records everything it receives from the vehicle,
     so that duplicates and strays are visible at the end."""
 
+    def ftp(self, opcode: int, seq: int, path: bytes = b"", session: int = 0, offset: int = 0, size: int | None = None, timeout: float = 3.0):
+        """One FTP request (QGC's FTPManager framing); the reply to it."""
+        n = len(path) if size is None else size
+        payload = struct.pack("<HBBBBBBI", seq, session, opcode, n, 0, 0, 0, offset) + path
+        self.conn.mav.file_transfer_protocol_send(0, 1, 1, list(payload.ljust(251, b"\0")))
+        return self.wait(
+            lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL"
+            and struct.unpack_from("<H", bytes(m.payload))[0] == (seq + 1) % 65536,
+            timeout,
+        )
+
+    def ftp_get(self, path: str) -> bytes:
+        """A file as QGC's FTPManager downloads it: OpenFileRO, then
+        BurstReadFile until the burst that ends short, then TerminateSession."""
+        ack = self.ftp(FTP_OPEN_FILE_RO, 100, path=path.encode())
+        assert ack is not None, f"no reply to OpenFileRO {path}"
+        data = bytes(ack.payload)
+        _seq, session, opcode, size = struct.unpack_from("<HBBB", data)
+        assert opcode == FTP_ACK and size == 4, f"OpenFileRO {path}: opcode {opcode}"
+        length = struct.unpack_from("<I", data, 12)[0]
+        out = bytearray()
+        seq = 200
+        while len(out) < length:
+            payload = struct.pack("<HBBBBBBI", seq, session, FTP_BURST_READ_FILE, 0, 0, 0, 0, len(out))
+            self.conn.mav.file_transfer_protocol_send(0, 1, 1, list(payload.ljust(251, b"\0")))
+            dl = Deadline(3.0)
+            complete = False
+            while not complete and not dl.expired():
+                m = self.wait(lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL", dl.left())
+                if m is None:
+                    break
+                d = bytes(m.payload)
+                r_seq, _s, opcode, size, _req, burst_complete, _pad, offset = struct.unpack_from("<HBBBBBBI", d)
+                assert opcode == FTP_ACK, f"burst read NAK {d[12]}"
+                assert offset == len(out), "a burst packet out of order on loopback"
+                out += d[12 : 12 + size]
+                complete = burst_complete == 1
+                seq = r_seq + 1
+            assert complete, "a burst that never completed"
+        assert self.ftp(FTP_TERMINATE_SESSION, seq, session=session) is not None
+        return bytes(out)
+
     def __init__(self, conn):
         self.conn = conn
         self.received = []
@@ -31,7 +76,10 @@ class Qgc:
 
     def pump(self, timeout: float):
         m = self.conn.recv_match(blocking=True, timeout=timeout)
-        if m is not None and m.get_type() != "BAD_DATA" and from_vehicle(m):
+        # A message pymavlink's dialect lacks comes without its header
+        # (UNKNOWN_<id>, the frame in `data`): its sender is read there.
+        unknown = m is not None and m.get_type().startswith("UNKNOWN_") and bytes(m.data)[5:7] == b"\x01\x01"
+        if m is not None and m.get_type() != "BAD_DATA" and (unknown or from_vehicle(m)):
             self.received.append(m)
             return m
         return None
@@ -107,24 +155,34 @@ def test_qgc_connect_sequence(qgc):
     assert not by_name["MANUAL"].properties & mavlink.MAV_MODE_PROPERTY_NOT_USER_SELECTABLE
     assert "ALT_HOLD" in by_name
 
-    # 3. Component metadata/information: not offered, answered UNSUPPORTED at once.
+    # 3. Component metadata (and the older component information): each
+    #    answered, naming the general metadata file, which QGC fetches over
+    #    MAVLink FTP. pymavlink 2.4.50's dialect lacks both messages: they
+    #    arrive as UNKNOWN_397/395, the URI read from the payload.
+    uris = []
     for msg_id in (MSG_COMPONENT_METADATA, MSG_COMPONENT_INFORMATION):
         ack = qgc.request_message(msg_id)
-        assert ack.result == mavlink.MAV_RESULT_UNSUPPORTED, f"REQUEST_MESSAGE({msg_id})"
+        assert ack.result == mavlink.MAV_RESULT_ACCEPTED, f"REQUEST_MESSAGE({msg_id})"
+        m = qgc.wait(lambda m: m.get_type() == f"UNKNOWN_{msg_id}", 3.0)
+        assert m is not None, f"REQUEST_MESSAGE({msg_id}) accepted, no message {msg_id}"
+        frame = bytes(m.data)
+        payload = frame[10 : 10 + frame[1]].ljust(320, b"\0")
+        # COMPONENT_METADATA: u32, u32, uri[100]; COMPONENT_INFORMATION: three u32, then the URI.
+        at = 8 if msg_id == MSG_COMPONENT_METADATA else 12
+        uris.append(payload[at : at + 100].split(b"\0")[0].decode())
+    assert uris[0] == uris[1] and uris[0].startswith("mftp://"), uris
+    # QGC keeps one slash of the scheme's and asks for the rest.
+    general = qgc.ftp_get("/" + uris[0][len("mftp://") :])
+    assert b'"metadataTypes"' in general
 
     # 4. MAVLink FTP for the parameter file: NAK FileNotFound within 1 s
     #    (QGC's FTP ack timeout), so QGC falls back to the parameter protocol.
-    path = b"@PARAM/param.pck"
-    seq = 7
-    payload = struct.pack("<HBBBBBBI", seq, 0, FTP_OPEN_FILE_RO, len(path), 0, 0, 0, 0) + path
-    payload = payload.ljust(251, b"\0")
-    qgc.conn.mav.file_transfer_protocol_send(0, 1, 1, list(payload))
-    nak = qgc.wait(lambda m: m.get_type() == "FILE_TRANSFER_PROTOCOL", 1.0)
+    ftp_before = len([m for m in qgc.received if m.get_type() == "FILE_TRANSFER_PROTOCOL"])
+    nak = qgc.ftp(FTP_OPEN_FILE_RO, 7, path=b"@PARAM/param.pck", timeout=1.0)
     assert nak is not None, "no FTP reply within 1 s"
     assert (nak.target_system, nak.target_component) == (QGC_SYSID, QGC_COMPID)
     data = bytes(nak.payload)
-    r_seq, _session, opcode, size, req_opcode = struct.unpack_from("<HBBBB", data)
-    assert r_seq == seq + 1
+    _seq, _session, opcode, size, req_opcode = struct.unpack_from("<HBBBB", data)
     assert opcode == FTP_NAK and req_opcode == FTP_OPEN_FILE_RO
     assert size >= 1 and data[12] == FTP_ERR_FILE_NOT_FOUND
 
@@ -176,8 +234,10 @@ def test_qgc_connect_sequence(qgc):
     )
     for a in acks:
         assert (a.target_system, a.target_component) == (QGC_SYSID, QGC_COMPID), a
-    # Nothing we said we don't have was sent anyway.
-    assert not [m for m in qgc.received if m.get_msgId() in (MSG_COMPONENT_METADATA, MSG_COMPONENT_INFORMATION)]
-    # FTP answered once (no duplicate NAK to time out on later).
-    assert len([m for m in qgc.received if m.get_type() == "FILE_TRANSFER_PROTOCOL"]) == 1
+    # Each metadata message came once.
+    for msg_id in (MSG_COMPONENT_METADATA, MSG_COMPONENT_INFORMATION):
+        assert len([m for m in qgc.received if m.get_type() == f"UNKNOWN_{msg_id}"]) == 1
+    # The parameter file's FTP request answered once (no duplicate NAK to
+    # time out on later).
+    assert len([m for m in qgc.received if m.get_type() == "FILE_TRANSFER_PROTOCOL"]) == ftp_before + 1
     print(f"{count} parameters, {retried} re-read by index")

@@ -2,7 +2,8 @@
 // the WebSocket, no DOM), the view (view.js: renders what the server says)
 // and the controls (controls.js: what the operator does, sent at 20 Hz),
 // with the input devices (input.js; the gamepad's buttons: gamepad.js),
-// snapshot, recording and the logs list (recording.js) and the developer interface (the
+// snapshot, recording and the logs list (recording.js), opening Cockpit as
+// the pilot (cockpit.js) and the developer interface (the
 // recorder and logger of recorder.js from connection on; the plots of
 // dev.js loaded when the view first opens), and routes each server message
 // to whoever shows it. Read this file first; docs/ARCHITECTURE.md is the
@@ -15,6 +16,7 @@ import { Controls, SEND_PERIOD_MS } from '/js/controls.js';
 import { Video } from '/js/video.js';
 import { Gamepad } from '/js/gamepad.js';
 import { Recording } from '/js/recording.js';
+import { CockpitLink } from '/js/cockpit.js';
 
 const $ = (id) => document.getElementById(id);
 const PLOT_REFRESH_MS = 250;
@@ -36,6 +38,7 @@ const view = new View({ session, video, logger, recorder });
 const controls = new Controls({ session, view, input, logger });
 const gamepad = new Gamepad({ session, view, controls, input });
 const recording = new Recording({ session, view, video });
+const cockpit = new CockpitLink(view);
 // Exposed for the browser tests and for poking around in the console
 // (`plots` once the developer view has been opened).
 window.neptunus = { state: session.state, session, view, controls, input, video, recorder, plots: null, logger, gamepad, recording };
@@ -79,10 +82,12 @@ session.on('welcome', (m) => {
   controls.welcomed();
   gamepad.welcomed();
   recording.listLogs();
+  recording.listRecordings();
 });
 session.on('telemetry', (t, prev) => {
   recorder.add(t, controls.lastCmd);
   view.telemetry(t, prev);
+  recording.telemetry(t);
 });
 session.on('statustext', (m) => {
   view.message(m.severity, m.text, { failsafe: m.category === 'failsafe' });
@@ -93,7 +98,7 @@ session.on('ack', (m) => view.ack(m));
 session.on('control', (m) => view.control(m));
 session.on('control_request', (m) => view.controlRequest(m));
 session.on('request_pending', (m) => view.setPending(m));
-session.on('identity', () => { view.showRights(); recording.listLogs(); });
+session.on('identity', () => { view.showRights(); recording.listLogs(); recording.listRecordings(); });
 session.on('login_result', (m) => view.message(m.ok ? 6 : 4, m.message));
 session.on('error', (m) => view.message(4, `server: ${m.message}`));
 
@@ -108,6 +113,7 @@ function frame() {
 controls.bind();
 gamepad.bind();
 recording.bind();
+cockpit.bind();
 view.labelTouchpad();
 video.start();
 session.connect();

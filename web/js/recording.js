@@ -1,12 +1,16 @@
 // Keeping what the pilot sees: the snapshot button (the video canvas as a
-// JPEG named with the time and the depth on the HUD), the record button
-// (the displayed video — the canvas video.js draws — recorded in the
+// JPEG named with the time and the depth on the HUD), the browser's record
+// button (the displayed video — the canvas video.js draws — recorded in the
 // browser as WebM with MediaRecorder, with a REC indicator and the time,
-// downloaded on stop) and the side panel's list of the vehicle's logs
-// (GET /api/logs: tlogs and event logs, each a download link). Nothing is
-// sent to the vehicle; the logs are listed only for a page that may pilot,
-// which is who the server lets read them. docs/ARCHITECTURE.md is the map
-// of the whole program.
+// downloaded on stop), the vehicle's record button (ROV: recording on the
+// vehicle, asked of the vehicle's camera over MAVLink like any station's
+// record button — the server turns `record` into VIDEO_START/STOP_CAPTURE
+// and the vehicle decides; its state comes back in telemetry's
+// `recording`), and the side panel's lists of the vehicle's logs (GET
+// /api/logs) and recordings (GET /api/recordings), each file a download
+// link. The lists are shown only to a page that may pilot, which is who the
+// server lets read them. docs/ARCHITECTURE.md is the map of the whole
+// program.
 import { hudData, STALE_MS } from '/js/hud.js';
 
 const $ = (id) => document.getElementById(id);
@@ -65,12 +69,15 @@ export class Recording {
     this.view = view;
     this.video = video;
     this.recorder = null; // { rec, chunks, startedAt, stamp, timer }
+    this.vehicleOn = false; // the vehicle records (its last capture status)
   }
 
   bind() {
     $('snapshot').onclick = () => this.snapshot();
     $('record').onclick = () => (this.recorder ? this.stop() : this.start());
+    $('vehicle-record').onclick = () => this.toggleVehicle();
     $('logs-refresh').onclick = () => this.listLogs();
+    $('recordings-refresh').onclick = () => this.listRecordings();
     if (!recorderType()) {
       $('record').disabled = true;
       $('record').title = 'This browser cannot record video (no WebM MediaRecorder)';
@@ -167,6 +174,41 @@ export class Recording {
     if (r) $('rec-time').textContent = elapsedText(performance.now() - r.startedAt);
   }
 
+  // ---- recording on the vehicle -------------------------------------------
+
+  /** Asks the vehicle to start or stop recording (its camera answers with
+   * an ack, and telemetry's `recording` follows). */
+  toggleVehicle() {
+    this.session.send({ type: 'record', on: !this.vehicleOn });
+  }
+
+  /** Whether this page may press the vehicle's record button: a pilot's
+   * page, with nobody else in control (the vehicle refuses others). */
+  mayRecordOnVehicle(t) {
+    const c = t && t.control;
+    return this.session.mayPilot() && !!c && (c.you || c.owner == null);
+  }
+
+  /** Telemetry came: the vehicle's record button and indicator follow it. */
+  telemetry(t) {
+    const r = t && t.recording;
+    const on = !!(r && r.on);
+    const b = $('vehicle-record');
+    const may = this.mayRecordOnVehicle(t);
+    b.disabled = !r || !r.can || !may;
+    b.classList.toggle('recording', on);
+    b.setAttribute('aria-pressed', String(on));
+    b.title = !(r && r.can) ? 'Recording on the vehicle: the vehicle has no camera that records'
+      : !this.session.mayPilot() ? 'Recording on the vehicle is for the pilot: log in first'
+        : !may ? 'Recording on the vehicle: only the station in control may start or stop it'
+          : on ? 'Stop recording on the vehicle'
+            : `Record on the vehicle (H.264 and telemetry, kept on the ROV${r.available_mib > 0 ? `; room for ${sizeText(r.available_mib * 1024 * 1024)}` : ''})`;
+    $('vrec-indicator').hidden = !on;
+    if (on) $('vrec-time').textContent = elapsedText(r.time_ms || 0);
+    if (this.vehicleOn && !on) this.listRecordings();
+    this.vehicleOn = on;
+  }
+
   // ---- the vehicle's logs -------------------------------------------------
 
   /** Lists the logs, when this page may read them (the server lets only a
@@ -222,6 +264,71 @@ export class Recording {
     }
     list.replaceChildren(...items);
     note.textContent = items.length ? `${logs.length} file${logs.length === 1 ? '' : 's'}, newest first` : 'No logs on the vehicle yet.';
+  }
+
+  /** Lists the recordings made on the vehicle, grouped by recording, when
+   * this page may read them (as the logs). */
+  async listRecordings() {
+    const note = $('recordings-note');
+    const list = $('recordings-list');
+    if (!this.session.mayPilot()) {
+      list.replaceChildren();
+      note.textContent = this.session.state.welcome
+        ? 'The recordings are for the pilot: log in with the pilot password to list and download them.'
+        : 'Not connected.';
+      return;
+    }
+    note.textContent = 'asking…';
+    let body;
+    try {
+      const r = await fetch('/api/recordings', { cache: 'no-store' });
+      if (!r.ok) {
+        const why = await r.json().then((j) => j.error).catch(() => null);
+        note.textContent = why || `the vehicle refused: HTTP ${r.status}`;
+        list.replaceChildren();
+        return;
+      }
+      body = await r.json();
+    } catch {
+      note.textContent = 'the vehicle did not answer: try again';
+      return;
+    }
+    const files = (Array.isArray(body && body.recordings) ? body.recordings : [])
+      .filter((f) => typeof f.url === 'string' && f.url.startsWith('/api/recordings/') && typeof f.recording === 'string');
+    const byRecording = new Map();
+    for (const f of files) {
+      if (!byRecording.has(f.recording)) byRecording.set(f.recording, []);
+      byRecording.get(f.recording).push(f);
+    }
+    const LABEL = { video: (f) => `video ${f.name.slice(-6, -3)}`, subtitles: (f) => `subtitles ${f.name.slice(-7, -4)}`, telemetry: () => 'telemetry CSV' };
+    const items = [];
+    for (const [rec, these] of [...byRecording].sort((a, b) => (a[0] < b[0] ? 1 : -1))) {
+      const li = document.createElement('li');
+      const head = document.createElement('div');
+      const bytes = these.reduce((n, f) => n + (f.bytes || 0), 0);
+      const name = document.createElement('strong');
+      name.textContent = rec;
+      const size = document.createElement('span');
+      size.className = 'muted';
+      size.textContent = ` ${sizeText(bytes)}`;
+      head.append(name, size);
+      const links = document.createElement('div');
+      links.className = 'rec-files';
+      for (const f of these) {
+        const a = document.createElement('a');
+        a.href = f.url;
+        a.download = f.name;
+        a.textContent = (LABEL[f.kind] || (() => f.name))(f);
+        a.title = `${f.name} · ${sizeText(f.bytes)}`;
+        links.append(a);
+      }
+      li.append(head, links);
+      items.push(li);
+    }
+    list.replaceChildren(...items);
+    note.textContent = items.length
+      ? `${items.length} recording${items.length === 1 ? '' : 's'}, newest first (MPEG-TS video, WebVTT subtitles, CSV telemetry)`
+      : 'No recordings on the vehicle yet: press ROV on the picture to record there.';
   }
 }
 

@@ -85,8 +85,10 @@ export class Video {
         if (available && info.webrtc && !this.webrtc && this.webrtcFailed === null) {
           await this.startWebRtc(info.webrtc);
         }
-        if (available && this.webrtc && this.transport === 'webrtc') await this.webrtcEnded;
-        else if (available) await this.read();
+        // A camera that streams H.264 gives no JPEG pictures: WebRTC only.
+        const mjpeg = info.mjpeg !== false;
+        if (available && this.webrtc && (this.transport === 'webrtc' || !mjpeg)) await this.webrtcEnded;
+        else if (available && mjpeg) await this.read();
       } catch {
         // The vehicle is not answering: try again shortly.
       }

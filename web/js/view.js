@@ -18,6 +18,10 @@ export const VIDEO_LOST_MS = 1000;
 /** Battery: the fraction left below which the widget warns, and turns red. */
 const BATTERY_LOW_PCT = 30;
 const BATTERY_CRITICAL_PCT = 15;
+/** The board pill turns amber at this share of the serial line damaged
+ * (the link re-sends what the board did not take, but a line this bad
+ * wants its cable or connector looked at). */
+const LINE_DAMAGE_WARN_PCT = 1;
 /** How long a run-mode pick shows before the vehicle's own run mode wins again. */
 const RUN_PICK_MS = 3000;
 
@@ -79,6 +83,7 @@ export class View {
     $('watch-only').textContent = w.watch_only_reason ? `Watch only: ${w.watch_only_reason}` : '';
     $('login').hidden = !(w.password_set && !w.logged_in && !w.pilot);
     $('logout').hidden = !w.logged_in;
+    $('cockpit').hidden = !w.logged_in;
     $('pilot-box').hidden = $('login').hidden && $('logout').hidden && !$('login-note').textContent;
     const who = w.sysid != null ? `you are GCS ${w.sysid}` : w.pilot ? 'you may pilot' : 'watching';
     $('me').textContent = `${who}${w.logged_in ? ' (logged in)' : ''}`;
@@ -149,7 +154,14 @@ export class View {
     if (pick && (pick.mode === vehicleRun || performance.now() > pick.until)) this.runPick = null;
     if (!this.runPick) document.querySelectorAll('input[name=run]').forEach((r) => { r.checked = r.value === vehicleRun; });
     const h = t.health;
-    setPill('link', `board: ${!t.vehicle_seen ? 'no vehicle' : h ? (h.board_link ? 'link up' : 'LINK DOWN') : '—'}`, h && h.board_link && t.vehicle_seen ? 'ok' : 'bad');
+    // The serial line's quality beside the link: frames and lines damaged
+    // or lost over the last 10 s (a long or wet cable to the board).
+    const dropPct = h && h.board_line_drop_pct > 0 ? h.board_line_drop_pct : 0;
+    // The colour follows the figure shown (0.96 reads "1.0": amber).
+    const shown = dropPct < 10 ? dropPct.toFixed(1) : dropPct.toFixed(0);
+    const line = h && h.board_link && dropPct > 0 ? ` · line ${shown} % damaged` : '';
+    setPill('link', `board: ${!t.vehicle_seen ? 'no vehicle' : h ? (h.board_link ? 'link up' : 'LINK DOWN') : '—'}${line}`, h && h.board_link && t.vehicle_seen ? (Number(shown) >= LINE_DAMAGE_WARN_PCT ? 'warn' : 'ok') : 'bad');
+    $('link').title = h ? `board serial line: ${dropPct.toFixed(2)} % of frames and lines damaged or lost over the last 10 s, ${h.board_line_errors} since the start` : '';
     this.failsafe(t);
     this.battery(t);
     if (t.mode != null && t.mode !== (prev && prev.mode)) {

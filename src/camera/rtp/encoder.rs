@@ -16,8 +16,7 @@ use super::config::{H264Config, RtpDest};
 use crate::camera::frame::Frame;
 use crate::camera::process::StderrTail;
 
-/// RTP packets stay under a typical path MTU with room for tunnels.
-pub const RTP_PACKET_BYTES: u32 = 1200;
+pub use crate::camera::h264::rtp::RTP_PACKET_BYTES;
 
 /// Why a run of the encoder ended.
 #[derive(Debug, thiserror::Error)]
@@ -43,6 +42,8 @@ pub enum RtpError {
         "RTP video: no frame from `{program}` for {secs:.1} s — restarting it (check camera.h264.passthrough and the camera; camera.stall_timeout_s)"
     )]
     Stalled { program: String, secs: f64 },
+    #[error("RTP video: cannot send to {dest}: {error} — check camera.rtp (--video-rtp)")]
+    Destination { dest: String, error: String },
     #[error(
         "RTP video: the camera's pictures changed from {from:?} to {to:?} — restarting the encoder"
     )]

@@ -13,6 +13,9 @@ use serde::{Deserialize, Serialize};
 /// Where mavlink-camera-manager's signalling WebSocket is looked for
 /// (Cockpit's default `ws://VEHICLE:6021/`).
 pub const MCM_SIGNALLING_PORT: u16 = 6021;
+/// Where mavlink-camera-manager's REST API is looked for (Cockpit's
+/// `http://VEHICLE:6020/streams`).
+pub const MCM_REST_PORT: u16 = 6020;
 /// Viewers at once unless configured.
 pub const DEFAULT_MAX_VIEWERS: usize = 8;
 
@@ -35,6 +38,22 @@ impl SignallingAddr {
             Some(SignallingAddr::Off) => None,
             Some(SignallingAddr::At(a)) => Some(a),
             None => hmi.map(|h| SocketAddr::new(h.ip(), MCM_SIGNALLING_PORT)),
+        }
+    }
+}
+
+impl SignallingAddr {
+    /// Where `/streams` listens: the configured address, else port 6020 on
+    /// the signalling's address (it goes where the signalling goes, and is
+    /// off with it); `None`: nowhere.
+    pub fn resolve_streams(
+        configured: Option<SignallingAddr>,
+        signalling: Option<SocketAddr>,
+    ) -> Option<SocketAddr> {
+        match configured {
+            Some(SignallingAddr::Off) => None,
+            Some(SignallingAddr::At(a)) => Some(a),
+            None => signalling.map(|s| SocketAddr::new(s.ip(), MCM_REST_PORT)),
         }
     }
 }
@@ -168,6 +187,11 @@ pub struct WebRtcConfig {
     /// address.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub signalling: Option<SignallingAddr>,
+    /// mavlink-camera-manager's REST port with `/streams` (what Cockpit
+    /// shows of the stream), or `off`; unset: port 6020 on the
+    /// signalling's address.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub streams: Option<SignallingAddr>,
     /// ICE servers for viewers away from the tether (`--ice-server`): the
     /// vehicle asks the STUN ones for its public address, and the page
     /// hands them all to its browser. None on a tether.
@@ -184,6 +208,7 @@ impl Default for WebRtcConfig {
         WebRtcConfig {
             enabled: true,
             signalling: None,
+            streams: None,
             ice_servers: Vec::new(),
             udp_port: 0,
             max_viewers: DEFAULT_MAX_VIEWERS,
@@ -232,6 +257,17 @@ mod tests {
             None
         );
         assert_eq!(SignallingAddr::resolve(None, None), None);
+        let sig = "127.0.0.5:6021".parse().ok();
+        assert_eq!(
+            SignallingAddr::resolve_streams(None, sig),
+            "127.0.0.5:6020".parse().ok(),
+            "Cockpit's /streams, beside the signalling"
+        );
+        assert_eq!(SignallingAddr::resolve_streams(None, None), None);
+        assert_eq!(
+            SignallingAddr::resolve_streams(Some(SignallingAddr::Off), sig),
+            None
+        );
         let a: SignallingAddr = "127.0.0.1:0".parse().expect("address");
         assert_eq!(a.to_string(), "127.0.0.1:0");
         for bad in ["", "6021", "localhost:6021", "on"] {

@@ -1,22 +1,23 @@
-//! The WebRTC viewers' one task: it owns every peer connection, the media
-//! sockets and the loopback socket the RTP encoder also sends to, and
-//! hands each picture of that one encode to every viewer.
+//! The WebRTC viewers' one task: it owns every peer connection and the
+//! media sockets, and hands each picture of the one stream (access units
+//! from the RTP sender, whatever route made them) to every viewer.
 //!
 //! The signalling connections talk to it with [`Command`]s and hear back
 //! through their own [`PeerEvent`] channel. While any viewer exists it says
-//! so on the `wanted` watch, which the RTP supervisor reads: the encoder
-//! (and so the camera) runs, with the loopback destination among its own.
+//! so on the `wanted` watch, which the RTP supervisor reads: the stream
+//! (and so the camera) runs, with this hub among its consumers.
 //! Nothing here decides who may watch (the HMI's Host and Origin rules are
 //! in front of the signalling) or panics on what arrives.
 
 use std::collections::BTreeMap;
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use tokio::net::UdpSocket;
 use tokio::sync::{mpsc, watch};
 
-use super::depay::Depay;
+use crate::camera::h264::AccessUnit;
+
 use super::net::{Inbound, Sockets};
 use super::peer::Peer;
 use super::protocol::Bind;
@@ -29,6 +30,10 @@ pub(super) enum Command {
     Start {
         bind: Bind,
         events: mpsc::UnboundedSender<PeerEvent>,
+        /// The vehicle's address the viewer's signalling connection
+        /// reached: the one host candidate it is offered (`None`: every
+        /// address of the vehicle).
+        reached: Option<IpAddr>,
     },
     Answer {
         session_id: String,
@@ -51,8 +56,8 @@ struct Viewer {
 
 pub(super) struct Hub {
     pub commands: mpsc::Receiver<Command>,
-    /// The encoder's RTP, on loopback.
-    pub rtp: UdpSocket,
+    /// The stream's pictures, from the RTP sender.
+    pub units: mpsc::Receiver<AccessUnit>,
     pub wanted: watch::Sender<bool>,
     pub max_viewers: usize,
     pub sockets: Sockets,
@@ -63,9 +68,8 @@ pub(super) struct Hub {
 impl Hub {
     pub(super) async fn run(mut self) {
         let mut viewers: BTreeMap<String, Viewer> = BTreeMap::new();
-        let mut depay = Depay::new();
-        let mut buf = vec![0u8; 2048];
         let mut logged = Instant::now();
+        let mut pictures = 0u64;
         loop {
             let next = viewers
                 .values()
@@ -79,28 +83,9 @@ impl Hub {
                     Some(c) => self.command(c, &mut viewers),
                     None => break,
                 },
-                r = self.rtp.recv_from(&mut buf) => {
-                    let (n, from) = match r {
-                        Ok(got) => got,
-                        Err(e) => {
-                            // Not expected on a bound UDP socket; never spin on it.
-                            tracing::debug!("WebRTC: loopback read failed: {e}");
-                            tokio::time::sleep(Duration::from_millis(10)).await;
-                            continue;
-                        }
-                    };
-                    // Only the encoder on this machine may feed the viewers.
-                    if !from.ip().is_loopback() {
-                        continue;
-                    }
-                    if let Some(au) = depay.push(&buf[..n]) {
-                        let now = Instant::now();
-                        let data: Arc<[u8]> = Arc::from(au.data.as_slice());
-                        for v in viewers.values_mut() {
-                            v.peer.send(now, &au, &data);
-                            flush(&self.sockets, &mut v.peer);
-                        }
-                    }
+                Some(au) = self.units.recv() => {
+                    pictures += 1;
+                    self.picture(&au, &mut viewers);
                 }
                 Some(d) = self.inbound.recv() => {
                     if let Some(new) = self.reflexive.take(&d) {
@@ -131,14 +116,7 @@ impl Hub {
             });
             if logged.elapsed() >= Duration::from_secs(60) && !viewers.is_empty() {
                 logged = Instant::now();
-                let s = depay.stats();
-                tracing::info!(
-                    viewers = viewers.len(),
-                    pictures = s.units,
-                    lost_packets = s.lost,
-                    bad_packets = s.bad,
-                    "WebRTC video"
-                );
+                tracing::info!(viewers = viewers.len(), pictures, "WebRTC video");
             }
         }
         for (session_id, v) in viewers {
@@ -149,10 +127,24 @@ impl Hub {
         }
     }
 
+    /// One picture to every viewer.
+    fn picture(&self, au: &AccessUnit, viewers: &mut BTreeMap<String, Viewer>) {
+        let now = Instant::now();
+        let data: Arc<[u8]> = Arc::from(au.data.as_slice());
+        for v in viewers.values_mut() {
+            v.peer.send(now, au, &data);
+            flush(&self.sockets, &mut v.peer);
+        }
+    }
+
     fn command(&mut self, c: Command, viewers: &mut BTreeMap<String, Viewer>) {
         let now = Instant::now();
         match c {
-            Command::Start { bind, events } => {
+            Command::Start {
+                bind,
+                events,
+                reached,
+            } => {
                 let session_id = bind.session_id.clone();
                 let refuse = |reason: String| PeerEvent::Ended {
                     session_id: session_id.clone(),
@@ -165,9 +157,13 @@ impl Hub {
                     )));
                     return;
                 }
-                let mut locals: Vec<str0m::Candidate> = self
-                    .sockets
-                    .refresh()
+                // The address the viewer reached is one it can reach: offer
+                // it alone (one route, no guessing for the viewer), else all.
+                let hosts = match reached.and_then(|ip| self.sockets.ensure(ip)) {
+                    Some(local) => vec![local],
+                    None => self.sockets.refresh(),
+                };
+                let mut locals: Vec<str0m::Candidate> = hosts
                     .into_iter()
                     .filter_map(|a| str0m::Candidate::host(a, "udp").ok())
                     .collect();

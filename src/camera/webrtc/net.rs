@@ -1,7 +1,8 @@
 //! The vehicle's addresses as ICE host candidates, and a UDP socket on
 //! each: one socket per address, shared by every viewer (str0m tells the
 //! datagrams apart), so str0m always knows which address a datagram came
-//! in on and which it must leave from.
+//! in on and which it must leave from. A viewer is offered the address its
+//! signalling connection reached when the vehicle knows it ([`Sockets::ensure`]).
 
 use std::collections::BTreeMap;
 use std::net::{IpAddr, SocketAddr};
@@ -85,37 +86,60 @@ impl Sockets {
             if self.by_local.keys().any(|l| l.ip() == *ip) || self.failed.contains(ip) {
                 continue;
             }
-            match bind(SocketAddr::new(*ip, self.port)) {
-                Ok(sock) => {
-                    let local = sock.local_addr().unwrap_or(SocketAddr::new(*ip, self.port));
-                    tracing::info!(%local, "WebRTC: media socket");
-                    let sock = Arc::new(sock);
-                    self.readers.push(tokio::spawn(read(
-                        Arc::clone(&sock),
-                        local,
-                        self.inbound.clone(),
-                    )));
-                    self.by_local.insert(local, sock);
-                }
-                Err(e) => {
-                    tracing::warn!(
-                        "WebRTC: cannot bind UDP {ip}:{} ({e}) — viewers cannot use this address{}",
-                        self.port,
-                        if self.port == 0 {
-                            ""
-                        } else {
-                            "; check camera.webrtc.udp_port"
-                        }
-                    );
-                    self.failed.push(*ip);
-                }
-            }
+            self.bind_on(*ip);
         }
         self.by_local
             .keys()
             .filter(|l| addrs.contains(&l.ip()))
             .copied()
             .collect()
+    }
+
+    /// The socket on `ip` (an address of this machine: a viewer reached it),
+    /// bound now if there is none yet (a loopback alias is on no
+    /// interface's list); `None` when it cannot be bound.
+    pub(super) fn ensure(&mut self, ip: IpAddr) -> Option<SocketAddr> {
+        let ip = ip.to_canonical();
+        if ip.is_unspecified() {
+            return None;
+        }
+        if let Some(local) = self.by_local.keys().find(|l| l.ip() == ip) {
+            return Some(*local);
+        }
+        if self.failed.contains(&ip) {
+            return None;
+        }
+        self.bind_on(ip);
+        self.by_local.keys().find(|l| l.ip() == ip).copied()
+    }
+
+    /// Binds a socket on `ip` with its reader, or notes that it cannot.
+    fn bind_on(&mut self, ip: IpAddr) {
+        match bind(SocketAddr::new(ip, self.port)) {
+            Ok(sock) => {
+                let local = sock.local_addr().unwrap_or(SocketAddr::new(ip, self.port));
+                tracing::info!(%local, "WebRTC: media socket");
+                let sock = Arc::new(sock);
+                self.readers.push(tokio::spawn(read(
+                    Arc::clone(&sock),
+                    local,
+                    self.inbound.clone(),
+                )));
+                self.by_local.insert(local, sock);
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "WebRTC: cannot bind UDP {ip}:{} ({e}) — viewers cannot use this address{}",
+                    self.port,
+                    if self.port == 0 {
+                        ""
+                    } else {
+                        "; check camera.webrtc.udp_port"
+                    }
+                );
+                self.failed.push(ip);
+            }
+        }
     }
 
     /// The local address of every socket.

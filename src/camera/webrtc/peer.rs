@@ -24,7 +24,7 @@ use str0m::media::{Direction, Frequency, MediaKind, MediaTime, Mid, Pt};
 use str0m::net::{Protocol, Receive};
 use str0m::{Candidate, Event, IceConnectionState, Input, Output, Rtc, RtcError};
 
-use super::depay::AccessUnit;
+use crate::camera::h264::AccessUnit;
 
 /// The payload type the offer gives H.264 (and its retransmissions).
 const H264_PT: u8 = 96;

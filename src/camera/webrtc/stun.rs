@@ -126,7 +126,7 @@ const BINDING_SUCCESS: u16 = 0x0101;
 const XOR_MAPPED_ADDRESS: u16 = 0x0020;
 
 /// A binding request without attributes.
-pub(super) fn binding_request(id: [u8; 12]) -> [u8; 20] {
+pub(crate) fn binding_request(id: [u8; 12]) -> [u8; 20] {
     let mut m = [0u8; 20];
     m[..2].copy_from_slice(&BINDING_REQUEST.to_be_bytes());
     m[4..8].copy_from_slice(&MAGIC);
@@ -136,7 +136,7 @@ pub(super) fn binding_request(id: [u8; 12]) -> [u8; 20] {
 
 /// The transaction and the XOR-MAPPED-ADDRESS of a binding success answer;
 /// `None` for anything else (other messages, short or damaged ones).
-pub(super) fn parse_binding_success(m: &[u8]) -> Option<([u8; 12], SocketAddr)> {
+pub(crate) fn parse_binding_success(m: &[u8]) -> Option<([u8; 12], SocketAddr)> {
     let header = m.get(..20)?;
     let len = usize::from(u16::from_be_bytes([header[2], header[3]]));
     if u16::from_be_bytes([header[0], header[1]]) != BINDING_SUCCESS

@@ -7,7 +7,7 @@
 //! Origin rules, the same for the HMI's port and the dedicated one); the
 //! video is for every client they admit, like `/video.mjpg`.
 
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -44,6 +44,8 @@ pub(super) struct Ctx {
     pub ice_servers: Vec<IceServer>,
     /// Where the dedicated signalling port listens, once it does.
     pub signalling: Mutex<Option<SocketAddr>>,
+    /// Where `/streams` listens, once it does.
+    pub streams: Mutex<Option<SocketAddr>>,
     connections: AtomicUsize,
     refused: AtomicU64,
     last_log: Mutex<Option<Instant>>,
@@ -60,6 +62,7 @@ impl Ctx {
             stream,
             ice_servers,
             signalling: Mutex::new(None),
+            streams: Mutex::new(None),
             connections: AtomicUsize::new(0),
             refused: AtomicU64::new(0),
             last_log: Mutex::new(None),
@@ -96,6 +99,7 @@ pub(super) fn signalling_routes(ctx: Arc<Ctx>) -> Router {
 
 async fn info(State(ctx): State<Arc<Ctx>>) -> Json<serde_json::Value> {
     let port = ctx.signalling.lock().ok().and_then(|a| a.map(|a| a.port()));
+    let streams_port = ctx.streams.lock().ok().and_then(|a| a.map(|a| a.port()));
     let ice: Vec<serde_json::Value> = ctx
         .ice_servers
         .iter()
@@ -113,6 +117,7 @@ async fn info(State(ctx): State<Arc<Ctx>>) -> Json<serde_json::Value> {
     Json(serde_json::json!({
         "path": PATH,
         "signalling_port": port,
+        "streams_port": streams_port,
         "ice_servers": ice,
         "streams": ctx.stream.iter().collect::<Vec<_>>(),
     }))
@@ -130,8 +135,11 @@ impl Drop for Slot {
 async fn upgrade(
     State(ctx): State<Arc<Ctx>>,
     axum::extract::ConnectInfo(client): axum::extract::ConnectInfo<SocketAddr>,
+    conn: Option<axum::Extension<crate::hmi::server::ConnInfo>>,
     ws: WebSocketUpgrade,
 ) -> Response {
+    // The vehicle's address this viewer reached: the one it is offered.
+    let reached = conn.and_then(|c| c.local).map(|a| a.ip());
     let taken = ctx
         .connections
         .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
@@ -153,7 +161,7 @@ async fn upgrade(
     ws.max_message_size(MAX_MESSAGE_BYTES)
         .max_frame_size(MAX_MESSAGE_BYTES)
         .read_buffer_size(READ_BUFFER_BYTES)
-        .on_upgrade(move |socket| run(socket, ctx, client, slot))
+        .on_upgrade(move |socket| run(socket, ctx, client, reached, slot))
 }
 
 /// A random (version 4) UUID, the shape of mavlink-camera-manager's ids.
@@ -172,7 +180,13 @@ pub(super) fn uuid() -> String {
     )
 }
 
-async fn run(socket: WebSocket, ctx: Arc<Ctx>, client: SocketAddr, slot: Slot) {
+async fn run(
+    socket: WebSocket,
+    ctx: Arc<Ctx>,
+    client: SocketAddr,
+    reached: Option<IpAddr>,
+    slot: Slot,
+) {
     let mut sig = Signalling::new(ctx.stream.clone(), Box::new(uuid));
     let who = client.to_string();
     tracing::info!(client = %who, consumer = sig.consumer_id(), "WebRTC signalling connected");
@@ -201,7 +215,7 @@ async fn run(socket: WebSocket, ctx: Arc<Ctx>, client: SocketAddr, slot: Slot) {
             },
             Some(ev) = events.recv() => sig.on_peer(ev),
         };
-        if !carry_out(actions, &ctx, &mut tx, &events_tx).await {
+        if !carry_out(actions, &ctx, &mut tx, &events_tx, reached).await {
             break;
         }
     }
@@ -223,6 +237,7 @@ async fn carry_out(
     ctx: &Ctx,
     tx: &mut futures_util::stream::SplitSink<WebSocket, WsMessage>,
     events: &mpsc::UnboundedSender<super::signalling::PeerEvent>,
+    reached: Option<IpAddr>,
 ) -> bool {
     for a in actions {
         let command = match a {
@@ -239,6 +254,7 @@ async fn carry_out(
             Action::Start(bind) => Command::Start {
                 bind,
                 events: events.clone(),
+                reached,
             },
             Action::Answer { session_id, sdp } => Command::Answer { session_id, sdp },
             Action::Candidate {

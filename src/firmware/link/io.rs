@@ -8,6 +8,7 @@
 //! never decide what to write, when, or what the link's state is — that is
 //! the session's, so it can be tested without a device or a clock.
 
+use futures_util::FutureExt as _;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::sync::{mpsc, watch};
 use tokio::time::Instant;
@@ -65,6 +66,25 @@ pub(super) async fn run(
         session.opened(now());
         deliver(&mut session, &events, &stats_tx);
         let down_reason: String = loop {
+            // What arrived while the loop was away (a busy machine can hold
+            // it back for a second) is read before anything is judged by
+            // its age: the board's echoes waiting in the device are not
+            // lost frames.
+            let mut gone = None;
+            while let Some(read) = port.read(&mut buf).now_or_never() {
+                match read {
+                    Ok(0) => gone = Some("device closed".to_owned()),
+                    Ok(n) => session.received(&buf[..n], now()),
+                    Err(e) => gone = Some(format!("read failed: {e}")),
+                }
+                if gone.is_some() {
+                    break;
+                }
+            }
+            deliver(&mut session, &events, &stats_tx);
+            if let Some(reason) = gone {
+                break reason;
+            }
             let t = now();
             let cmd = session.poll_transmit(t, &mut frame);
             deliver(&mut session, &events, &stats_tx);

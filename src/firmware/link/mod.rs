@@ -79,7 +79,9 @@ impl LinkConfig {
             device: device.into(),
             baud: 115_200,
             framing: Framing::Crc8,
-            ping_period: Duration::from_secs(1),
+            // Five pings in the board's 2-s dead-man window: three lost
+            // in a row on a noisy line still leave it fed.
+            ping_period: Duration::from_millis(400),
             healthy_window: Duration::from_millis(500),
             stale_after: Duration::from_millis(1500),
             boot_wait: Duration::from_millis(1500),
@@ -148,6 +150,29 @@ pub struct LinkStats {
     /// Times the board printed `boot` again after it had talked on this
     /// opening (a `boot` while it was still setting up is its first).
     pub board_reboots: u64,
+    /// Thrust commands written again because the board did not take them
+    /// or said it held something else.
+    pub thrust_resent: u64,
+    /// Frames and lines damaged or lost, both ways, as a share of all over
+    /// the last 10 s, in hundredths of a percent (`session/quality.rs`).
+    pub drop_rate_cpct: u16,
+}
+
+impl LinkStats {
+    /// Frames and lines damaged or lost since the link started, both ways
+    /// (SYS_STATUS `errors_comm`).
+    pub fn errors(&self) -> u16 {
+        session::quality::errors(self)
+    }
+}
+
+/// The line's quality, as the vehicle tells the pilot (SYS_STATUS).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkQuality {
+    /// Damaged or lost over the last 10 s, hundredths of a percent.
+    pub drop_rate_cpct: u16,
+    /// Damaged or lost since the link started (saturating).
+    pub errors: u16,
 }
 
 impl Default for LinkStats {
@@ -172,6 +197,8 @@ impl Default for LinkStats {
             events_dropped: 0,
             echoes_missed: 0,
             board_reboots: 0,
+            thrust_resent: 0,
+            drop_rate_cpct: 0,
         }
     }
 }
@@ -184,6 +211,8 @@ pub enum LinkEvent {
         reason: Option<String>,
     },
     Telemetry(Event),
+    /// The line's quality changed.
+    Quality(LinkQuality),
 }
 
 #[derive(Debug)]

@@ -73,6 +73,9 @@ pub fn parse_origin(s: &str) -> Result<String, String> {
     if rest.is_empty() || rest.contains(['/', '?', '#', '@']) {
         return Err(bad("only a host and a port, no path"));
     }
+    if rest.contains(|c: char| c.is_whitespace() || c.is_control()) {
+        return Err(bad("a space or a control character"));
+    }
     if split_host(rest).is_none() {
         return Err(bad("the port is not a number"));
     }
@@ -270,5 +273,7 @@ mod tests {
         assert!(parse_origin("http://x/path").is_err());
         assert!(parse_origin("topside").is_err());
         assert!(parse_origin("http://x:port").is_err());
+        assert!(parse_origin("http://top side").is_err());
+        assert!(parse_origin("https://x\u{b}/").is_err());
     }
 }

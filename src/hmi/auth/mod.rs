@@ -21,7 +21,7 @@ mod throttle;
 
 pub use bursts::{BURST_QUIET, Bursts, loggable};
 pub use gate::{Gate, OpenControl, machine_hostname, parse_origin, with_port};
-pub use login::{COOKIE, LOGIN_LIFETIME, Tokens, cookie_value};
+pub use login::{COOKIE, LINK_FIRST_USE, LOGIN_LIFETIME, Tokens, cookie_value};
 pub use password::{
     MAX_PASSWORD_BYTES, MIN_PASSWORD_CHARS, PASSWORD_FILE, PasswordError, PasswordStore,
     PilotPassword,

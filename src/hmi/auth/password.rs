@@ -6,6 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::durable;
 use argon2::{Argon2, PasswordHash, PasswordHasher as _, PasswordVerifier as _};
 use rand::RngCore as _;
 
@@ -148,9 +149,8 @@ impl PasswordStore {
 
     /// Removes the password; true if there was one.
     pub fn clear(&self) -> Result<bool, PasswordError> {
-        match std::fs::remove_file(&self.path) {
-            Ok(()) => Ok(true),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        match durable::remove(&self.path) {
+            Ok(there) => Ok(there),
             Err(source) => Err(PasswordError::Write {
                 path: self.path.clone(),
                 source,
@@ -158,35 +158,14 @@ impl PasswordStore {
         }
     }
 
+    /// Owner-only (0600), atomically and durably.
     fn write(&self, text: &str) -> Result<(), PasswordError> {
-        use std::io::Write as _;
-        let err = |source| PasswordError::Write {
-            path: self.path.clone(),
-            source,
-        };
-        if let Some(dir) = self.path.parent() {
-            std::fs::create_dir_all(dir).map_err(err)?;
-        }
-        let tmp = self.path.with_extension("tmp");
-        let mut opts = std::fs::OpenOptions::new();
-        opts.write(true).create(true).truncate(true);
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::OpenOptionsExt as _;
-            opts.mode(0o600);
-        }
-        let mut f = opts.open(&tmp).map_err(err)?;
-        // A file left by an older version may carry wider permissions.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt as _;
-            f.set_permissions(std::fs::Permissions::from_mode(0o600))
-                .map_err(err)?;
-        }
-        f.write_all(text.as_bytes()).map_err(err)?;
-        f.sync_all().map_err(err)?;
-        drop(f);
-        std::fs::rename(&tmp, &self.path).map_err(err)
+        durable::write(&self.path, text.as_bytes(), durable::Mode::Exactly(0o600)).map_err(|e| {
+            PasswordError::Write {
+                path: self.path.clone(),
+                source: e.into(),
+            }
+        })
     }
 }
 

@@ -34,14 +34,13 @@ use std::time::{Duration, Instant, SystemTime};
 use axum::Router;
 use axum::body::Bytes;
 use axum::extract::{Path, Query, Request, State, WebSocketUpgrade};
-use axum::http::{HeaderValue, Method, StatusCode, header};
-use axum::middleware::Next;
+use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use mavlink_core::Message as _;
 use tokio::sync::{broadcast, watch};
 
-use super::{Deliveries, Shared, guard};
+use super::{Deliveries, Shared, auth, guard};
 use crate::dialect::neptunus::MavMessage;
 use crate::vehicle::machine::{COMPONENT_ID, Input, Sender};
 use frame::{Header, NOT_CONVERTED};
@@ -59,7 +58,7 @@ const MAX_FRAME_BYTES: usize = 16 * 1024;
 /// What one read of a client's socket takes at most.
 const READ_BUFFER_BYTES: usize = 4096;
 
-fn is_api_path(path: &str) -> bool {
+pub(crate) fn is_api_path(path: &str) -> bool {
     PREFIXES.iter().any(|p| {
         path.strip_prefix(p).is_some_and(|rest| {
             rest == "/mavlink"
@@ -100,6 +99,7 @@ pub(crate) struct Hub {
     clients: AtomicUsize,
     bad: AtomicU64,
     last_bad: Mutex<Option<Instant>>,
+    last_void_link: Mutex<Option<Instant>>,
 }
 
 /// A client's place among [`MAX_CLIENTS`]; given back when dropped.
@@ -125,6 +125,7 @@ impl Hub {
             clients: AtomicUsize::new(0),
             bad: AtomicU64::new(0),
             last_bad: Mutex::new(None),
+            last_void_link: Mutex::new(None),
         }
     }
 
@@ -191,6 +192,20 @@ impl Hub {
             true
         } else {
             false
+        }
+    }
+
+    /// A Cockpit link that logs in nobody; logs at most every 5 s.
+    fn note_void_link(&self, ip: Option<std::net::IpAddr>) {
+        let Ok(mut last) = self.last_void_link.lock() else {
+            return;
+        };
+        if last.is_none_or(|t| t.elapsed() >= Duration::from_secs(5)) {
+            *last = Some(Instant::now());
+            tracing::warn!(
+                "mavlink2rest: a Cockpit link from {ip:?} is void (not used within {} s, logged out, used from another address, or made before a restart): the client only watches — open Cockpit again from the vehicle's page",
+                auth::LINK_FIRST_USE.as_secs()
+            );
         }
     }
 
@@ -290,53 +305,7 @@ pub(crate) fn routes(shared: Arc<Shared>) -> Router {
             .route(&format!("{p}/helper/mavlink"), get(helper))
             .route(&format!("{p}/info"), get(info));
     }
-    r.layer(axum::middleware::from_fn_with_state(
-        Arc::clone(&shared),
-        cors,
-    ))
-    .with_state(shared)
-}
-
-/// CORS for the pages the Origin rule admits (Cockpit served from an origin
-/// in `[hmi] allowed_origins`): their answers are readable, preflights pass.
-async fn cors(State(shared): State<Arc<Shared>>, req: Request, next: Next) -> Response {
-    let origin = req
-        .headers()
-        .get(header::ORIGIN)
-        .and_then(|o| o.to_str().ok())
-        .map(str::to_owned);
-    let host = req
-        .headers()
-        .get(header::HOST)
-        .and_then(|h| h.to_str().ok())
-        .map(str::to_owned);
-    let allowed = origin
-        .as_deref()
-        .filter(|o| {
-            shared
-                .gate
-                .origin_ok(o, host.as_deref(), guard::is_tls(req.extensions()))
-        })
-        .and_then(|o| HeaderValue::from_str(o).ok());
-    let mut resp = if req.method() == Method::OPTIONS && is_api_path(req.uri().path()) {
-        StatusCode::NO_CONTENT.into_response()
-    } else {
-        next.run(req).await
-    };
-    if let Some(o) = allowed {
-        let h = resp.headers_mut();
-        h.insert(header::ACCESS_CONTROL_ALLOW_ORIGIN, o);
-        h.insert(
-            header::ACCESS_CONTROL_ALLOW_METHODS,
-            HeaderValue::from_static("GET, POST, OPTIONS"),
-        );
-        h.insert(
-            header::ACCESS_CONTROL_ALLOW_HEADERS,
-            HeaderValue::from_static("content-type"),
-        );
-        h.insert(header::VARY, HeaderValue::from_static("Origin"));
-    }
-    resp
+    super::cors::layer(r, Arc::clone(&shared), is_api_path, None).with_state(shared)
 }
 
 fn json_response(status: StatusCode, body: String) -> Response {
@@ -345,7 +314,7 @@ fn json_response(status: StatusCode, body: String) -> Response {
 
 /// What a read of `path` in the view is for: the message it names, or
 /// (for the view as a whole or a vehicle's part) the vehicle's heartbeat.
-fn wanted(path: &str, vehicle_sysid: u8) -> (u8, u8, &str) {
+pub(crate) fn wanted(path: &str, vehicle_sysid: u8) -> (u8, u8, &str) {
     let seg: Vec<&str> = path.trim_matches('/').split('/').take(6).collect();
     let named = match seg[..] {
         ["vehicles", sys, "components", comp, "messages", name] => sys
@@ -392,6 +361,8 @@ async fn view_path(State(shared): State<Arc<Shared>>, Path(path): Path<String>) 
 struct WsQuery {
     filter: Option<String>,
     password: Option<String>,
+    /// A Cockpit link from the logged-in page (`/api/cockpit-link`).
+    token: Option<String>,
 }
 
 /// The upgrade (Host and Origin were checked in front).
@@ -422,6 +393,20 @@ async fn ws(
             return (StatusCode::UNAUTHORIZED, format!("{}\n", outcome.message())).into_response();
         }
         logged_in = true;
+    }
+    if let Some(t) = q.token.as_deref() {
+        // A link that is void (expired, logged out, a restart, another
+        // address) still watches: a pilot who sees keeps seeing.
+        let key = auth::throttle_key(ip.unwrap_or(std::net::IpAddr::from([0, 0, 0, 0])));
+        let used = shared
+            .tokens
+            .lock()
+            .is_ok_and(|mut tokens| tokens.use_link(t, key, Instant::now()));
+        if used {
+            logged_in = true;
+        } else {
+            shared.m2r.note_void_link(ip);
+        }
     }
     let Some(slot) = shared.m2r.take_slot() else {
         return (

@@ -40,14 +40,21 @@ pub(crate) struct Start {
     pub slot: StationSlot,
 }
 
-/// The frames a watcher may still send: requests that change nothing.
+/// The frames a watcher may still send: requests that change nothing and
+/// are answered to the asker alone (Cockpit waits for the mission count
+/// and covers the picture when it never comes).
 fn read_only(msg: &MavMessage) -> bool {
-    matches!(
-        msg,
+    use crate::dialect::neptunus::MavCmd;
+    let asks = |c: MavCmd| c == MavCmd::MAV_CMD_REQUEST_MESSAGE;
+    match msg {
         MavMessage::PARAM_REQUEST_LIST(_)
-            | MavMessage::PARAM_REQUEST_READ(_)
-            | MavMessage::TIMESYNC(_)
-    )
+        | MavMessage::PARAM_REQUEST_READ(_)
+        | MavMessage::TIMESYNC(_)
+        | MavMessage::MISSION_REQUEST_LIST(_) => true,
+        MavMessage::COMMAND_LONG(c) => asks(c.command),
+        MavMessage::COMMAND_INT(c) => asks(c.command),
+        _ => false,
+    }
 }
 
 #[derive(serde::Deserialize)]

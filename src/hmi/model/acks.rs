@@ -57,6 +57,8 @@ pub(super) fn command_words(cmd: MavCmd) -> String {
         C::MAV_CMD_DO_MOUNT_CONTROL => "Camera tilt",
         C::MAV_CMD_DO_ILLUMINATOR_CONFIGURE => "Lights",
         C::MAV_CMD_DO_SET_SERVO => "Laser",
+        C::MAV_CMD_VIDEO_START_CAPTURE => "Recording on the vehicle",
+        C::MAV_CMD_VIDEO_STOP_CAPTURE => "Stopping the recording",
         other => return name_words(&format!("{other:?}"), "MAV_CMD_"),
     };
     words.to_owned()

@@ -15,8 +15,8 @@ use std::time::{Duration, Instant};
 
 use super::Delivery;
 use super::protocol::{
-    AgesView, AutopilotView, ControlView, EstimateView, HealthView, ServerMsg, SimView, Telemetry,
-    ThrustersUs,
+    AgesView, AutopilotView, ControlView, EstimateView, HealthView, RecordingView, ServerMsg,
+    SimView, Telemetry, ThrustersUs,
 };
 use crate::dialect::neptunus::*;
 use crate::vehicle::machine::Topic;
@@ -214,6 +214,8 @@ impl Model {
                     pilot_input: h.contains(S::MAV_SYS_STATUS_SENSOR_RC_RECEIVER),
                     battery: h.contains(S::MAV_SYS_STATUS_SENSOR_BATTERY),
                     prearm: h.contains(S::MAV_SYS_STATUS_PREARM_CHECK),
+                    board_line_drop_pct: f64::from(s.drop_rate_comm) / 100.0,
+                    board_line_errors: s.errors_comm,
                 });
                 // A value the message lacks keeps its last reading (its age
                 // says how old). The core repeats the last voltage while the
@@ -308,13 +310,27 @@ impl Model {
                     events.push(ServerMsg::Control(view));
                 }
             }
+            MavMessage::CAMERA_INFORMATION(c) => {
+                let r = t.recording.get_or_insert_with(RecordingView::default);
+                r.can = c
+                    .flags
+                    .contains(CameraCapFlags::CAMERA_CAP_FLAGS_CAPTURE_VIDEO);
+            }
+            MavMessage::CAMERA_CAPTURE_STATUS(c) => {
+                let r = t.recording.get_or_insert_with(RecordingView::default);
+                r.on = c.video_status == 1;
+                r.time_ms = c.recording_time_ms;
+                r.available_mib = c.available_capacity;
+            }
             MavMessage::STATUSTEXT(s) => self.on_statustext(s, events),
-            // Our own telemetry-rate requests are plumbing, not news.
+            // Our own telemetry-rate and message requests are plumbing, not news.
             MavMessage::COMMAND_ACK(a)
-                if a.command != MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL
-                    && self
-                        .me
-                        .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
+                if !matches!(
+                    a.command,
+                    MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL | MavCmd::MAV_CMD_REQUEST_MESSAGE
+                ) && self
+                    .me
+                    .is_none_or(|me| a.target_system == me || a.target_system == 0) =>
             {
                 events.push(self.on_ack(a));
             }

@@ -37,10 +37,12 @@ pub(super) async fn connection(
     mut stop: watch::Receiver<bool>,
     slot: Slot,
 ) {
+    let local = stream.local_addr().ok();
     let Some(acceptor) = tls else {
         http(
             Held::new(stream, slot),
             peer,
+            local,
             false,
             app,
             header_timeout,
@@ -71,7 +73,7 @@ pub(super) async fn connection(
         () = stopped(&mut stop) => return,
     };
     match handshake {
-        Ok(Ok(stream)) => http(stream, peer, true, app, header_timeout, stop).await,
+        Ok(Ok(stream)) => http(stream, peer, local, true, app, header_timeout, stop).await,
         // A plain-HTTP request, a scanner or a browser that distrusts the
         // certificate: the client's business, not the vehicle's.
         Ok(Err(e)) => tracing::debug!("browser HMI: TLS handshake with {peer} failed: {e}"),
@@ -100,14 +102,7 @@ async fn plain_http_on_tls_port(
         }
     }
     let text = String::from_utf8_lossy(&head);
-    let host = text
-        .lines()
-        .skip(1)
-        .find_map(|l| {
-            let (k, v) = l.split_once(':')?;
-            k.trim().eq_ignore_ascii_case("host").then(|| v.trim())
-        })
-        .filter(|h| crate::hmi::headers::plain_host(h));
+    let host = redirect_host(&text);
     let reply = match host {
         Some(h) => format!(
             "HTTP/1.1 301 Moved Permanently\r\nLocation: https://{h}/\r\nContent-Type: text/plain; charset=utf-8\r\n\
@@ -130,6 +125,18 @@ async fn plain_http_on_tls_port(
     tracing::debug!("browser HMI: plain HTTP from {peer} on the TLS port, sent to https://");
 }
 
+/// The Host a plain-HTTP request head names, when it is a plain host name
+/// (it goes into the redirect's `Location`); `None` otherwise.
+pub(crate) fn redirect_host(head: &str) -> Option<&str> {
+    head.lines()
+        .skip(1)
+        .find_map(|l| {
+            let (k, v) = l.split_once(':')?;
+            k.trim().eq_ignore_ascii_case("host").then(|| v.trim())
+        })
+        .filter(|h| crate::hmi::headers::plain_host(h))
+}
+
 /// The body of the answer to plain HTTP on the TLS port.
 const HTTPS_ONLY: &str =
     "This vehicle's HMI is served over HTTPS: open https:// and the same address.\n";
@@ -137,6 +144,7 @@ const HTTPS_ONLY: &str =
 async fn http<S>(
     stream: S,
     peer: SocketAddr,
+    local: Option<SocketAddr>,
     tls: bool,
     app: Router,
     header_timeout: Duration,
@@ -146,7 +154,7 @@ async fn http<S>(
 {
     let service = hyper::service::service_fn(move |mut req: hyper::Request<Incoming>| {
         req.extensions_mut().insert(ConnectInfo(peer));
-        req.extensions_mut().insert(ConnInfo { tls });
+        req.extensions_mut().insert(ConnInfo { tls, local });
         app.clone().oneshot(req)
     });
     let conn = http1::Builder::new()

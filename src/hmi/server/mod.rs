@@ -19,12 +19,13 @@
 //! - `axum::extract::ConnectInfo<std::net::SocketAddr>`: the client's address
 //!   (extract it as `ConnectInfo(addr): ConnectInfo<SocketAddr>`);
 //! - [`ConnInfo`]: facts about the connection itself (`tls`: whether it came
-//!   over TLS, e.g. to set a cookie's `Secure` flag).
+//!   over TLS, e.g. to set a cookie's `Secure` flag; `local`: the vehicle's
+//!   address the client reached).
 //!
 //! This file holds the accept loop and the public types; `connection` serves
 //! one connection, `slots` keeps the caps.
 
-mod connection;
+pub(crate) mod connection;
 mod slots;
 
 use std::future::Future;
@@ -53,6 +54,9 @@ const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
 pub struct ConnInfo {
     /// The connection is TLS (`https://`, `wss://`): a cookie may be `Secure`.
     pub tls: bool,
+    /// The vehicle's address the client reached (the accepted socket's
+    /// local address): where a WebRTC viewer can reach the vehicle.
+    pub local: Option<std::net::SocketAddr>,
 }
 
 /// Limits of the transport (`[hmi] max_connections`,
@@ -221,7 +225,7 @@ mod tests {
             axum::routing::get(
                 |ConnectInfo(addr): ConnectInfo<SocketAddr>,
                  Extension(info): Extension<ConnInfo>| async move {
-                    format!("{addr} tls={}", info.tls)
+                    format!("{addr} tls={} local={:?}", info.tls, info.local)
                 },
             ),
         );
@@ -236,7 +240,10 @@ mod tests {
         s.write_all(b"GET / HTTP/1.0\r\n\r\n").await.expect("write");
         let mut reply = String::new();
         s.read_to_string(&mut reply).await.expect("read");
-        assert!(reply.ends_with(&format!("{me} tls=false")), "{reply}");
+        assert!(
+            reply.ends_with(&format!("{me} tls=false local=Some({at})")),
+            "{reply}"
+        );
         let _ = stop.send(());
         server.await.expect("join").expect("serve");
     }

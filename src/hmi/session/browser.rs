@@ -10,7 +10,7 @@ use super::{REFUSAL_REPLY, REQUEST_TIMEOUT_S, Session};
 use crate::dialect::neptunus::*;
 use crate::hmi::model::ControlAsk;
 use crate::hmi::protocol::{ClientMsg, RunMode, ServerMsg};
-use crate::vehicle::machine::{COMPONENT_ID, HmiEvent};
+use crate::vehicle::machine::{CAMERA_COMPONENT_ID, COMPONENT_ID, HmiEvent};
 
 impl Session {
     pub(super) fn bad_message(&mut self, why: &str) -> Option<ServerMsg> {
@@ -138,6 +138,16 @@ impl Session {
                 // Output 6 is the laser (SERVO6_FUNCTION 60).
                 let pwm = if on { 1900.0 } else { 1100.0 };
                 self.command(MavCmd::MAV_CMD_DO_SET_SERVO, [6.0, pwm]).await
+            }
+            ClientMsg::Record { on } => {
+                let cmd = if on {
+                    MavCmd::MAV_CMD_VIDEO_START_CAPTURE
+                } else {
+                    MavCmd::MAV_CMD_VIDEO_STOP_CAPTURE
+                };
+                // To the camera component, like any station's record button:
+                // stream 0 (all), CAMERA_CAPTURE_STATUS at its default rate.
+                self.command_to(CAMERA_COMPONENT_ID, cmd, [0.0, 0.0]).await
             }
             ClientMsg::Tilt { deg } => {
                 // The core takes the legacy MOUNT_CONTROL (centidegrees), as ArduSub does.

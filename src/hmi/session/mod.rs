@@ -125,6 +125,9 @@ pub(crate) async fn run(socket: WebSocket, shared: Arc<Shared>, start: Start) {
         if send(&mut tx, &welcome).await.is_err() {
             break 'session End::SendFailed;
         }
+        // As QGroundControl does: whether the camera records, and whether
+        // it records now (the page's record button).
+        s.ask_camera().await;
         let mut ping = tokio::time::interval(PING_PERIOD);
         ping.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
         let mut pushed_at = tokio::time::Instant::now();

@@ -12,7 +12,7 @@ use mavlink_core::MessageData;
 use super::{BROWSER_LIFE, Session};
 use crate::dialect::neptunus::*;
 use crate::hmi::Shared;
-use crate::vehicle::machine::{COMPONENT_ID, HmiEvent, Input};
+use crate::vehicle::machine::{CAMERA_COMPONENT_ID, COMPONENT_ID, HmiEvent, Input};
 
 /// Telemetry rates this HMI asks the vehicle for on its endpoint (msg id, Hz),
 /// once, from the server's own peer (see [`request_rates`]). What the
@@ -45,6 +45,7 @@ pub(crate) async fn request_rates(shared: &Shared) {
     for (id, hz) in RATES {
         let msg = command_long(
             shared.vehicle_sysid,
+            COMPONENT_ID,
             MavCmd::MAV_CMD_SET_MESSAGE_INTERVAL,
             [id as f32, 1e6 / hz],
         );
@@ -53,7 +54,12 @@ pub(crate) async fn request_rates(shared: &Shared) {
 }
 
 /// COMMAND_LONG to the vehicle with the first params given, the rest 0.
-fn command_long<const N: usize>(target: u8, command: MavCmd, params: [f32; N]) -> MavMessage {
+fn command_long<const N: usize>(
+    target: u8,
+    component: u8,
+    command: MavCmd,
+    params: [f32; N],
+) -> MavMessage {
     let mut p = [0f32; 7];
     p[..N].copy_from_slice(&params);
     MavMessage::COMMAND_LONG(COMMAND_LONG_DATA {
@@ -66,7 +72,7 @@ fn command_long<const N: usize>(target: u8, command: MavCmd, params: [f32; N]) -
         param7: p[6],
         command,
         target_system: target,
-        target_component: COMPONENT_ID,
+        target_component: component,
         confirmation: 0,
     })
 }
@@ -81,6 +87,20 @@ impl Session {
             .shared
             .sender(self.id, sysid, self.may_pilot(), self.logged_in);
         let _ = self.shared.inputs.send(Input::Mavlink { from, msg }).await;
+    }
+
+    /// Asks the camera (component 100) for CAMERA_INFORMATION (can it
+    /// record?) and CAMERA_CAPTURE_STATUS (does it now?); the answers come
+    /// to this session alone. A vehicle without a camera does not answer.
+    pub(super) async fn ask_camera(&self) {
+        for id in [CAMERA_INFORMATION_DATA::ID, CAMERA_CAPTURE_STATUS_DATA::ID] {
+            self.command_to(
+                CAMERA_COMPONENT_ID,
+                MavCmd::MAV_CMD_REQUEST_MESSAGE,
+                [id as f32],
+            )
+            .await;
+        }
     }
 
     pub(super) async fn hmi_event(&self, event: HmiEvent) {
@@ -107,8 +127,23 @@ impl Session {
 
     /// COMMAND_LONG to the vehicle with the first params given, the rest 0.
     pub(super) async fn command<const N: usize>(&self, command: MavCmd, params: [f32; N]) {
-        self.to_vehicle(command_long(self.shared.vehicle_sysid, command, params))
-            .await;
+        self.command_to(COMPONENT_ID, command, params).await;
+    }
+
+    /// A command to another component of the vehicle (the camera).
+    pub(super) async fn command_to<const N: usize>(
+        &self,
+        component: u8,
+        command: MavCmd,
+        params: [f32; N],
+    ) {
+        self.to_vehicle(command_long(
+            self.shared.vehicle_sysid,
+            component,
+            command,
+            params,
+        ))
+        .await;
     }
 
     pub(super) fn manual_control(

@@ -46,6 +46,9 @@ pub(super) enum Target {
 pub(super) struct Queued {
     pub(super) target: Target,
     pub(super) bytes: Arc<[u8]>,
+    /// Goes to the telemetry log (a reply to one peer is logged by the
+    /// endpoint that knows the peer's standing).
+    pub(super) log: bool,
 }
 
 /// What every task of one endpoint shares.
@@ -192,8 +195,12 @@ impl EndpointCtx {
 
     /// Logs a frame addressed to one peer: always for a peer that may
     /// control, through the shared rate limit for the others.
-    pub(super) fn log_reply(&self, standing: &PeerStanding, bytes: &Arc<[u8]>) {
+    pub(super) fn log_reply(&self, standing: &PeerStanding, queued: &Queued) {
         let Some(tlog) = &self.tlog else { return };
+        if !queued.log {
+            return;
+        }
+        let bytes = &queued.bytes;
         if standing.may_control() || self.tlog_allows_stranger(Instant::now()) {
             tlog.record(Arc::clone(bytes));
         }

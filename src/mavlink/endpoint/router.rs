@@ -204,6 +204,17 @@ impl RouterHandle {
         {
             tlog.sender.record(Arc::clone(&out.bytes));
         }
+        self.queue(out, true);
+    }
+
+    /// As [`RouterHandle::send`], but the frame is not written to the
+    /// telemetry log: file contents sent to a station (log download, FTP)
+    /// are copies of what is on the disk already.
+    pub fn send_unlogged(&self, out: Outbound) {
+        self.queue(out, false);
+    }
+
+    fn queue(&self, out: Outbound, log: bool) {
         let (slots, target) = match out.route {
             Route::All => (&self.inner.endpoints[..], Target::All),
             Route::Endpoint(e) => (self.slot(e), Target::All),
@@ -213,6 +224,7 @@ impl RouterHandle {
             let queued = Queued {
                 target,
                 bytes: Arc::clone(&out.bytes),
+                log,
             };
             if let Err(mpsc::error::TrySendError::Full(_)) = slot.queue.try_send(queued) {
                 slot.ctx
@@ -230,6 +242,11 @@ impl RouterHandle {
             );
         }
         slots
+    }
+
+    /// The telemetry log files this run writes (None without a log).
+    pub fn tlog_run(&self) -> Option<crate::mavlink::tlog::TlogRun> {
+        self.inner.tlog.as_ref().map(|t| t.run.clone())
     }
 
     /// Why the telemetry log asked for could not be opened, if it could not.

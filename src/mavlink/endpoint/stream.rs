@@ -172,7 +172,7 @@ pub(super) async fn run_connector<S, F, Fut>(
                 queued = queue.recv() => match queued {
                     Some(queued) => {
                         if matches!(queued.target, Target::Peer(p) if p == peer) {
-                            ctx.log_reply(&standing, &queued.bytes);
+                            ctx.log_reply(&standing, &queued);
                         }
                         dispatch(&ctx, std::iter::once((peer, &tx)), &queued);
                     }

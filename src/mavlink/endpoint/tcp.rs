@@ -129,7 +129,7 @@ pub(super) async fn run_tcp_in(
                 if let Target::Peer(id) = queued.target
                     && let Some(conn) = conns.get(&id)
                 {
-                    ctx.log_reply(&conn.standing, &queued.bytes);
+                    ctx.log_reply(&conn.standing, &queued);
                 }
                 dispatch(&ctx, conns.iter().map(|(id, c)| (*id, &c.tx)), &queued);
             }

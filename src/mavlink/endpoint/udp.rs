@@ -206,10 +206,10 @@ pub(super) async fn run_udp(
                         }
                         Target::Peer(id) => {
                             if let Some((addr, _)) = target.filter(|&(_, t)| t == id) {
-                                ctx.log_reply(&target_standing, &queued.bytes);
+                                ctx.log_reply(&target_standing, &queued);
                                 add(addr);
                             } else if let Some((addr, p)) = peers.iter().find(|(_, p)| p.id == id) {
-                                ctx.log_reply(&p.standing, &queued.bytes);
+                                ctx.log_reply(&p.standing, &queued);
                                 add(*addr);
                             }
                         }

@@ -6,14 +6,15 @@
 //! or a log line, and never reads a file larger than what it writes.
 
 use std::fmt;
-use std::fs::{self, File, OpenOptions, Permissions};
-use std::io::{self, Read, Write};
-use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+use std::fs::File;
+use std::io::{self, Read};
+use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 
 use super::MAX_TIMESTAMP;
 use super::key::{KEY_LEN, SigningKey};
 use super::verify::ReplayState;
+use crate::durable;
 
 /// Something about the key file the operator should fix, though the key
 /// still loaded.
@@ -180,12 +181,8 @@ impl SigningStore {
     pub fn save_key(&self, key: Option<&SigningKey>) -> Result<(), SigningError> {
         let path = self.key_path();
         let Some(key) = key else {
-            return match fs::remove_file(&path) {
-                Ok(()) => {
-                    sync_dir(&self.dir);
-                    Ok(())
-                }
-                Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(()),
+            return match durable::remove(&path) {
+                Ok(_) => Ok(()),
                 Err(source) => Err(SigningError::Remove { path, source }),
             };
         };
@@ -329,48 +326,13 @@ fn hex_value(digit: u8) -> u8 {
     }
 }
 
-/// Writes `dir/name` by way of `dir/name.tmp`, created with `mode` (and
-/// chmod'ed to it whatever the umask), synced, then renamed over the old file.
+/// Writes `dir/name` with [`durable::write`], with exactly `mode`.
 fn write_atomic(dir: &Path, name: &str, contents: &[u8], mode: u32) -> Result<(), SigningError> {
     let path = dir.join(name);
-    let tmp = dir.join(format!("{name}.tmp"));
-    let write_err = |p: &Path| {
-        let p = p.to_path_buf();
-        move |source| SigningError::Write { path: p, source }
-    };
-    fs::create_dir_all(dir).map_err(write_err(dir))?;
-    // A temporary file left by a crash may have other permissions;
-    // create_new with our mode guarantees ours.
-    if let Err(e) = fs::remove_file(&tmp)
-        && e.kind() != io::ErrorKind::NotFound
-    {
-        return Err(write_err(&tmp)(e));
-    }
-    let result = (|| {
-        let mut file = OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .mode(mode)
-            .open(&tmp)?;
-        file.set_permissions(Permissions::from_mode(mode))?;
-        file.write_all(contents)?;
-        file.sync_all()?;
-        fs::rename(&tmp, &path)
-    })();
-    if let Err(e) = result {
-        let _ = fs::remove_file(&tmp);
-        return Err(write_err(&path)(e));
-    }
-    sync_dir(dir);
-    Ok(())
-}
-
-/// Makes a rename or removal durable. Best effort: some file systems cannot
-/// sync a directory, and the data is already written.
-fn sync_dir(dir: &Path) {
-    if let Ok(d) = File::open(dir) {
-        let _ = d.sync_all();
-    }
+    durable::write(&path, contents, durable::Mode::Exactly(mode)).map_err(|e| SigningError::Write {
+        path: path.clone(),
+        source: e.into(),
+    })
 }
 
 #[cfg(test)]

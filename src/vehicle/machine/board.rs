@@ -47,6 +47,8 @@ impl<T> Stamped<T> {
 pub(super) struct BoardState {
     pub link: LinkState,
     pub link_reason: Option<String>,
+    /// The serial line's quality as the link last reported it.
+    pub link_quality: crate::firmware::link::LinkQuality,
     /// The link has been up at least once since start.
     pub link_seen_up: bool,
     pub heading_deg: Stamped<f64>,
@@ -75,6 +77,9 @@ pub(super) struct BoardState {
     /// The board's free RAM (`fmem`) and uptime (`time`).
     pub fmem_bytes: Stamped<u32>,
     pub uptime_ms: Stamped<u64>,
+    /// A `time` reading that did not follow the uptime (and when it came),
+    /// held until the next one says whether the clock really moved.
+    uptime_doubt: Option<(u64, Duration)>,
     /// The firmware's `ver` and `cmpd`, once the board said them.
     pub firmware: Option<(String, Option<String>)>,
     /// The board's dead-man switch stopped the thrusters (`icmd:stop`) and
@@ -245,18 +250,56 @@ impl Vehicle {
             self.board.fmem_bytes = Stamped::new(b, at);
         }
         if let Some(t) = s.time_ms {
-            // The board's clock went back: it restarted, even if its
-            // `boot:1` line was lost.
-            if self.board.uptime_ms.at.is_some() && t + 1000 < self.board.uptime_ms.value {
-                self.on_board_boot(out);
-            }
-            self.board.uptime_ms = Stamped::new(t, at);
+            self.on_board_clock(t, at, out);
         }
         if let Some(v) = s.version {
             let first = self.board.firmware.is_none();
             self.board.firmware = Some((v, s.compiled));
             if first {
                 self.announce_firmware(out);
+            }
+        }
+    }
+
+    /// The board's uptime `t` (ms), arrived at `at`. A clock that went
+    /// back means the board restarted, even if its `boot:1` line was lost.
+    /// A noisy line changes digits, though (one byte in 400 with a bit
+    /// flipped makes a damaged `time` every few minutes, and a digit flip
+    /// stays a number): a reading that does not follow the uptime — back
+    /// more than a second, or ahead of it by more than the time since plus
+    /// two seconds — moves nothing until the next reading follows *it*;
+    /// only then is it the board's clock (and, back, a restart). A damaged
+    /// reading is followed by a true one, which follows the old uptime.
+    fn on_board_clock(&mut self, t: u64, at: Duration, out: &mut Vec<Output>) {
+        let follows = |base: u64, base_at: Duration| {
+            let since_ms = at.saturating_sub(base_at).as_millis() as u64;
+            t + 1000 >= base && t <= base + since_ms + 2000
+        };
+        let old = self.board.uptime_ms;
+        let Some(old_at) = old.at else {
+            self.board.uptime_ms = Stamped::new(t, at);
+            return;
+        };
+        if follows(old.value, old_at) {
+            self.board.uptime_doubt = None;
+            self.board.uptime_ms = Stamped::new(t, at);
+            return;
+        }
+        match self.board.uptime_doubt {
+            Some((doubted, doubted_at)) if follows(doubted, doubted_at) => {
+                self.board.uptime_doubt = None;
+                if t + 1000 < old.value {
+                    self.on_board_boot(out);
+                }
+                self.board.uptime_ms = Stamped::new(t, at);
+            }
+            _ => {
+                tracing::debug!(
+                    uptime_ms = old.value,
+                    reading_ms = t,
+                    "a board uptime that does not follow; held until the next one"
+                );
+                self.board.uptime_doubt = Some((t, at));
             }
         }
     }
@@ -283,6 +326,7 @@ impl Vehicle {
         self.board.pressure_read = None;
         self.board.firmware = None;
         self.board.uptime_ms = Stamped::default();
+        self.board.uptime_doubt = None;
         if self.armed {
             self.statustext(
                 Topic::Stop,

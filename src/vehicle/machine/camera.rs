@@ -7,7 +7,10 @@
 //! MAV_CMD_REQUEST_MESSAGE for CAMERA_INFORMATION, CAMERA_SETTINGS,
 //! STORAGE_INFORMATION, CAMERA_CAPTURE_STATUS, VIDEO_STREAM_INFORMATION and
 //! VIDEO_STREAM_STATUS, and the legacy MAV_CMD_REQUEST_CAMERA_* /
-//! _VIDEO_STREAM_* commands. Any other command to it is UNSUPPORTED.
+//! _VIDEO_STREAM_* commands; with a recorder, MAV_CMD_VIDEO_START_CAPTURE
+//! and _STOP_CAPTURE too (`recording.rs`, which also makes the storage
+//! information and the capture status). Any other command to it is
+//! UNSUPPORTED.
 //!
 //! It exists only when the vehicle has a camera source
 //! ([`Vehicle::with_camera`]). What it says about the video stream comes
@@ -17,8 +20,9 @@
 //! knows the camera streams video) but without the RUNNING flag and with an
 //! empty uri, and VIDEO_STREAM_STATUS says it is not running.
 //!
-//! Sans-IO like the rest of the core; it never changes the vehicle, so no
-//! request to it needs the authority check.
+//! Sans-IO like the rest of the core. Its requests never change the
+//! vehicle and need no authority check; starting and stopping a recording
+//! do (`recording.rs`).
 
 use std::time::Duration;
 
@@ -182,10 +186,18 @@ impl Vehicle {
         if component == Some(0) && !is_camera_request(cmd, &p) {
             return false;
         }
-        let (result, replies) = self.camera_command(cmd, p, now);
+        // What a capture command tells everyone goes after the ack.
+        let mut after = Vec::new();
+        let (result, replies) = match cmd {
+            MavCmd::MAV_CMD_VIDEO_START_CAPTURE | MavCmd::MAV_CMD_VIDEO_STOP_CAPTURE => {
+                self.capture_command(from, cmd, p, now, &mut after)
+            }
+            _ => self.camera_command(cmd, p, now),
+        };
         let to = from.reply();
         out.push(camera_out(to, ack(cmd, result, from)));
         out.extend(replies.into_iter().map(|m| camera_out(to, m)));
+        out.append(&mut after);
         true
     }
 
@@ -216,27 +228,8 @@ impl Vehicle {
                 focusLevel: f32::NAN,
                 ..Default::default()
             })),
-            STORAGE_INFORMATION_DATA::ID => {
-                Some(MavMessage::STORAGE_INFORMATION(STORAGE_INFORMATION_DATA {
-                    time_boot_ms: self.boot_ms(now),
-                    storage_id: 0,
-                    storage_count: 0,
-                    status: StorageStatus::STORAGE_STATUS_NOT_SUPPORTED,
-                    ..Default::default()
-                }))
-            }
-            CAMERA_CAPTURE_STATUS_DATA::ID => Some(MavMessage::CAMERA_CAPTURE_STATUS(
-                CAMERA_CAPTURE_STATUS_DATA {
-                    time_boot_ms: self.boot_ms(now),
-                    image_status: 0,
-                    video_status: 0,
-                    image_interval: 0.0,
-                    recording_time_ms: 0,
-                    available_capacity: 0.0,
-                    image_count: 0,
-                    ..Default::default()
-                },
-            )),
+            STORAGE_INFORMATION_DATA::ID => Some(self.storage_information(now)),
+            CAMERA_CAPTURE_STATUS_DATA::ID => Some(self.capture_status(now)),
             VIDEO_STREAM_INFORMATION_DATA::ID if stream_ok => Some(self.video_stream_information()),
             VIDEO_STREAM_STATUS_DATA::ID if stream_ok => Some(self.video_stream_status()),
             VIDEO_STREAM_INFORMATION_DATA::ID | VIDEO_STREAM_STATUS_DATA::ID => {
@@ -271,7 +264,12 @@ impl Vehicle {
             model_name: model,
             resolution_h: w,
             resolution_v: h,
-            flags: CameraCapFlags::CAMERA_CAP_FLAGS_HAS_VIDEO_STREAM,
+            flags: if self.can_record() {
+                CameraCapFlags::CAMERA_CAP_FLAGS_HAS_VIDEO_STREAM
+                    | CameraCapFlags::CAMERA_CAP_FLAGS_CAPTURE_VIDEO
+            } else {
+                CameraCapFlags::CAMERA_CAP_FLAGS_HAS_VIDEO_STREAM
+            },
             // Empty: no camera definition file to download.
             cam_definition_uri: chars(""),
             ..Default::default()

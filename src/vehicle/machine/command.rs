@@ -155,8 +155,36 @@ impl Vehicle {
                 .into_iter()
                 .collect(),
             PROTOCOL_VERSION_DATA::ID => vec![super::stubs::protocol_version()],
+            COMPONENT_METADATA_DATA::ID => vec![self.component_metadata(now)],
+            COMPONENT_INFORMATION_DATA::ID => vec![self.component_information(now)],
             _ => self.build(id, now),
         }
+    }
+}
+
+impl Vehicle {
+    /// COMPONENT_METADATA: where the general metadata file is (MAVLink
+    /// FTP) and its CRC.
+    fn component_metadata(&self, now: Now) -> MavMessage {
+        use crate::files::{MemFile, component};
+        MavMessage::COMPONENT_METADATA(COMPONENT_METADATA_DATA {
+            time_boot_ms: self.boot_ms(now),
+            file_crc: component::file(MemFile::General).crc,
+            uri: super::chars(&component::uri(MemFile::General)),
+        })
+    }
+
+    /// COMPONENT_INFORMATION, the older form QGroundControl still asks
+    /// for: the same file, no peripherals.
+    fn component_information(&self, now: Now) -> MavMessage {
+        use crate::files::{MemFile, component};
+        MavMessage::COMPONENT_INFORMATION(COMPONENT_INFORMATION_DATA {
+            time_boot_ms: self.boot_ms(now),
+            general_metadata_file_crc: component::file(MemFile::General).crc,
+            peripherals_metadata_file_crc: 0,
+            general_metadata_uri: super::chars(&component::uri(MemFile::General)),
+            peripherals_metadata_uri: super::chars(""),
+        })
     }
 }
 

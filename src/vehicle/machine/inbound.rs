@@ -146,6 +146,11 @@ impl Vehicle {
             MavMessage::PARAM_REQUEST_READ(p) => self.param_request_read(from, &p, out),
             MavMessage::PARAM_SET(p) => self.param_set(from, &p, now, out),
             MavMessage::REQUEST_DATA_STREAM(r) => self.request_data_stream(from, &r, now, out),
+            MavMessage::FILE_TRANSFER_PROTOCOL(f) => self.on_ftp(from, &f, now, out),
+            MavMessage::LOG_REQUEST_LIST(m) => self.log_request_list(from, &m, now, out),
+            MavMessage::LOG_REQUEST_DATA(m) => self.log_request_data(from, &m, now, out),
+            MavMessage::LOG_REQUEST_END(_) => self.log_request_end(from),
+            MavMessage::LOG_ERASE(_) => self.log_erase(from, now, out),
             other => {
                 self.answer_stub(from, &other, now, out);
             }

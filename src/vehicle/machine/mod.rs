@@ -25,6 +25,7 @@
 //! | `payload.rs` | lights, laser, camera tilt, servo outputs |
 //! | `gimbal.rs` | the camera tilt as a MAVLink gimbal (protocol v2, manager on component 1) |
 //! | `camera.rs` | the MAVLink camera component (id 100): heartbeat, camera and video-stream information |
+//! | `recording.rs` | recording on the vehicle: the capture commands (after the authority check), capture status, storage information, the telemetry beside the video |
 //! | `modes.rs` | flight mode changes, AVAILABLE_MODES |
 //! | `run_mode.rs` | real board or built-in simulator |
 //! | `driving.rs` | sticks, buttons, motor test → one `go()` |
@@ -34,7 +35,8 @@
 //! | `failsafe.rs` | GCS, pilot-input, board-link and battery failsafes |
 //! | `persist.rs` | parameter saving (asked of the app) |
 //! | `signing.rs` | SETUP_SIGNING |
-//! | `stubs.rs` | missions, FTP, TIMESYNC, PING answered without implementing them |
+//! | `stubs.rs` | missions, TIMESYNC, PING answered without implementing them |
+//! | `transfer/` | onboard log download (LOG_*) and MAVLink FTP's read side: sessions, paced streams, who may read what |
 //! | `texts.rs` | STATUSTEXT to all or to one asker, with a topic |
 //! | `wall_time.rs` | SYSTEM_TIME from the station in control sets a wrong clock |
 
@@ -63,19 +65,23 @@ mod modes;
 mod param_proto;
 mod payload;
 mod persist;
+mod recording;
 mod run_mode;
 mod signing;
 mod stubs;
 mod telemetry;
 mod texts;
+mod transfer;
 mod wake;
 mod wall_time;
 
 pub use camera::{CAMERA_COMPONENT_ID, CameraSpec, VIDEO_STREAM_ID, VideoStreamInfo};
 pub use gimbal::GIMBAL_DEVICE_ID;
 pub use persist::{SAVE_DEBOUNCE, SAVE_MAX_DELAY};
+pub use recording::{RecordControl, RecordSample, RecorderEvent, StorageReport};
 pub use run_mode::RunMode;
 pub use texts::{FailsafeKind, Topic, ascii_text};
+pub use transfer::{NETWORK_RATE, START_RATE};
 pub use wake::{BUSY_TICK, IDLE_TICK};
 pub use wall_time::ClockSync;
 
@@ -85,7 +91,7 @@ use super::params::ParamStore;
 use crate::dialect::neptunus::*;
 pub use crate::eventlog::LogEvent;
 use crate::firmware::codec::{Command, Event};
-use crate::firmware::link::LinkState;
+use crate::firmware::link::{LinkQuality, LinkState};
 pub use crate::vehicle::mixer::NEUTRAL_US;
 
 /// Our MAVLink component id (the autopilot).
@@ -163,6 +169,9 @@ pub enum Input {
         state: LinkState,
         reason: Option<String>,
     },
+    /// The board line's quality changed (SYS_STATUS `drop_rate_comm`,
+    /// `errors_comm`).
+    LinkQuality(LinkQuality),
     /// Periodic (the app ticks at 100 Hz): telemetry, timeouts.
     Tick,
     /// Ground truth from the simulator (only when running on it).
@@ -205,6 +214,13 @@ pub enum Input {
         endpoint: usize,
         listened: bool,
     },
+    /// The recorder's news: a recording started or stopped, the storage.
+    Recorder(RecorderEvent),
+    /// The disk worker's answer to an [`Output::Files`].
+    Files(crate::files::FileReply),
+    /// The file transfers may send what their pacing allows (due at
+    /// [`Vehicle::next_transfer`]).
+    Transfer,
 }
 
 /// Events of a browser HMI session that matter for safety.
@@ -245,8 +261,8 @@ pub enum Output {
         msg: MavMessage,
     },
     /// A message sent like [`Output::Send`] but from another component of
-    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire only
-    /// (the browser HMI talks to the autopilot alone).
+    /// this system (the camera, [`CAMERA_COMPONENT_ID`]); on the wire and to
+    /// mavlink2rest (the browser HMI hears only the camera's recording).
     SendAs {
         to: To,
         compid: u8,
@@ -301,6 +317,20 @@ pub enum Output {
     SetWallClock {
         unix_us: u64,
     },
+    /// Start or stop recording on the vehicle (answered: [`Input::Recorder`]).
+    Record(RecordControl),
+    /// A row of the telemetry written beside the recording.
+    RecordSample(RecordSample),
+    /// File data for one station (LOG_DATA, FTP replies), sent like
+    /// [`Output::Send`] on the wire only: never into the telemetry log
+    /// (it is a copy of what is on the disk) nor to the in-process stations.
+    Bulk {
+        to: To,
+        msg: MavMessage,
+    },
+    /// A request for the disk worker; its answer comes back as
+    /// [`Input::Files`].
+    Files(crate::files::FileRequest),
 }
 
 impl Output {
@@ -364,6 +394,7 @@ pub struct Vehicle {
     board: board::BoardState,
     payload: payload::Payload,
     camera: camera::Camera,
+    recording: recording::Recording,
     gimbal: gimbal::Gimbal,
     pilot: driving::Pilot,
     auth: authority::Authority,
@@ -372,6 +403,7 @@ pub struct Vehicle {
     streams: telemetry::Streams,
     texts: texts::Texts,
     persist: persist::Persist,
+    transfers: transfer::Transfers,
     signing_active: bool,
     wall_time: wall_time::WallTime,
     counters: Counters,
@@ -441,6 +473,7 @@ impl Vehicle {
             board: board::BoardState::default(),
             payload: payload::Payload::default(),
             camera: camera::Camera::default(),
+            recording: recording::Recording::default(),
             gimbal: gimbal::Gimbal::default(),
             pilot,
             auth: authority::Authority::default(),
@@ -449,6 +482,7 @@ impl Vehicle {
             streams: telemetry::Streams::new(endpoints),
             texts: texts::Texts::default(),
             persist: persist::Persist::default(),
+            transfers: transfer::Transfers::default(),
             signing_active: false,
             wall_time: wall_time::WallTime::default(),
             counters: Counters::default(),
@@ -535,6 +569,7 @@ impl Vehicle {
         match input {
             Input::Tick => self.tick(now, out),
             Input::Link { state, reason } => self.on_link(state, reason, now, out),
+            Input::LinkQuality(q) => self.board.link_quality = q,
             Input::Board(ev) => {
                 // In SIMULATOR run mode the board's navigation and power
                 // telemetry is not the vehicle's (the simulator's is).
@@ -584,6 +619,9 @@ impl Vehicle {
             Input::Listeners { endpoint, listened } => {
                 self.streams.set_listened(endpoint, listened)
             }
+            Input::Recorder(ev) => self.on_recorder(ev, now, out),
+            Input::Files(reply) => self.on_file_reply(reply, now, out),
+            Input::Transfer => self.transfer_pass(now, out),
         }
     }
 
@@ -622,6 +660,7 @@ impl Vehicle {
         self.authority_tick(now, out);
         self.persist_tick(now, out);
         self.wall_time_tick(now, out);
+        self.transfers_tick(now);
         // The board's dead-man is fed by the owner's life, not by ours alone:
         // a dead owner link reaches the board even if this loop runs on.
         if !self.armed
@@ -632,6 +671,7 @@ impl Vehicle {
         }
         self.stream_tick(now, out);
         self.camera_tick(now, out);
+        self.recording_tick(now, out);
         self.param_stream_tick(out);
     }
 }

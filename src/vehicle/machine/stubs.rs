@@ -1,7 +1,6 @@
 //! The services Neptunus answers without implementing them, so ground
 //! stations move on at once instead of timing out: missions (none, and
-//! none accepted), MAVLink FTP (no files), PROTOCOL_VERSION, TIMESYNC and
-//! PING.
+//! none accepted), PROTOCOL_VERSION, TIMESYNC and PING.
 
 use super::{Now, Output, Sender, Vehicle};
 use crate::dialect::neptunus::*;
@@ -32,7 +31,6 @@ impl Vehicle {
             MavMessage::MISSION_CLEAR_ALL(m) => {
                 mission_ack(from, m.mission_type, MavMissionResult::MAV_MISSION_ACCEPTED)
             }
-            MavMessage::FILE_TRANSFER_PROTOCOL(f) => ftp_reply(&f.payload, from),
             // A request (tc1 0), not an answer to someone else's.
             MavMessage::TIMESYNC(t) if t.tc1 == 0 => MavMessage::TIMESYNC(TIMESYNC_DATA {
                 tc1: now.mono.as_nanos().min(i64::MAX as u128) as i64,
@@ -77,36 +75,5 @@ pub(super) fn protocol_version() -> MavMessage {
         max_version: 200,
         spec_version_hash: [0; 8],
         library_version_hash: [0; 8],
-    })
-}
-
-fn ftp_reply(req: &[u8; 251], from: Sender) -> MavMessage {
-    const ACK: u8 = 128;
-    const NAK: u8 = 129;
-    const FILE_NOT_FOUND: u8 = 10;
-    let seq = u16::from_le_bytes([req[0], req[1]]).wrapping_add(1);
-    let session = req[2];
-    let opcode = req[3];
-    let mut payload = [0u8; 251];
-    payload[0..2].copy_from_slice(&seq.to_le_bytes());
-    payload[2] = session;
-    payload[5] = opcode;
-    match opcode {
-        // TerminateSession, ResetSessions: nothing to do, fine.
-        1 | 2 => {
-            payload[3] = ACK;
-            payload[4] = 0;
-        }
-        _ => {
-            payload[3] = NAK;
-            payload[4] = 1;
-            payload[12] = FILE_NOT_FOUND;
-        }
-    }
-    MavMessage::FILE_TRANSFER_PROTOCOL(FILE_TRANSFER_PROTOCOL_DATA {
-        target_network: 0,
-        target_system: from.sysid,
-        target_component: from.compid,
-        payload,
     })
 }

@@ -438,6 +438,10 @@ impl Vehicle {
             }),
             current_battery: self.fresh_current_ca(now),
             battery_remaining: self.battery_remaining(now),
+            // The serial line to the board (frames and lines damaged or
+            // lost, both ways: `firmware/link/session/quality.rs`).
+            drop_rate_comm: self.board.link_quality.drop_rate_cpct,
+            errors_comm: self.board.link_quality.errors,
             ..Default::default()
         })
     }
@@ -520,7 +524,9 @@ impl Vehicle {
         let param_float = C::MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT;
         caps |= param_float
             | C::MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
-            | C::MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL;
+            | C::MAV_PROTOCOL_CAPABILITY_COMPONENT_ACCEPTS_GCS_CONTROL
+            // MAVLink FTP (read side): the logs and the component metadata.
+            | C::MAV_PROTOCOL_CAPABILITY_FTP;
         let mut custom = [0u8; 8];
         let v = env!("CARGO_PKG_VERSION").as_bytes();
         let tag = b"nept";

@@ -40,6 +40,8 @@ pub(super) enum ReplyKind {
     Signing,
     /// Information for the asker (SYSID_THISMAV at the next start …).
     Note,
+    /// Log download and file access refused or done.
+    Files,
 }
 
 impl ReplyKind {
@@ -47,9 +49,12 @@ impl ReplyKind {
     fn topic(self) -> Topic {
         match self {
             Self::Refused | Self::Input | Self::Control => Topic::Control,
-            Self::UnknownParam | Self::ParamRefused | Self::Rates | Self::Signing | Self::Note => {
-                Topic::General
-            }
+            Self::UnknownParam
+            | Self::ParamRefused
+            | Self::Rates
+            | Self::Signing
+            | Self::Note
+            | Self::Files => Topic::General,
         }
     }
 }

@@ -44,10 +44,14 @@ impl Vehicle {
         // The idle tick goes with the board's lines (`tick_with_line`): its
         // own deadline gives a line its slack, so a line a little late is not
         // preceded by a tick of its own.
-        [self.streams.next_deadline(), self.camera_next_heartbeat()]
-            .into_iter()
-            .flatten()
-            .fold(last + IDLE_TICK + LINE_SLACK, Duration::min)
+        [
+            self.streams.next_deadline(),
+            self.camera_next_heartbeat(),
+            self.recording_next_tick(),
+        ]
+        .into_iter()
+        .flatten()
+        .fold(last + IDLE_TICK + LINE_SLACK, Duration::min)
     }
 
     /// A navigation line was handled at `now`: the idle tick runs with it

@@ -1,19 +1,20 @@
 //! `params.toml` in the data directory ([`ParamFile`]): the TOML text of the
 //! values that differ from their defaults, loading it (bad entries are
-//! warnings, an unreadable file is moved aside), saving it atomically
-//! (tmp file, fsync, rename) and removing a tmp file an interrupted save
+//! warnings, an unreadable file is moved aside), saving it with
+//! [`crate::durable::write`] and removing a tmp file an interrupted save
 //! left behind.
 //!
 //! The only part of the parameters that does I/O. Nothing a file contains
 //! makes it panic or stops the vehicle from starting: the defaults apply.
 
 use std::fmt::Write as _;
-use std::fs::{self, File};
-use std::io::{self, Write as _};
+use std::fs;
+use std::io;
 use std::path::{Path, PathBuf};
 
 use super::defs::{definitions, format_value, wire_value};
 use super::store::ParamStore;
+use crate::durable;
 
 /// The TOML text of a store (what [`ParamFile`] writes and reads).
 impl ParamStore {
@@ -203,9 +204,7 @@ impl ParamFile {
 
     /// `params.toml.tmp` beside the file.
     pub fn tmp_path(&self) -> PathBuf {
-        let mut name = self.path.clone().into_os_string();
-        name.push(".tmp");
-        PathBuf::from(name)
+        durable::tmp_path(&self.path)
     }
 
     /// Removes a `params.toml.tmp` left by a save that was interrupted (a
@@ -218,39 +217,18 @@ impl ParamFile {
         }
     }
 
-    /// Writes atomically: `params.toml.tmp`, fsync, rename over
-    /// `params.toml`, fsync the directory. A crash leaves either the old or
-    /// the new file, never a torn one.
+    /// Writes atomically and durably ([`durable::write`]): a crash leaves
+    /// either the old or the new file, never a torn one.
     pub fn save(&self, store: &ParamStore) -> Result<(), StoreError> {
-        let io_err = |action, path: &Path| {
-            let path = path.to_path_buf();
-            move |source| StoreError::Io {
-                action,
-                path,
-                source,
-            }
-        };
-        let dir = match self.path.parent() {
-            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-            _ => PathBuf::from("."),
-        };
-        fs::create_dir_all(&dir).map_err(io_err("create directory", &dir))?;
-        let tmp = self.tmp_path();
-        let mut file = File::create(&tmp).map_err(io_err("create", &tmp))?;
-        let written = file
-            .write_all(store.to_toml().as_bytes())
-            .map_err(io_err("write", &tmp))
-            .and_then(|()| file.sync_all().map_err(io_err("fsync", &tmp)));
-        drop(file);
-        if let Err(e) = written {
-            // A half-written file (disk full) must not linger.
-            let _ = fs::remove_file(&tmp);
-            return Err(e);
-        }
-        fs::rename(&tmp, &self.path).map_err(io_err("rename over", &self.path))?;
-        File::open(&dir)
-            .and_then(|d| d.sync_all())
-            .map_err(io_err("fsync directory", &dir))?;
-        Ok(())
+        durable::write(
+            &self.path,
+            store.to_toml().as_bytes(),
+            durable::Mode::LessUmask(0o666),
+        )
+        .map_err(|e| StoreError::Io {
+            action: e.step,
+            path: e.path,
+            source: e.source,
+        })
     }
 }

@@ -104,6 +104,91 @@ pub fn is_button_function(code: u8) -> bool {
         || code == BTN_FUNCTION_LASER_TOGGLE
 }
 
+/// Every button function code with ArduSub's name for it (and ours, 101),
+/// in code order: the values BTNn_FUNCTION and BTNn_SFUNCTION offer in the
+/// parameter metadata. Codes Neptunus has nothing for say "(no effect)".
+pub const BUTTON_FUNCTION_NAMES: &[(i32, &str)] = &[
+    (0, "disabled"),
+    (1, "shift"),
+    (2, "arm_toggle"),
+    (3, "arm"),
+    (4, "disarm"),
+    (5, "mode_manual"),
+    (6, "mode_stabilize"),
+    (7, "mode_depth_hold"),
+    (8, "mode_poshold"),
+    (9, "mode_auto"),
+    (10, "mode_circle"),
+    (11, "mode_guided"),
+    (12, "mode_acro"),
+    (13, "mode_surftrak"),
+    (21, "mount_center"),
+    (22, "mount_tilt_up"),
+    (23, "mount_tilt_down"),
+    (24, "camera_trigger (no effect)"),
+    (25, "camera_source_toggle (no effect)"),
+    (26, "mount_pan_right (no effect)"),
+    (27, "mount_pan_left (no effect)"),
+    (31, "lights1_cycle"),
+    (32, "lights1_brighter"),
+    (33, "lights1_dimmer"),
+    (34, "lights2_cycle (no effect)"),
+    (35, "lights2_brighter (no effect)"),
+    (36, "lights2_dimmer (no effect)"),
+    (41, "gain_toggle"),
+    (42, "gain_inc"),
+    (43, "gain_dec"),
+    (44, "trim_roll_inc (no effect)"),
+    (45, "trim_roll_dec (no effect)"),
+    (46, "trim_pitch_inc (no effect)"),
+    (47, "trim_pitch_dec (no effect)"),
+    (48, "input_hold_set"),
+    (49, "roll_pitch_toggle (no effect)"),
+    (51, "relay_1_on (no effect)"),
+    (52, "relay_1_off (no effect)"),
+    (53, "relay_1_toggle (no effect)"),
+    (54, "relay_2_on (no effect)"),
+    (55, "relay_2_off (no effect)"),
+    (56, "relay_2_toggle (no effect)"),
+    (57, "relay_3_on (no effect)"),
+    (58, "relay_3_off (no effect)"),
+    (59, "relay_3_toggle (no effect)"),
+    (61, "servo_1_inc (no effect)"),
+    (62, "servo_1_dec (no effect)"),
+    (63, "servo_1_min (no effect)"),
+    (64, "servo_1_max (no effect)"),
+    (65, "servo_1_center (no effect)"),
+    (66, "servo_2_inc (no effect)"),
+    (67, "servo_2_dec (no effect)"),
+    (68, "servo_2_min (no effect)"),
+    (69, "servo_2_max (no effect)"),
+    (70, "servo_2_center (no effect)"),
+    (71, "servo_3_inc (no effect)"),
+    (72, "servo_3_dec (no effect)"),
+    (73, "servo_3_min (no effect)"),
+    (74, "servo_3_max (no effect)"),
+    (75, "servo_3_center (no effect)"),
+    (76, "servo_1_min_momentary (no effect)"),
+    (77, "servo_1_max_momentary (no effect)"),
+    (78, "servo_1_min_toggle (no effect)"),
+    (79, "servo_1_max_toggle (no effect)"),
+    (80, "servo_2_min_momentary (no effect)"),
+    (81, "servo_2_max_momentary (no effect)"),
+    (82, "servo_2_min_toggle (no effect)"),
+    (83, "servo_2_max_toggle (no effect)"),
+    (84, "servo_3_min_momentary (no effect)"),
+    (85, "servo_3_max_momentary (no effect)"),
+    (86, "servo_3_min_toggle (no effect)"),
+    (87, "servo_3_max_toggle (no effect)"),
+    (91, "custom_1 (no effect)"),
+    (92, "custom_2 (no effect)"),
+    (93, "custom_3 (no effect)"),
+    (94, "custom_4 (no effect)"),
+    (95, "custom_5 (no effect)"),
+    (96, "custom_6 (no effect)"),
+    (BTN_FUNCTION_LASER_TOGGLE as i32, "laser_toggle (Neptunus)"),
+];
+
 /// What a virtual output drives (SERVOn_FUNCTION), for the codes Neptunus
 /// reports; the values are ArduPilot's.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -169,6 +254,23 @@ mod tests {
         );
         for code in 0..=100 {
             assert_eq!(ServoFunction::from_code(code).code(), code);
+        }
+    }
+
+    #[test]
+    fn every_button_code_is_named_and_the_unused_say_so() {
+        let named: Vec<u8> = BUTTON_FUNCTION_NAMES
+            .iter()
+            .map(|(c, _)| *c as u8)
+            .collect();
+        let known: Vec<u8> = (0..=255).filter(|&c| is_button_function(c)).collect();
+        assert_eq!(named, known);
+        for (code, name) in BUTTON_FUNCTION_NAMES {
+            let unused = matches!(
+                ButtonFunction::from_code(*code as u8),
+                Some(ButtonFunction::Unsupported(_))
+            );
+            assert_eq!(unused, name.ends_with("(no effect)"), "{code} {name}");
         }
     }
 }

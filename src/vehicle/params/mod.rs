@@ -19,7 +19,8 @@
 //!
 //! The pieces: `defs` is the table of definitions (and the wire types),
 //! `store` the values with their validation and typed accessors, `file`
-//! `params.toml` and its TOML text, `doc` the table the user guide embeds, `functions` what the
+//! `params.toml` and its TOML text, `doc` the table the user guide embeds, `metadata` the parameter
+//! metadata file ground stations fetch over MAVLink FTP, `functions` what the
 //! button and servo-output function codes mean.
 //! Everything is re-exported here, so users name `vehicle::params::X`.
 
@@ -27,6 +28,7 @@ mod defs;
 mod doc;
 mod file;
 mod functions;
+pub mod metadata;
 mod store;
 
 pub use defs::{BTN_DEFAULTS, BUTTONS, ParamDef, ParamType, Use, definitions, index_of};

@@ -34,48 +34,16 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use super::{LinkConfig, LinkEvent, LinkState, LinkStats};
+use super::{LinkConfig, LinkEvent, LinkQuality, LinkState, LinkStats};
 use crate::firmware::codec::{Command, Event, Framing, LineDecoder, encode};
 
-/// The bytes a `rawcmd:` echo lists (`9E,70,69,6E,67,28,30,29,3B,`: each
-/// received byte in hex, each followed by a comma).
-fn raw_frame(hex: &str) -> Option<Vec<u8>> {
-    hex.split(',')
-        .filter(|h| !h.is_empty())
-        .map(|h| u8::from_str_radix(h, 16).ok())
-        .collect()
-}
+mod confirm;
+mod outbox;
+pub(crate) mod quality;
 
-/// Whether the board's `cmd:` echo (`go(1500,1500,1500)`, tokens re-joined
-/// with commas) is of `frame` (`go(1500,1500,1500);`, plain framing).
-fn echo_matches(frame: &[u8], echo: &str) -> bool {
-    let canon = |t: &[u8]| -> Vec<u8> {
-        t.iter()
-            .copied()
-            .filter(|&b| b != b' ' && b != b';')
-            .collect()
-    };
-    canon(frame) == canon(echo.as_bytes())
-}
-
-/// A frame written and not yet echoed.
-#[derive(Debug)]
-struct InFlight {
-    frame: Vec<u8>,
-    at: Instant,
-    thrust: bool,
-}
-
-/// Removes the oldest in-flight frame that `is_it` recognises, and every
-/// older one (frames the board lost: it echoes in order); returns how many
-/// of them were thrust commands. An echo of nothing in flight (another
-/// writer's frame, a garbled one) changes nothing.
-fn acknowledge(in_flight: &mut VecDeque<InFlight>, is_it: impl Fn(&[u8]) -> bool) -> u64 {
-    match in_flight.iter().position(|f| is_it(&f.frame)) {
-        Some(i) => in_flight.drain(..=i).filter(|f| f.thrust).count() as u64,
-        None => 0,
-    }
-}
+use confirm::Confirm;
+use outbox::{Budget, ECHO_OVERDUE, InFlight, Outbox, acknowledge, echo_matches, raw_frame};
+use quality::Quality;
 
 /// How often the figures are published while the device is open (at most;
 /// when the session runs anyway), and while it is closed.
@@ -96,48 +64,20 @@ pub(crate) enum Output {
     Event(LinkEvent),
 }
 
+/// The neutral pulse width.
+const NEUTRAL_US: u16 = crate::vehicle::mixer::NEUTRAL_US;
+
 /// `go()` with every thruster stopped.
 const NEUTRAL_GO: Command = Command::Go {
-    port_us: 1500,
-    vertical_us: 1500,
-    starboard_us: 1500,
+    port_us: NEUTRAL_US,
+    vertical_us: NEUTRAL_US,
+    starboard_us: NEUTRAL_US,
 };
 
-/// Pending writes: control commands in order (a level replacing a pending
-/// one of its kind in place, the keep-alive ping ahead of the levels), plus
-/// the newest thrust command.
-#[derive(Debug, Default)]
-struct Outbox {
-    control: VecDeque<Command>,
-    thrust: Option<Command>,
-}
-
-impl Outbox {
-    fn push(&mut self, cmd: Command, stats: &mut LinkStats) {
-        if cmd.is_thrust() {
-            if self.thrust.replace(cmd).is_some() {
-                stats.thrust_coalesced += 1;
-            }
-        } else if let Some(pending) = cmd
-            .is_level()
-            .then(|| self.control.iter_mut().find(|c| c.name() == cmd.name()))
-            .flatten()
-        {
-            *pending = cmd;
-            stats.settings_coalesced += 1;
-        } else {
-            self.control.push_back(cmd);
-        }
-    }
-    fn pop(&mut self) -> Option<Command> {
-        self.control.pop_front().or_else(|| self.thrust.take())
-    }
-    fn peek(&self) -> Option<Command> {
-        self.control.front().copied().or(self.thrust)
-    }
-    fn is_empty(&self) -> bool {
-        self.control.is_empty() && self.thrust.is_none()
-    }
+/// The board's motor mapping, as the firmware ships it (`Motor.cpp`): what
+/// its `motors:` reports are compared with.
+fn cfg_motors() -> crate::vehicle::mixer::BoardMotors {
+    crate::vehicle::mixer::BoardMotors::default()
 }
 
 /// What lives only as long as one opening of the device.
@@ -189,8 +129,8 @@ impl Connection {
 }
 
 /// How close to the board's dead-man timeout a gap in the pings counts as
-/// one that may have tripped it. Pings go every second while the vehicle is
-/// healthy, so only a vehicle that stood still comes this near.
+/// one that may have tripped it. Pings go every 400 ms while the vehicle
+/// is healthy, so only a vehicle that stood still comes this near.
 const DEAD_MAN_DOUBT: Duration = Duration::from_millis(500);
 
 /// The link's state machine (see the module docs).
@@ -208,6 +148,13 @@ pub(crate) struct Session {
     last_line: Option<Instant>,
     conn: Option<Connection>,
     outputs: VecDeque<Output>,
+    /// Whether the board holds the thrust the vehicle wants.
+    confirm: Confirm,
+    quality: Quality,
+    /// The line quality last reported to the vehicle task.
+    quality_reported: Option<LinkQuality>,
+    /// The next frame's number.
+    next_serial: u64,
 }
 
 impl Session {
@@ -223,6 +170,10 @@ impl Session {
             last_line: None,
             conn: None,
             outputs: VecDeque::new(),
+            confirm: Confirm::new(cfg_motors()),
+            quality: Quality::default(),
+            quality_reported: None,
+            next_serial: 0,
         };
         session.report(LinkState::Down, Some("not opened yet".into()));
         session
@@ -250,6 +201,9 @@ impl Session {
     /// only the newest pending one is written. Taken while the device is
     /// down too, so the newest one is what goes out once the board is back.
     pub(crate) fn command(&mut self, cmd: Command) {
+        if cmd.is_thrust() {
+            self.confirm.wanted(&cmd);
+        }
         self.outbox.push(cmd, &mut self.stats);
     }
 
@@ -297,6 +251,7 @@ impl Session {
         if self.outbox.thrust.take().is_some() {
             self.stats.thrust_coalesced += 1;
         }
+        self.confirm.forget();
         self.report(LinkState::Down, Some(reason));
         self.publish();
         self.retry_at(now)
@@ -318,27 +273,89 @@ impl Session {
                     tracing::info!("board booted; handshaking");
                     conn.handshake_due = Some(now);
                     conn.booted = true;
-                    // Whatever it had not taken is gone with its old state.
+                    // Whatever it had not taken is gone with its old state;
+                    // it holds neutral, and the vehicle decides again: a
+                    // thrust still pending was decided for the board
+                    // before, and is not written to the new one.
                     conn.in_flight.clear();
+                    if self.outbox.thrust.take().is_some() {
+                        self.stats.thrust_coalesced += 1;
+                    }
+                    self.confirm.forget();
                     reboot = conn.handshaken && conn.board_talked;
                 }
                 Event::RawCmd(hex) if self.cfg.framing == Framing::Crc8 => {
                     if let Some(frame) = raw_frame(hex) {
-                        self.stats.thrust_echoed +=
-                            acknowledge(&mut conn.in_flight, |f| *f == frame);
+                        acknowledge(
+                            &mut conn.in_flight,
+                            &mut self.stats,
+                            &mut self.confirm,
+                            |f| *f == frame,
+                        );
+                    }
+                }
+                // After `crc:pass`: the oldest frame's text, its `rawcmd:`
+                // echo damaged on the way back (an identical frame behind
+                // it taken for it holds the same command).
+                Event::CmdEcho(text) if self.cfg.framing == Framing::Crc8 => {
+                    let front = conn.in_flight.front().map(|f| f.frame.clone());
+                    if let Some(front) = front {
+                        acknowledge(
+                            &mut conn.in_flight,
+                            &mut self.stats,
+                            &mut self.confirm,
+                            |f| f == front.as_slice() && echo_matches(&f[1..], text),
+                        );
                     }
                 }
                 Event::CmdEcho(text) if self.cfg.framing == Framing::Plain => {
-                    self.stats.thrust_echoed +=
-                        acknowledge(&mut conn.in_flight, |f| echo_matches(f, text));
+                    let ours = conn.in_flight.iter().any(|f| echo_matches(&f.frame, text));
+                    if ours {
+                        acknowledge(
+                            &mut conn.in_flight,
+                            &mut self.stats,
+                            &mut self.confirm,
+                            |f| echo_matches(f, text),
+                        );
+                    } else if let Some(f) = conn.in_flight.pop_front() {
+                        // No CRC in this framing: the board read the oldest
+                        // frame damaged (and may have taken what it read),
+                        // or the echo was damaged on its way back. Either
+                        // way that frame is not known taken.
+                        self.stats.echoes_missed += 1;
+                        if f.thrust {
+                            self.confirm.lost(f.serial);
+                        }
+                    }
                 }
                 Event::CrcFail { calc, got } => {
                     self.stats.crc_failures_echoed += 1;
                     tracing::debug!(calc, got, "board dropped a frame: CRC mismatch");
+                    // It reads frames in order: the one it rejected is the
+                    // oldest not echoed yet.
+                    if let Some(f) = conn.in_flight.pop_front()
+                        && f.thrust
+                    {
+                        self.confirm.lost(f.serial);
+                    }
                 }
-                Event::Nav(_) | Event::Status(_) => {
+                Event::Nav(_) => {
                     self.last_line = Some(now);
                     conn.board_talked = true;
+                }
+                Event::Status(status) => {
+                    self.last_line = Some(now);
+                    conn.board_talked = true;
+                    if let Some(target) = status.mtarg_us {
+                        self.confirm.target_reported(target);
+                    }
+                    if let Some(esc) = status.motors_us {
+                        self.confirm.outputs_reported(esc);
+                    }
+                }
+                // The dead-man's stop: the board holds neutral now.
+                Event::InternalCommand(cmd) if cmd.starts_with("stop") => {
+                    self.confirm.target_reported([NEUTRAL_US; 3]);
                 }
                 _ => {}
             }
@@ -382,9 +399,7 @@ impl Session {
         // is not ours (a crystal's error, a simulator catching up) and a
         // thrust written to a board that did trip is resumed by the ping
         // that follows.
-        let gap = conn
-            .last_ping
-            .is_some_and(|t| now.duration_since(t) + DEAD_MAN_DOUBT > self.cfg.dead_man_timeout);
+        let gap = Self::gap_since(conn.last_ping, now, self.cfg.dead_man_timeout);
         if conn.handshaken && now >= conn.next_ping && healthy {
             conn.next_ping = now + self.cfg.ping_period;
             if !self.outbox.control.contains(&Command::Ping(0)) {
@@ -408,8 +423,22 @@ impl Session {
                     if self.outbox.thrust.take().is_some() {
                         self.stats.thrust_coalesced += 1;
                     }
+                    // And neutral is what the link confirms (and writes
+                    // again) until the vehicle's next decision: the push
+                    // it wanted before the gap is not renewed.
+                    self.confirm.wanted(&NEUTRAL_GO);
                 }
             }
+        }
+        // A thrust the board did not take (or says it does not hold) goes
+        // again, unless a newer one waits already; a push only while the
+        // keep-alive would go (the vehicle healthy, no gap).
+        if conn.handshaken
+            && let Some(again) = self.confirm.due(now, healthy && !gap)
+            && self.outbox.thrust.is_none()
+        {
+            self.outbox.thrust = Some(again);
+            self.stats.thrust_resent += 1;
         }
         // The board's dead-man has (or may have) stopped it since the last
         // ping; it still obeys `go()`, so no thrust but neutral is written
@@ -420,30 +449,58 @@ impl Session {
         }
         // Echoes that never came: the board lost those frames (or is busy
         // and will not take them soon); they no longer hold the budget.
-        while conn
+        while let Some(f) = conn
             .in_flight
             .front()
             .is_some_and(|f| now.duration_since(f.at) > self.cfg.echo_timeout)
+            .then(|| conn.in_flight.pop_front())
+            .flatten()
         {
-            conn.in_flight.pop_front();
             self.stats.echoes_missed += 1;
+            tracing::debug!(
+                frame = %String::from_utf8_lossy(&f.frame).trim_start_matches(|c: char| !c.is_ascii_graphic()),
+                age_ms = now.duration_since(f.at).as_millis() as u64,
+                "the board never echoed a frame"
+            );
+            if f.thrust {
+                self.confirm.lost(f.serial);
+            }
         }
-        let in_flight: usize = conn.in_flight.iter().map(|f| f.frame.len()).sum();
+        let budget = Budget::at(&conn.in_flight, self.cfg.max_in_flight_bytes, now);
         if conn.line_free_at.saturating_duration_since(now) <= self.cfg.max_ahead
             && conn.handshaken
-            && let Some(cmd) = self.outbox.peek()
+            && let Some(mut cmd) = self.outbox.peek()
         {
             frame.clear();
             encode(&cmd, self.cfg.framing, frame);
-            if in_flight + frame.len() > self.cfg.max_in_flight_bytes {
-                // Waits for the board's echo (or its timeout).
-                return None;
+            if budget.fits(&cmd, frame.len()) {
+                self.outbox.pop();
+            } else {
+                // Waits for the board's echo (or its timeout) — but a
+                // keep-alive behind it goes past (a stop written again
+                // into a budget lost echoes hold must not starve the
+                // board's dead-man).
+                if cmd == Command::Ping(0) || !self.outbox.take_ping() {
+                    return None;
+                }
+                cmd = Command::Ping(0);
+                frame.clear();
+                encode(&cmd, self.cfg.framing, frame);
+                if !budget.fits(&cmd, frame.len()) {
+                    self.outbox.control.push_front(cmd);
+                    return None;
+                }
             }
-            self.outbox.pop();
+            let serial = self.next_serial;
+            self.next_serial += 1;
+            if cmd.is_thrust() {
+                self.confirm.written(&cmd, serial, now);
+            }
             conn.in_flight.push_back(InFlight {
                 frame: frame.clone(),
                 at: now,
                 thrust: cmd.is_thrust(),
+                serial,
             });
             if cmd == Command::Ping(0) {
                 conn.last_ping = Some(now);
@@ -500,7 +557,18 @@ impl Session {
             self.stats.telemetry_age_ms = self
                 .last_line
                 .map(|t| now.duration_since(t).as_millis() as u64);
+            self.stats.drop_rate_cpct = self.quality.drop_rate_cpct(&self.stats, now);
+            let q = LinkQuality {
+                drop_rate_cpct: self.stats.drop_rate_cpct,
+                errors: quality::errors(&self.stats),
+            };
             self.publish();
+            // The vehicle task hears of a change only (an idle, clean line
+            // wakes it for nothing).
+            if self.quality_reported != Some(q) {
+                self.quality_reported = Some(q);
+                self.outputs.push_back(Output::Event(LinkEvent::Quality(q)));
+            }
         }
     }
 
@@ -577,15 +645,31 @@ impl Session {
             wake = wake.min(t);
         }
         if conn.handshaken && !self.outbox.is_empty() {
-            wake = wake.min(
-                conn.line_free_at
-                    .checked_sub(self.cfg.max_ahead)
-                    .unwrap_or(now),
-            );
-            // Waiting for an echo: its timeout is the latest the budget frees.
-            if let Some(f) = conn.in_flight.front() {
-                wake = wake.min(f.at + self.cfg.echo_timeout);
+            // The line's room, when the board's has room for the next frame
+            // too (else only an echo, or its timeout, frees it: waking for
+            // the line would spin).
+            if self.next_fits(conn, now) {
+                wake = wake.min(
+                    conn.line_free_at
+                        .checked_sub(self.cfg.max_ahead)
+                        .unwrap_or(now),
+                );
             }
+            // Waiting for an echo: the oldest frame's overdue time (when a
+            // keep-alive or a stop may go) and its timeout are the latest
+            // the budget frees (just past each: the checks are "later
+            // than").
+            if let Some(f) = conn.in_flight.front() {
+                let overdue = f.at + ECHO_OVERDUE + Duration::from_millis(1);
+                let timeout = f.at + self.cfg.echo_timeout + Duration::from_millis(1);
+                wake = wake.min(if overdue > now { overdue } else { timeout });
+            }
+        }
+        let alive = self.vehicle_healthy(now) && !self.ping_gap(conn, now);
+        if conn.handshaken
+            && let Some(t) = self.confirm.next_due(now, alive)
+        {
+            wake = wake.min(t);
         }
         // While the vehicle is not healthy no ping is due (a due-but-withheld
         // ping must not make the loop spin); its next `healthy` wakes the loop.
@@ -593,6 +677,29 @@ impl Session {
             wake = wake.min(conn.next_ping);
         }
         wake
+    }
+
+    /// Whether the board has room for the next frame [`Session::poll_transmit`]
+    /// would write (the pending keep-alive, if the head must wait).
+    fn next_fits(&self, conn: &Connection, now: Instant) -> bool {
+        let budget = Budget::at(&conn.in_flight, self.cfg.max_in_flight_bytes, now);
+        let fits = |cmd: &Command| {
+            let mut frame = Vec::new();
+            encode(cmd, self.cfg.framing, &mut frame);
+            budget.fits(cmd, frame.len())
+        };
+        self.outbox.peek().is_some_and(|c| fits(&c))
+            || (self.outbox.control.contains(&Command::Ping(0)) && fits(&Command::Ping(0)))
+    }
+
+    /// Whether the pings have had a gap at `now` that may have tripped the
+    /// board's dead-man (within [`DEAD_MAN_DOUBT`] of its timeout).
+    fn gap_since(last_ping: Option<Instant>, now: Instant, dead_man: Duration) -> bool {
+        last_ping.is_some_and(|t| now.duration_since(t) + DEAD_MAN_DOUBT > dead_man)
+    }
+
+    fn ping_gap(&self, conn: &Connection, now: Instant) -> bool {
+        Self::gap_since(conn.last_ping, now, self.cfg.dead_man_timeout)
     }
 
     /// The vehicle task said it is alive within the healthy window.
@@ -645,3 +752,9 @@ impl Session {
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_confirm;
+#[cfg(test)]
+mod tests_hazards;
+#[cfg(test)]
+mod tests_keepalive;

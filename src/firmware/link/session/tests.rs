@@ -7,11 +7,11 @@ use crate::vehicle::mixer::NEUTRAL_US;
 
 /// What a handshake writes, in order: never `rcap()`, which blinds the
 /// genuine board for five seconds.
-const HANDSHAKE: [Command; 2] = [Command::DeadMan(true), Command::Start];
+pub(super) const HANDSHAKE: [Command; 2] = [Command::DeadMan(true), Command::Start];
 
-const NAV: &[u8] = b"hdgd:10.00;deep:1.00;pitc:0.00;roll:0.00;yaw:10.00;fthr:0.00;\r\n";
+pub(super) const NAV: &[u8] = b"hdgd:10.00;deep:1.00;pitc:0.00;roll:0.00;yaw:10.00;fthr:0.00;\r\n";
 
-fn go(us: u16) -> Command {
+pub(super) fn go(us: u16) -> Command {
     Command::Go {
         port_us: us,
         vertical_us: NEUTRAL_US,
@@ -19,7 +19,7 @@ fn go(us: u16) -> Command {
     }
 }
 
-fn opened(t0: Instant) -> Session {
+pub(super) fn opened(t0: Instant) -> Session {
     let mut s = Session::new(LinkConfig::new("/dev/null"));
     s.opened(t0);
     s
@@ -27,7 +27,7 @@ fn opened(t0: Instant) -> Session {
 
 /// A session whose board was handshaken at the boot wait and has talked:
 /// the link is up at the returned time.
-fn up(t0: Instant) -> (Session, Instant) {
+pub(super) fn up(t0: Instant) -> (Session, Instant) {
     let mut s = opened(t0);
     let t = t0 + s.cfg.boot_wait;
     assert_eq!(drain_writes(&mut s, t), HANDSHAKE);
@@ -39,11 +39,11 @@ fn up(t0: Instant) -> (Session, Instant) {
 
 /// Everything written at `now` (pacing permitting), as commands; the
 /// board echoes each frame at once, as the genuine 2015 firmware does.
-fn drain_writes(s: &mut Session, now: Instant) -> Vec<Command> {
+pub(super) fn drain_writes(s: &mut Session, now: Instant) -> Vec<Command> {
     drain(s, now, true)
 }
 
-fn drain(s: &mut Session, now: Instant, echo: bool) -> Vec<Command> {
+pub(super) fn drain(s: &mut Session, now: Instant, echo: bool) -> Vec<Command> {
     let mut frame = Vec::new();
     let mut written = Vec::new();
     while let Some(cmd) = s.poll_transmit(now, &mut frame) {
@@ -57,7 +57,7 @@ fn drain(s: &mut Session, now: Instant, echo: bool) -> Vec<Command> {
 }
 
 /// The genuine board's echo of `frame`: `rawcmd:9E,70,…,3B,;`.
-fn rawcmd(frame: &[u8]) -> Vec<u8> {
+pub(super) fn rawcmd(frame: &[u8]) -> Vec<u8> {
     let mut line = b"rawcmd:".to_vec();
     for b in frame {
         line.extend_from_slice(format!("{b:X},").as_bytes());

@@ -1,13 +1,18 @@
 //! The RTP encoder's own packets, read back on loopback, turned into whole
-//! H.264 access units (Annex B) for the WebRTC viewers, sans-IO.
+//! H.264 access units (Annex B), sans-IO: once, for every consumer in the
+//! vehicle (the WebRTC viewers, the recorder).
 //!
 //! The RTP header is read here; the H.264 payload formats (single NAL
 //! units, STAP-A, FU-A) by str0m's depacketizer. Packets of one picture
 //! share a timestamp and the last carries the marker bit. A lost packet
 //! (a gap in the sequence numbers) spoils its picture and everything after
-//! it up to the next keyframe, so nothing undecodable goes out; a new SSRC
-//! (the encoder restarted) starts over the same way. The 32-bit RTP
-//! timestamps become a 64-bit media clock that never goes back.
+//! it up to the next keyframe, so nothing undecodable goes out: the rest of
+//! the spoiled picture is not taken, up to and including its marker — the
+//! lost packets may have been its first ones (SPS, PPS, a slice), which only
+//! a single gap right after an unfinished picture rules out. A payload that
+//! does not parse spoils its picture the same way. A new SSRC (the encoder
+//! restarted; its first packet starts a picture) starts over. The 32-bit
+//! RTP timestamps become a 64-bit media clock that never goes back.
 //!
 //! Garbage never panics: a packet that is not RTP, or whose payload does
 //! not parse, is counted and dropped.
@@ -15,17 +20,7 @@
 use str0m::format::CodecExtra;
 use str0m::unversioned::{Depacketizer, H264Depacketizer};
 
-/// One picture, ready for str0m's H.264 packetizer.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct AccessUnit {
-    /// NAL units with Annex B start codes.
-    pub data: Vec<u8>,
-    /// The media clock at 90 kHz, monotonic across encoder restarts.
-    pub time_90khz: u64,
-    /// Holds an IDR picture (with x264's `repeat-headers`, SPS and PPS too):
-    /// a viewer may start here.
-    pub keyframe: bool,
-}
+pub use crate::camera::h264::AccessUnit;
 
 /// What went by, for the log and the tests.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -36,7 +31,7 @@ pub struct DepayStats {
     pub bad: u64,
     /// Packets missing from the sequence.
     pub lost: u64,
-    /// Pictures dropped while waiting for a keyframe.
+    /// Pictures dropped: spoiled by a loss, or while waiting for a keyframe.
     pub skipped: u64,
 }
 
@@ -89,6 +84,9 @@ pub struct Depay {
     next_seq: Option<u16>,
     /// Until a keyframe: after a loss, a new stream, or at the start.
     need_keyframe: bool,
+    /// The rest of a spoiled picture is going by: nothing is taken up to
+    /// and including its marker.
+    spoiled: bool,
     /// The media clock: the last RTP timestamp and its extended value.
     clock: Option<(u32, u64)>,
     stats: DepayStats,
@@ -118,16 +116,34 @@ impl Depay {
             return None;
         };
         if self.ssrc != Some(rtp.ssrc) {
-            // The encoder restarted: its sequence starts anywhere.
+            // The encoder restarted: its sequence starts anywhere, with a
+            // picture.
             self.ssrc = Some(rtp.ssrc);
             self.restart();
+            self.spoiled = false;
         } else if let Some(expected) = self.next_seq
             && rtp.seq != expected
         {
-            self.stats.lost += u64::from(rtp.seq.wrapping_sub(expected).min(1000));
+            let missing = rtp.seq.wrapping_sub(expected);
+            self.stats.lost += u64::from(missing.min(1000));
+            // This packet starts a picture only when the one packet lost was
+            // the last of the picture in progress (its marker never came).
+            let starts = missing == 1
+                && self
+                    .partial
+                    .as_ref()
+                    .is_some_and(|p| p.timestamp != rtp.timestamp);
             self.restart();
+            self.spoiled = !starts;
         }
         self.next_seq = Some(rtp.seq.wrapping_add(1));
+        if self.spoiled {
+            if rtp.marker {
+                self.spoiled = false;
+                self.stats.skipped += 1;
+            }
+            return None;
+        }
         let mut done = None;
         if self
             .partial
@@ -149,6 +165,8 @@ impl Depay {
         {
             self.stats.bad += 1;
             self.restart();
+            // The rest of this picture is spoiled (unless this was its end).
+            self.spoiled = !rtp.marker;
             return done;
         }
         if rtp.marker {
