@@ -6,6 +6,10 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
+# A clean checkout builds everything once: incremental compilation's caches
+# would only fill the disk (about 14 GB of the debug build's 22).
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
+
 echo "== toolchain"
 cargo --version
 rustc --version

@@ -423,12 +423,27 @@ fn request_message_answers_every_request() {
         .filter(|(_, m)| matches!(m, MavMessage::AVAILABLE_MODES(_)))
         .count();
     assert!(modes >= 9);
-    for id in [397.0, 395.0] {
-        let out = r.cmd(QGC, MavCmd::MAV_CMD_REQUEST_MESSAGE, &[id]);
-        let a = acks(&out);
-        assert_eq!(a.len(), 1);
-        assert_eq!(a[0].result, MavResult::MAV_RESULT_UNSUPPORTED);
-    }
+    // The component metadata, in MAVLink's form and QGroundControl's older
+    // one: each names the general metadata file over MAVLink FTP.
+    let out = r.cmd(QGC, MavCmd::MAV_CMD_REQUEST_MESSAGE, &[397.0]);
+    assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED);
+    let meta = &msgs!(&out, COMPONENT_METADATA)[0];
+    assert!(
+        meta.uri.to_str().unwrap().starts_with("mftp://"),
+        "{:?}",
+        meta.uri
+    );
+    let out = r.cmd(QGC, MavCmd::MAV_CMD_REQUEST_MESSAGE, &[395.0]);
+    assert_eq!(acks(&out)[0].result, MavResult::MAV_RESULT_ACCEPTED);
+    let info = &msgs!(&out, COMPONENT_INFORMATION)[0];
+    assert!(
+        info.general_metadata_uri
+            .to_str()
+            .unwrap()
+            .starts_with("mftp://"),
+        "{:?}",
+        info.general_metadata_uri
+    );
     let out = r.cmd(QGC, MavCmd::MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, &[1.0]);
     assert!(
         sent(&out)
@@ -529,7 +544,7 @@ fn parameter_list_read_and_set() {
 }
 
 #[test]
-fn missions_are_empty_and_ftp_is_refused_fast() {
+fn missions_are_empty_and_a_path_outside_the_ftp_tree_is_not_found() {
     let mut r = rig();
     for ty in [
         MavMissionType::MAV_MISSION_TYPE_MISSION,
@@ -558,9 +573,13 @@ fn missions_are_empty_and_ftp_is_refused_fast() {
     );
     let a = &msgs!(&out, MISSION_ACK)[0];
     assert_eq!(a.mavtype, MavMissionResult::MAV_MISSION_UNSUPPORTED);
+    // MAVLink FTP answers at once, to the asker alone: a path outside the
+    // tree is not found.
     let mut payload = [0u8; 251];
     payload[0] = 5; // seq 5
     payload[3] = 4; // OpenFileRO
+    payload[4] = 9; // size
+    payload[12..21].copy_from_slice(b"/etc/x.db");
     let out = r.msg(
         QGC,
         MavMessage::FILE_TRANSFER_PROTOCOL(FILE_TRANSFER_PROTOCOL_DATA {
@@ -570,7 +589,17 @@ fn missions_are_empty_and_ftp_is_refused_fast() {
             payload,
         }),
     );
-    let f = &msgs!(&out, FILE_TRANSFER_PROTOCOL)[0];
+    let f = out
+        .iter()
+        .find_map(|o| match o {
+            Output::Bulk {
+                msg: MavMessage::FILE_TRANSFER_PROTOCOL(f),
+                ..
+            } => Some(f),
+            _ => None,
+        })
+        .expect("an FTP reply");
+    assert_eq!(f.target_system, 255);
     assert_eq!(u16::from_le_bytes([f.payload[0], f.payload[1]]), 6);
     assert_eq!(f.payload[3], 129, "NAK");
     assert_eq!(f.payload[5], 4, "req_opcode");

@@ -104,7 +104,8 @@ export async function openPage(browser, url, viewport = { width: 1280, height: 8
   page.on('pageerror', (e) => problems.push(`page error: ${e.message}`));
   page.on('requestfailed', (r) => {
     // The video stream is cut when the page closes; that is no failure.
-    if (!r.url().endsWith('/video.mjpg')) problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`);
+    // A navigation aborts the stream and the page's video-path request.
+    if (!r.url().endsWith('/video.mjpg') && !(r.url().endsWith('/api/video') && r.failure()?.errorText === 'net::ERR_ABORTED')) problems.push(`request failed: ${r.url()} ${r.failure()?.errorText}`);
   });
   page.on('response', (r) => { if (r.status() >= 400) problems.push(`HTTP ${r.status()}: ${r.url()}`); });
   await page.goto(url);

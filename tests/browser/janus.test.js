@@ -14,7 +14,7 @@
 import { test, before, after } from 'node:test';
 import assert from 'node:assert/strict';
 import { spawn, spawnSync } from 'node:child_process';
-import { mkdtempSync, openSync, readFileSync, readdirSync, rmSync, writeFileSync } from 'node:fs';
+import { mkdtempSync, openSync, readFileSync, readdirSync, readlinkSync, rmSync, writeFileSync } from 'node:fs';
 import { createServer } from 'node:http';
 import { createServer as createTcpServer } from 'node:net';
 import { createSocket } from 'node:dgram';
@@ -275,14 +275,46 @@ async function measureDecoding(v, janus, pages, encoder) {
   return m;
 }
 
-/** The vehicle's one encoder, sending to Janus's port and nowhere else. */
+/** The UDP ports bound by the process `pid` (from its descriptors and the
+ * kernel's socket tables). */
+function udpPortsOf(pid) {
+  const inodes = new Set();
+  for (const fd of readdirSync(`/proc/${pid}/fd`)) {
+    try {
+      const m = /^socket:\[(\d+)\]$/.exec(readlinkSync(`/proc/${pid}/fd/${fd}`));
+      if (m) inodes.add(m[1]);
+    } catch {
+      // closed meanwhile
+    }
+  }
+  const ports = new Set();
+  for (const table of ['/proc/net/udp', '/proc/net/udp6']) {
+    for (const line of readFileSync(table, 'utf8').split('\n').slice(1)) {
+      const f = line.trim().split(/\s+/);
+      if (f.length > 9 && inodes.has(f[9])) ports.add(parseInt(f[1].split(':')[1], 16));
+    }
+  }
+  return ports;
+}
+
+/** The vehicle's one encoder, sending to Janus's port and, off the
+ * vehicle, nowhere else: any other output of its `tee` is the vehicle's own
+ * tap (recording, its WebRTC), a loopback port the vehicle itself holds. */
 function oneEncoderTo(v, port) {
   const encoders = children(v.pid, 'ffmpeg');
   assert.equal(encoders.length, 1, `ffmpeg children of neptunus: ${encoders}`);
   const args = readFileSync(`/proc/${encoders[0]}/cmdline`, 'utf8').split('\0');
-  const outputs = args.filter((a) => a.includes('rtp://'));
-  assert.deepEqual(outputs.length, 1, `the encoder's outputs: ${outputs}`);
-  assert.match(outputs[0], new RegExp(`^rtp://127\\.0\\.0\\.1:${port}\\b`));
+  const outputs = args
+    .filter((a) => a.includes('rtp://'))
+    .flatMap((a) => a.split('|'))
+    .map((o) => o.replace(/^\[[^\]]*\]/, ''));
+  const toJanus = outputs.filter((o) => new RegExp(`^rtp://127\\.0\\.0\\.1:${port}\\b`).test(o));
+  assert.equal(toJanus.length, 1, `the encoder's outputs: ${outputs}`);
+  const own = udpPortsOf(v.pid);
+  for (const o of outputs.filter((x) => !toJanus.includes(x))) {
+    const m = /^rtp:\/\/(127\.0\.0\.1|\[::1\]):(\d+)\b/.exec(o);
+    assert.ok(m && own.has(Number(m[2])), `an output that is neither Janus nor the vehicle's own tap: ${o} (the vehicle's UDP ports: ${[...own]})`);
+  }
   return encoders[0];
 }
 

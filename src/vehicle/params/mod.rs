@@ -29,13 +29,15 @@ mod doc;
 mod file;
 mod functions;
 pub mod metadata;
+mod outputs;
 mod store;
 
-pub use defs::{BTN_DEFAULTS, BUTTONS, ParamDef, ParamType, Use, definitions, index_of};
+pub use defs::{ParamDef, ParamType, Use, definitions, index_of};
 pub use doc::markdown_table;
 pub use file::{ParamFile, StoreError};
 pub use functions::{
     BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, BTN_FUNCTION_LASER_TOGGLE, ButtonFunction,
     ServoFunction, is_button_function,
 };
+pub use outputs::{BTN_DEFAULTS, BUTTONS};
 pub use store::{ControlClaim, FailsafeAction, ParamError, ParamStore, PidGains};

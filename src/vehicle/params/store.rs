@@ -5,10 +5,11 @@
 //! Pure: it never touches a file, a socket or a clock (`params.toml` is
 //! [`super::file`]'s).
 
-use super::defs::{BTN_NAMES, BUTTONS, ParamDef, ParamType, definitions, index_of, wire_value};
+use super::defs::{ParamDef, ParamType, definitions, index_of, wire_value};
 use super::functions::{
     BTN_FUNCTION_ARM_TOGGLE, BTN_FUNCTION_DISARM, ServoFunction, is_button_function,
 };
+use super::outputs::{BTN_NAMES, BUTTONS};
 use crate::vehicle::mixer::{BoardMotors, MixerConfig, NEUTRAL_US};
 
 /// Rejected parameter writes.
