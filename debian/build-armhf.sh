@@ -10,6 +10,7 @@
 #
 #   bash debian/build-armhf.sh
 #   -> target/armv7-unknown-linux-gnueabihf/debian/neptunus_<version>_armhf.deb
+#   bash debian/build-armhf.sh --toolchain-only   (installs, builds nothing)
 #
 # The profile `rov` (Cargo.toml) is the release profile without link-time
 # optimisation. No npm: the page's plotting library comes from
@@ -34,6 +35,9 @@ fi
 CARGO_DEB_VERSION=3.8.0
 if ! cargo deb --version 2>/dev/null | grep -q "$CARGO_DEB_VERSION"; then
     cargo install cargo-deb --version "$CARGO_DEB_VERSION" --locked
+fi
+if [ "${1:-}" = --toolchain-only ]; then
+    exit 0
 fi
 
 # Debian's rustc and cargo, whatever a rustup toolchain earlier in PATH is;

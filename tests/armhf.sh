@@ -13,6 +13,11 @@
 #   back to neutral, the board's dead-man stop.
 # Nothing here skips: a missing binary, qemu or firmware fails the step.
 # Prints its own `armhf: N passed, N failed` line.
+#
+#   bash tests/armhf.sh          the build, then the checks
+#   bash tests/armhf.sh build    only the build (the test command runs it in
+#                                the background while its other tests run)
+#   bash tests/armhf.sh check    only the checks, on the build already made
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -29,23 +34,40 @@ finish() {
 target=armv7-unknown-linux-gnueabihf
 bin="target/$target/rov/neptunus"
 started=$(date +%s)
+
+phase="${1:-all}"
+case "$phase" in
+all | build | check) ;;
+*)
+    echo "usage: bash tests/armhf.sh [build|check]" >&2
+    exit 2
+    ;;
+esac
+if [ "$phase" != check ]; then
+    echo "== armhf: the package (debian/build-armhf.sh, no npm)"
+    uplot="$PWD/web/node_modules/uplot/dist"
+    if [ ! -f "$uplot/uPlot.esm.js" ]; then
+        # The development build of this run installs it (build.rs, npm ci).
+        cargo build --locked
+    fi
+    if ! NEPTUNUS_UPLOT_DIR="$uplot" NPM=/bin/false bash debian/build-armhf.sh; then
+        bad "the armhf build"
+        finish
+        exit 1
+    fi
+    echo "armhf: built in $(($(date +%s) - started)) s"
+    if [ "$phase" = build ]; then
+        exit 0
+    fi
+fi
 if ! command -v file >/dev/null 2>&1; then
     as_root apt-get update -q && as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q file
 fi
-
-echo "== armhf: the package (debian/build-armhf.sh, no npm)"
-uplot="$PWD/web/node_modules/uplot/dist"
-if [ ! -f "$uplot/uPlot.esm.js" ]; then
-    # The development build of this run installs it (build.rs, npm ci).
-    cargo build --locked
-fi
-if ! NEPTUNUS_UPLOT_DIR="$uplot" NPM=/bin/false bash debian/build-armhf.sh; then
-    bad "the armhf build"
+if ! deb=$(ls "target/$target/debian/"neptunus_*_armhf.deb 2>/dev/null) || [ ! -x "$bin" ]; then
+    bad "no armhf build to check (target/$target/debian/, $bin): bash tests/armhf.sh build"
     finish
     exit 1
 fi
-echo "armhf: built in $(($(date +%s) - started)) s"
-deb=$(ls "target/$target/debian/"neptunus_*_armhf.deb)
 echo "$deb: $(stat -c %s "$deb") bytes (the binary: $(stat -c %s "$bin") bytes)"
 info=$(dpkg-deb -I "$deb")
 if grep -q '^ Architecture: armhf$' <<<"$info"; then ok "control data: Architecture armhf"; else bad "control data does not say armhf:"$'\n'"$info"; fi

@@ -10,48 +10,57 @@ cd "$(dirname "$0")/.."
 # would only fill the disk (about 14 GB of the debug build's 22).
 export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 
-echo "== toolchain"
+# Each stage's header says how long the run has taken so far.
+stage() { printf '== %s  [%d min %02d s]\n' "$1" $((SECONDS / 60)) $((SECONDS % 60)); }
+
+stage "toolchain"
 cargo --version
 rustc --version
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
-echo "== test tools"
-# The camera tests run a real ffmpeg (tests/camera.rs).
-if ! command -v ffmpeg >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q ffmpeg
-fi
-ffmpeg -hide_banner -version | sed -n 1p
-# The RTP video tests receive with QGroundControl's own GStreamer pipeline
-# (tests/video_rtp.rs): udpsrc, rtph264depay (good), h264parse (bad),
-# avdec_h264 (libav).
-if ! gst-inspect-1.0 avdec_h264 >/dev/null 2>&1 || ! gst-inspect-1.0 h264parse >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
-        gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav
-fi
-gst-launch-1.0 --version | sed -n 1p
-# The clock test runs the vehicle under libfaketime (tests/clock.rs).
-if ! command -v faketime >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q faketime
-fi
-
-# The genuine OpenROV firmware in the loop (feature hil, tests/genuine_*.rs):
-# avr-gcc and the Arduino AVR core build the firmware; simavr (built from
-# the simavr-ffi crate's sources) needs libclang for its bindings, libelf
-# and zstd to load ELF files.
-hil_packages="gcc-avr avr-libc arduino-core-avr libclang-dev libelf-dev libzstd-dev pkg-config"
-hil_missing=""
-for p in $hil_packages; do
-    dpkg -s "$p" >/dev/null 2>&1 || hil_missing="$hil_missing $p"
+stage "test tools (every package the stages below use, installed here once: two of them run side by side)"
+apt_packages=(
+    # The camera tests run a real ffmpeg (tests/camera.rs).
+    ffmpeg
+    # The RTP video tests receive with QGroundControl's own GStreamer
+    # pipeline (tests/video_rtp.rs): udpsrc, rtph264depay (good), h264parse
+    # (bad), avdec_h264 (libav).
+    gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav
+    # The clock test runs the vehicle under libfaketime (tests/clock.rs).
+    faketime
+    # The genuine OpenROV firmware in the loop (feature hil,
+    # tests/genuine_*.rs): avr-gcc and the Arduino AVR core build the
+    # firmware; simavr (built from the simavr-ffi crate's sources) needs
+    # libclang for its bindings, libelf and zstd to load ELF files.
+    gcc-avr avr-libc arduino-core-avr libclang-dev libelf-dev libzstd-dev pkg-config
+    # The step-response plots (neptunus sim-report) label axes with a system font.
+    fonts-dejavu-core
+    # libFuzzer (built by libfuzzer-sys) needs a C++ compiler.
+    g++
+    # The interoperability tests' venv; MAVProxy pulls in opencv-python,
+    # which needs libGL and glib at import time.
+    python3-venv libgl1 libglib2.0-0
+    # Debian's Chromium, never a browser a tool downloads; the many-viewers
+    # recipe (tests/browser/janus.test.js) runs Debian's Janus with a
+    # configuration of its own (the package's service is not used).
+    chromium nodejs npm janus
+    # The package checks (tests/package.sh, tests/armhf.sh).
+    dpkg systemd file
+)
+apt_missing=()
+for p in "${apt_packages[@]}"; do
+    dpkg -s "$p" >/dev/null 2>&1 || apt_missing+=("$p")
 done
-if [ -n "$hil_missing" ]; then
+if [ "${#apt_missing[@]}" -gt 0 ]; then
     as_root apt-get update -q
-    # shellcheck disable=SC2086 # one word per package
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $hil_missing
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${apt_missing[@]}"
 fi
+# The BeagleBone's toolchain (Debian's Rust with the standard library's
+# sources, the cross gcc) and cargo-deb, as the guide's build script installs them.
+bash debian/build-armhf.sh --toolchain-only
+ffmpeg -hide_banner -version | sed -n 1p
+gst-launch-1.0 --version | sed -n 1p
 avr-gcc --version | sed -n 1p
 # The firmware snapshots the HIL tests build: ../shared/openrov-firmware
 # beside the repository unless OPENROV_FIRMWARE_DIR says otherwise.
@@ -62,7 +71,7 @@ if [ ! -f "$firmware_dir/30.0.2/OpenROV/OpenROV.ino" ] || [ ! -f "$firmware_dir/
 fi
 export OPENROV_FIRMWARE_DIR="$firmware_dir"
 
-echo "== formatting and lints"
+stage "formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked --features hil -- -D warnings
 # The vehicle as packaged (without the simulator of the genuine firmware).
@@ -70,7 +79,23 @@ cargo clippy --all-targets --locked -- -D warnings
 # The API docs build without a warning (broken links included).
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --features hil
 
-echo "== the user guide (mdBook: docs/guide -> target/guide)"
+stage "the packages' builds, started in the background at the lowest priority"
+# The BeagleBone's armhf build (tests/armhf.sh build: Debian's Rust, the
+# standard library rebuilt, the cross linker) and this machine's release
+# build for its package (cargo deb) need no test to have run. At nice 19
+# they take the cores the real-time tests below leave idle; their checks
+# run at the end, on what they built. The page's plotting library they
+# embed is in web/node_modules since the lints above ran build.rs.
+rm -f target/armhf-build.rc target/release-build.rc
+(
+    nice -n 19 bash tests/armhf.sh build >target/armhf-build.log 2>&1
+    echo $? >target/armhf-build.rc
+    nice -n 19 cargo deb --locked >target/release-build.log 2>&1
+    echo $? >target/release-build.rc
+) &
+package_builds=$!
+
+stage "the user guide (mdBook: docs/guide -> target/guide)"
 # Debian has no mdbook package: cargo installs the pinned version once. Only
 # the search feature: the guide is built here, never served or watched.
 mdbook_version=0.4.52
@@ -82,32 +107,19 @@ mdbook --version
 # tests/docs_links.rs; a chapter that fails to render fails the run here.
 mdbook build docs/guide --dest-dir ../../target/guide
 
-# The step-response plots (neptunus sim-report, tested) label axes with a system font.
-if ! find /usr/share/fonts -name '*.ttf' -print -quit 2>/dev/null | grep -q .; then
-    as_root apt-get update -q && as_root apt-get install -y -q fonts-dejavu-core
-fi
-
-echo "== tests"
+stage "tests"
 status=0
 cargo test --all-targets --locked --features hil --no-fail-fast 2>&1 | tee target/test-output.txt || status=1
 
-echo "== fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
-# libFuzzer (built by libfuzzer-sys) needs a C++ compiler.
-if ! command -v c++ >/dev/null 2>&1; then
-    as_root apt-get update -q && as_root apt-get install -y -q g++
-fi
+stage "fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
 # Its own build in fuzz/target; FUZZ_SECONDS per target, two at a time. A
 # crash fails the run with the input's path and how to run it again.
 FUZZ_SECONDS="${FUZZ_SECONDS:-20}" bash fuzz/run.sh || status=1
 
-echo "== interoperability tests (real ground-station clients against the binary)"
+stage "interoperability tests (real ground-station clients against the binary)"
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
 venv=target/interop-venv
 reqs=tests/interop/requirements.txt
-if ! python3 -c 'import ensurepip, venv' 2>/dev/null; then
-    # Debian/Ubuntu split venv/ensurepip out of the interpreter package.
-    as_root apt-get update -q && as_root apt-get install -y -q python3-venv
-fi
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
@@ -115,30 +127,13 @@ if ! cmp -s "$reqs" "$venv/requirements.installed"; then
     "$venv/bin/python" -m pip install -q --disable-pip-version-check -r "$reqs"
     cp "$reqs" "$venv/requirements.installed"
 fi
-# MAVProxy pulls in opencv-python, which needs libGL and glib at import time.
-if ! "$venv/bin/python" -c 'import cv2' 2>/dev/null; then
-    as_root apt-get update -q && as_root apt-get install -y -q libgl1 libglib2.0-0
-fi
 cargo build --locked
 test -x target/debug/neptunus
 rm -f target/interop-junit.xml
 NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest tests/interop -q \
     -p no:cacheprovider --timeout 300 --junitxml target/interop-junit.xml || status=1
 
-echo "== browser tests (Debian's Chromium, driven by playwright-core)"
-# Debian's Chromium, never a browser a tool downloads; npm ci from the lock.
-if [ ! -x /usr/bin/chromium ]; then
-    as_root apt-get update -q && as_root apt-get install -y -q chromium
-fi
-if ! command -v npm >/dev/null 2>&1; then
-    as_root apt-get update -q && as_root apt-get install -y -q nodejs npm
-fi
-# The many-viewers recipe (tests/browser/janus.test.js) runs Debian's Janus
-# with a configuration of its own; the package's service is not used.
-if ! dpkg -s janus >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q janus
-fi
+stage "browser tests (Debian's Chromium, driven by playwright-core)"
 dpkg-query -W -f 'janus ${Version}\n' janus
 (cd tests/browser && npm ci --no-audit --no-fund --ignore-scripts) || status=1
 rm -f target/browser-junit.xml
@@ -147,7 +142,7 @@ rm -f target/browser-junit.xml
     --test-reporter=junit --test-reporter-destination=../../target/browser-junit.xml \
     ./*.test.js) || status=1
 
-echo "== interoperability tests with the genuine firmware in the loop (neptunus --hil)"
+stage "interoperability tests with the genuine firmware in the loop (neptunus --hil)"
 # The same clients against `--hil`: QGroundControl's connect sequence,
 # pymavlink's everyday calls, depth hold and the mavlink2rest client
 # (Cockpit's API), with the 30.0.2 firmware in simavr reading the
@@ -173,17 +168,29 @@ else
     status=1
 fi
 
-echo "== Debian package (built for this machine and checked: tests/package.sh)"
+stage "the packages' builds (waiting for the background)"
+wait "$package_builds" || true
+for b in armhf release; do
+    echo "-- $b build: exit $(cat "target/$b-build.rc" 2>/dev/null || echo '?'); its log's end:"
+    tail -n 5 "target/$b-build.log" 2>/dev/null || true
+done
+
+stage "Debian package (built for this machine and checked: tests/package.sh)"
 pk_pass=0
 pk_fail=0
 if bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
 
-echo "== the BeagleBone's vehicle (armhf: built as the guide says, packaged, run under qemu-arm: tests/armhf.sh)"
+stage "the BeagleBone's vehicle (armhf: built as the guide says, packaged, run under qemu-arm: tests/armhf.sh)"
 # Its build, its package's checks, --sim and the genuine firmware under
 # qemu-arm -cpu cortex-a8; it counts as one test here and prints its own.
 ah_pass=0
 ah_fail=0
-if bash tests/armhf.sh; then ah_pass=1; else ah_fail=1; status=1; fi
+if [ "$(cat target/armhf-build.rc 2>/dev/null)" != 0 ]; then
+    echo "the armhf build failed: target/armhf-build.log" >&2
+    tail -n 40 target/armhf-build.log >&2 || true
+    ah_fail=1
+    status=1
+elif bash tests/armhf.sh check; then ah_pass=1; else ah_fail=1; status=1; fi
 
 # Summarise as one plain line for CI: cargo prints one result line per test
 # binary; pytest's and node's counts come from their JUnit XML.
