@@ -44,7 +44,7 @@ apt_packages=(
     # Debian's Chromium, never a browser a tool downloads; the many-viewers
     # recipe (tests/browser/janus.test.js) runs Debian's Janus with a
     # configuration of its own (the package's service is not used).
-    chromium nodejs npm janus
+    chromium janus
     # The package checks (tests/package.sh, tests/armhf.sh).
     dpkg systemd file
 )
@@ -52,6 +52,9 @@ apt_missing=()
 for p in "${apt_packages[@]}"; do
     dpkg -s "$p" >/dev/null 2>&1 || apt_missing+=("$p")
 done
+# Node.js and npm (the browser tests' runner) by command: a machine may have
+# them from NodeSource's nodejs, whose npm is no package of its own.
+command -v npm >/dev/null 2>&1 || apt_missing+=(nodejs npm)
 if [ "${#apt_missing[@]}" -gt 0 ]; then
     as_root apt-get update -q
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${apt_missing[@]}"
