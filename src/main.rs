@@ -60,7 +60,7 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
             hmi(&command, &settings)?;
         }
         Some(CliCommand::EmulateBoard(args)) => {
-            init_logging(None)?;
+            let _log = init_logging(None)?;
             let opts = config::resolve_emulator(&args, cli.run.config.as_deref())?;
             runtime()?.block_on(neptunus::app::emulate_board(
                 opts,
@@ -75,7 +75,7 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
         }
         #[cfg(feature = "hil")]
         Some(CliCommand::GenuineBoard(args)) => {
-            init_logging(None)?;
+            let _log = init_logging(None)?;
             genuine_board(&args, &cli.run)?;
         }
         None if cli.run.check => {
@@ -88,7 +88,7 @@ fn real_main(cli: Cli) -> anyhow::Result<std::process::ExitCode> {
             // it never keeps the vehicle from starting.
             // init_logging falls back to stderr alone when the log file cannot be opened.
             let _ = std::fs::create_dir_all(&settings.data_dir);
-            init_logging(Some(&settings.data_dir))?;
+            let _log = init_logging(Some(&settings.data_dir))?;
             tracing::info!(data_dir = %settings.data_dir.display(), "neptunus {} starting", env!("CARGO_PKG_VERSION"));
             raise_open_file_limit();
             // The vehicle's loop runs as a task, not as the future the
@@ -457,12 +457,22 @@ fn profiles_check(dir: Option<&std::path::Path>) -> anyhow::Result<()> {
 /// directory, rotated by size (10 MiB × 5 files). A log file that cannot be
 /// opened (read-only or full data directory) is said loudly on stderr and
 /// the vehicle runs on, logging to stderr only.
-fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
+///
+/// Each destination is written by a thread of its own: the vehicle's loop
+/// only queues a line. A destination that stops taking lines (a disk the
+/// kernel is flushing, a stalled journal, a terminal nobody reads) holds up
+/// to [`LOG_QUEUE_LINES`] of them, then drops and counts the rest — it never
+/// stops the loop that feeds the board, which would disarm the vehicle.
+/// Keep the returned [`LogWriters`] until the program ends: dropping it
+/// writes out what is queued.
+fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<LogWriters> {
     use neptunus::logfile::{DEFAULT_FILES, DEFAULT_MAX_BYTES, RotatingFile};
     use tracing_subscriber::prelude::*;
+    let mut writers = LogWriters::default();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
-    let stderr = tracing_subscriber::fmt::layer().with_writer(std::io::stderr);
+    let stderr =
+        tracing_subscriber::fmt::layer().with_writer(writers.add("stderr", std::io::stderr()));
     let mut unopened = None;
     let file = match data_dir {
         Some(dir) => {
@@ -471,7 +481,7 @@ fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
                 Ok(f) => Some(
                     tracing_subscriber::fmt::layer()
                         .with_ansi(false)
-                        .with_writer(std::sync::Mutex::new(f)),
+                        .with_writer(writers.add("neptunus.log", f)),
                 ),
                 Err(e) => {
                     unopened = Some((path, e));
@@ -493,7 +503,50 @@ fn init_logging(data_dir: Option<&std::path::Path>) -> anyhow::Result<()> {
              writable (or free space on it), or pass another --data-dir"
         );
     }
-    Ok(())
+    Ok(writers)
+}
+
+/// How many lines a log destination that has stopped taking them holds
+/// before it drops (about 2 MB of the vehicle's lines).
+const LOG_QUEUE_LINES: usize = 10_000;
+
+/// The log's writer threads. Dropped at the end of the program: it says how
+/// many lines were dropped, if any, then writes out what is queued (waiting
+/// at most a second for a destination that is stuck).
+#[derive(Default)]
+struct LogWriters {
+    guards: Vec<tracing_appender::non_blocking::WorkerGuard>,
+    dropped: Vec<(&'static str, tracing_appender::non_blocking::ErrorCounter)>,
+}
+
+impl LogWriters {
+    fn add(
+        &mut self,
+        name: &'static str,
+        to: impl std::io::Write + Send + 'static,
+    ) -> tracing_appender::non_blocking::NonBlocking {
+        let (writer, guard) = tracing_appender::non_blocking::NonBlockingBuilder::default()
+            .lossy(true)
+            .buffered_lines_limit(LOG_QUEUE_LINES)
+            .thread_name("neptunus-log")
+            .finish(to);
+        self.dropped.push((name, writer.error_counter()));
+        self.guards.push(guard);
+        writer
+    }
+}
+
+impl Drop for LogWriters {
+    fn drop(&mut self) {
+        for (name, counter) in &self.dropped {
+            let n = counter.dropped_lines();
+            if n > 0 {
+                tracing::warn!(
+                    "{n} log lines were dropped: {name} stopped taking them for a while"
+                );
+            }
+        }
+    }
 }
 
 /// Raises the soft open-file limit to the hard one: every ground station,

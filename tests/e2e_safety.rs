@@ -203,3 +203,77 @@ fn a_silent_owner_gcs_disarms_the_vehicle_and_the_board_goes_neutral() {
         (neutral_go_at.unwrap() - last_life).as_secs_f64()
     );
 }
+
+/// A pipe whose buffer is already full: whoever writes to its write end
+/// blocks until someone reads — a stderr that a stalled journal, or a
+/// terminal nobody scrolls, has stopped taking.
+fn full_pipe() -> (std::os::fd::OwnedFd, std::os::fd::OwnedFd) {
+    use nix::fcntl::{FcntlArg, OFlag, fcntl};
+    let (read, write) = nix::unistd::pipe().unwrap();
+    let flags = OFlag::from_bits_truncate(fcntl(&write, FcntlArg::F_GETFL).unwrap());
+    fcntl(&write, FcntlArg::F_SETFL(flags | OFlag::O_NONBLOCK)).unwrap();
+    let chunk = [b'#'; 4096];
+    let mut filled = 0;
+    loop {
+        match nix::unistd::write(&write, &chunk) {
+            Ok(n) => filled += n,
+            Err(nix::errno::Errno::EAGAIN) => break,
+            Err(e) => panic!("filling the pipe: {e}"),
+        }
+    }
+    assert!(filled > 0, "the pipe took nothing");
+    // The child must block on it, not be told EAGAIN: the flag belongs to
+    // the open pipe, which the child shares.
+    fcntl(&write, FcntlArg::F_SETFL(flags)).unwrap();
+    (read, write)
+}
+
+#[test]
+fn a_log_nobody_reads_never_stops_the_vehicle() {
+    // Its stderr full from the first line, and logging at info: every line
+    // the vehicle logs would block a writer that writes in place.
+    let (read, write) = full_pipe();
+    let mut rig = Rig::start_with(
+        bin(),
+        "",
+        &[("RUST_LOG", "info")],
+        Some(std::process::Stdio::from(write)),
+    )
+    .unwrap();
+    // Up, armed (logged) and driving: the board's motors leave neutral.
+    rig.arm_and_drive(FORWARD).unwrap();
+    let Rig {
+        vehicle,
+        gcs,
+        board,
+        ..
+    } = &mut rig;
+    let control = board.control();
+    // Disarmed (logged again) by command, the board goes neutral.
+    let disarm = gcs
+        .command(vehicle, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, 0.0)
+        .unwrap();
+    assert_eq!(disarm, MavResult::MAV_RESULT_ACCEPTED);
+    let neutral = gcs
+        .run_until(vehicle, Traffic::Drive(FORWARD), GENEROUS, |_| {
+            control.snapshot().motors_us == NEUTRAL_US
+        })
+        .unwrap();
+    assert!(
+        neutral,
+        "disarmed, the board still drives: {:?}",
+        control.snapshot()
+    );
+    vehicle.check_running().unwrap();
+    // Reading the pipe now lets the lines through: they were held, not lost.
+    let mut text = Vec::new();
+    let mut pipe = std::fs::File::from(read);
+    vehicle.signal(Signal::SIGTERM).unwrap();
+    std::io::Read::read_to_end(&mut pipe, &mut text).unwrap();
+    let text = String::from_utf8_lossy(&text);
+    assert!(
+        text.contains("starting") && text.contains("armed"),
+        "the held log lines did not come out: {}",
+        &text[text.len().saturating_sub(2000)..]
+    );
+}

@@ -77,28 +77,27 @@ fn a_picture_that_lost_its_first_packet_does_not_come_out() {
     let p_slice = [0x41, 0x9a, 0x02, 0x04];
     let idr = [0x65, 0x88, 0x84, 0x21];
     let mut d = Depay::new();
-    assert!(d.push(&rtp(10, 0, true, &idr)).is_some());
+    assert_eq!(d.push(&rtp(10, 0, true, &idr)).len(), 1);
     // Picture 3000: a slice (seq 11, lost), then the IDR slice with the marker.
-    assert_eq!(
-        d.push(&rtp(12, 3000, true, &idr)),
-        None,
+    assert!(
+        d.push(&rtp(12, 3000, true, &idr)).is_empty(),
         "a truncated keyframe came out"
     );
     assert_eq!(d.stats().lost, 1);
     // The next whole keyframe comes out.
-    let next = d.push(&rtp(13, 6000, true, &idr)).unwrap();
+    let next = d.push(&rtp(13, 6000, true, &idr)).pop().unwrap();
     assert!(next.keyframe);
     assert_eq!(next.data, [&[0, 0, 0, 1][..], &idr].concat());
     // The same when the SPS went missing before an IDR in FU-A fragments.
     let sps = [0x67, 0x42, 0xc0, 0x1e];
-    assert_eq!(d.push(&rtp(14, 9000, false, &sps)), None);
+    assert!(d.push(&rtp(14, 9000, false, &sps)).is_empty());
     // 15 (the first fragment) is lost.
-    assert_eq!(d.push(&rtp(16, 9000, true, &[0x7c, 0x45, 0x21])), None);
+    assert!(d.push(&rtp(16, 9000, true, &[0x7c, 0x45, 0x21])).is_empty());
     assert_eq!(d.stats().lost, 2);
     // A P picture that lost its first slice, after which all is well again.
-    assert!(d.push(&rtp(17, 12000, true, &idr)).is_some());
-    assert_eq!(d.push(&rtp(19, 15000, true, &p_slice)), None);
-    assert!(d.push(&rtp(20, 18000, true, &idr)).is_some());
+    assert_eq!(d.push(&rtp(17, 12000, true, &idr)).len(), 1);
+    assert!(d.push(&rtp(19, 15000, true, &p_slice)).is_empty());
+    assert_eq!(d.push(&rtp(20, 18000, true, &idr)).len(), 1);
 }
 
 /// The other side of the same rule: a single lost packet that was the last
@@ -108,10 +107,10 @@ fn a_picture_that_lost_its_first_packet_does_not_come_out() {
 fn a_picture_after_a_lost_last_packet_comes_out() {
     let idr = [0x65, 0x88, 0x84, 0x21];
     let mut d = Depay::new();
-    assert!(d.push(&rtp(100, 0, true, &idr)).is_some());
-    assert_eq!(d.push(&rtp(101, 3000, false, &[0x41, 0x9a])), None);
+    assert_eq!(d.push(&rtp(100, 0, true, &idr)).len(), 1);
+    assert!(d.push(&rtp(101, 3000, false, &[0x41, 0x9a])).is_empty());
     // 102, the marker of picture 3000, is lost; 103 starts picture 6000.
-    let k = d.push(&rtp(103, 6000, true, &idr)).unwrap();
+    let k = d.push(&rtp(103, 6000, true, &idr)).pop().unwrap();
     assert!(k.keyframe);
     assert_eq!(d.stats().lost, 1);
 }

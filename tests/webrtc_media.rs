@@ -80,31 +80,38 @@ fn stap_a(nals: &[&[u8]]) -> Vec<u8> {
     p
 }
 
+/// The one picture a packet ended, if any (these streams always end a
+/// picture with its marker: never two at once).
+fn one(mut units: Vec<AccessUnit>) -> Option<AccessUnit> {
+    assert!(units.len() <= 1, "{} pictures from one packet", units.len());
+    units.pop()
+}
+
 #[test]
 fn pictures_come_back_whole_and_start_at_a_keyframe() {
     let mut d = Depay::new();
     let ssrc = 7;
     // A P picture before any keyframe cannot be decoded: skipped.
-    assert_eq!(d.push(&rtp(10, 1000, true, ssrc, &p_slice(50))), None);
+    assert_eq!(one(d.push(&rtp(10, 1000, true, ssrc, &p_slice(50)))), None);
     assert_eq!(d.stats().skipped, 1);
     // SPS and PPS in a STAP-A, then the IDR in FU-A fragments.
     let big = idr(3000);
     assert_eq!(
-        d.push(&rtp(11, 4000, false, ssrc, &stap_a(&[SPS, PPS]))),
+        one(d.push(&rtp(11, 4000, false, ssrc, &stap_a(&[SPS, PPS])))),
         None
     );
     let frags = fu_a(&big, 1100);
     assert_eq!(frags.len(), 3);
     let mut out = None;
     for (i, f) in frags.iter().enumerate() {
-        out = d.push(&rtp(12 + i as u16, 4000, i == frags.len() - 1, ssrc, f));
+        out = one(d.push(&rtp(12 + i as u16, 4000, i == frags.len() - 1, ssrc, f)));
         assert_eq!(out.is_some(), i == frags.len() - 1);
     }
     let key = out.unwrap();
     assert!(key.keyframe);
     assert_eq!(key.data, annex_b(&[SPS, PPS, &big]));
     // The next picture 3000 ticks later (30 fps at 90 kHz).
-    let p = d.push(&rtp(15, 7000, true, ssrc, &p_slice(80))).unwrap();
+    let p = one(d.push(&rtp(15, 7000, true, ssrc, &p_slice(80)))).unwrap();
     assert_eq!(
         p,
         AccessUnit {
@@ -121,33 +128,31 @@ fn pictures_come_back_whole_and_start_at_a_keyframe() {
 fn a_lost_packet_spoils_everything_up_to_the_next_keyframe() {
     let mut d = Depay::new();
     let ssrc = 9;
-    assert!(d.push(&rtp(100, 0, true, ssrc, &idr(100))).is_some());
+    assert!(one(d.push(&rtp(100, 0, true, ssrc, &idr(100)))).is_some());
     // Packet 101 (the first half of a picture) never comes.
-    assert_eq!(d.push(&rtp(102, 3000, true, ssrc, &p_slice(40))), None);
-    assert_eq!(d.push(&rtp(103, 6000, true, ssrc, &p_slice(40))), None);
+    assert_eq!(one(d.push(&rtp(102, 3000, true, ssrc, &p_slice(40)))), None);
+    assert_eq!(one(d.push(&rtp(103, 6000, true, ssrc, &p_slice(40)))), None);
     assert_eq!(d.stats().lost, 1);
-    let k = d.push(&rtp(104, 9000, true, ssrc, &idr(100))).unwrap();
+    let k = one(d.push(&rtp(104, 9000, true, ssrc, &idr(100)))).unwrap();
     assert!(k.keyframe);
-    assert!(d.push(&rtp(105, 12000, true, ssrc, &p_slice(40))).is_some());
+    assert!(one(d.push(&rtp(105, 12000, true, ssrc, &p_slice(40)))).is_some());
 }
 
 #[test]
 fn a_restarted_encoder_starts_over_and_the_clock_never_goes_back() {
     let mut d = Depay::new();
-    let a = d
-        .push(&rtp(65535, u32::MAX - 1000, true, 1, &idr(10)))
-        .unwrap();
+    let a = one(d.push(&rtp(65535, u32::MAX - 1000, true, 1, &idr(10)))).unwrap();
     // Sequence and timestamp wrap around: still one stream.
-    let b = d.push(&rtp(0, 2000, true, 1, &p_slice(10))).unwrap();
+    let b = one(d.push(&rtp(0, 2000, true, 1, &p_slice(10)))).unwrap();
     assert_eq!(b.time_90khz, a.time_90khz + 3001);
     // The encoder restarts: a new SSRC, its own sequence and clock.
-    assert_eq!(d.push(&rtp(500, 10, true, 2, &p_slice(10))), None);
-    let c = d.push(&rtp(501, 3010, true, 2, &idr(10))).unwrap();
+    assert_eq!(one(d.push(&rtp(500, 10, true, 2, &p_slice(10)))), None);
+    let c = one(d.push(&rtp(501, 3010, true, 2, &idr(10)))).unwrap();
     assert!(c.keyframe && c.time_90khz > b.time_90khz);
     // A picture whose marker packet was lost ends when the next begins.
-    assert_eq!(d.push(&rtp(502, 6010, false, 2, &p_slice(10))), None);
+    assert_eq!(one(d.push(&rtp(502, 6010, false, 2, &p_slice(10)))), None);
     // 503 (the marker) is lost; 504 is a new picture: 502's is spoilt.
-    assert_eq!(d.push(&rtp(504, 9010, true, 2, &p_slice(10))), None);
+    assert_eq!(one(d.push(&rtp(504, 9010, true, 2, &p_slice(10)))), None);
     assert!(d.stats().lost >= 1);
 }
 
@@ -164,7 +169,7 @@ fn what_is_not_rtp_is_counted_and_dropped() {
         rtp(2, 0, true, 1, &[28]),                           // FU-A without its header
         rtp(3, 0, true, 1, &[24, 0, 50, 0x65]),              // STAP-A longer than the packet
     ] {
-        assert_eq!(d.push(&bad), None, "{bad:?}");
+        assert_eq!(one(d.push(&bad)), None, "{bad:?}");
     }
     assert!(d.stats().bad >= 7, "{:?}", d.stats());
 }
@@ -174,7 +179,7 @@ proptest! {
     fn garbage_never_panics(packets in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..64), 0..50)) {
         let mut d = Depay::new();
         for p in packets {
-            if let Some(au) = d.push(&p) {
+            if let Some(au) = one(d.push(&p)) {
                 prop_assert!(au.keyframe || d.stats().units > 1);
             }
         }

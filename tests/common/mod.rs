@@ -168,13 +168,30 @@ impl Vehicle {
         params_toml: &str,
         env: &[(&str, &str)],
     ) -> anyhow::Result<Self> {
+        let stderr_path = dir.join("neptunus.stderr");
+        let stderr = File::create(&stderr_path)?;
+        let mut vehicle = Self::spawn_to(bin, args, dir, params_toml, env, stderr.into())?;
+        vehicle.stderr_path = stderr_path;
+        Ok(vehicle)
+    }
+
+    /// [`spawn_env`](Self::spawn_env) with its stderr going to `stderr`
+    /// (a pipe, say) instead of `DIR/neptunus.stderr`: then
+    /// [`stderr_text`](Self::stderr_text) is empty.
+    pub fn spawn_to(
+        bin: &Path,
+        args: &[&str],
+        dir: &Path,
+        params_toml: &str,
+        env: &[(&str, &str)],
+        stderr: Stdio,
+    ) -> anyhow::Result<Self> {
         let data = dir.join("data");
         if !params_toml.is_empty() {
             std::fs::create_dir_all(&data)?;
             std::fs::write(data.join("params.toml"), params_toml)?;
         }
-        let stderr_path = dir.join("neptunus.stderr");
-        let stderr = File::create(&stderr_path)?;
+        let stderr_path = dir.join("neptunus.stderr.absent");
         let mut cmd = Command::new(bin);
         cmd.args(args);
         // Its own process group: a wrapper (`faketime`) runs the vehicle as
@@ -713,6 +730,17 @@ impl Rig {
     /// Starts the board, then `bin --serial <pty>` with `params_toml`
     /// preset, and waits for the vehicle's first datagram.
     pub fn start(bin: &Path, params_toml: &str) -> anyhow::Result<Self> {
+        Self::start_with(bin, params_toml, &[], None)
+    }
+
+    /// [`start`](Self::start) with extra environment variables and, when
+    /// given, the vehicle's stderr going to `stderr`.
+    pub fn start_with(
+        bin: &Path,
+        params_toml: &str,
+        env: &[(&str, &str)],
+        stderr: Option<Stdio>,
+    ) -> anyhow::Result<Self> {
         let dir = tempfile::tempdir()?;
         let rt = board_runtime()?;
         let board = spawn_board(&rt, None)?;
@@ -720,12 +748,11 @@ impl Rig {
         let (mut gcs, port) = Gcs::bind()?;
         let serial = board.path().to_string_lossy().into_owned();
         let endpoint = format!("udpout:127.0.0.1:{port}");
-        let mut vehicle = Vehicle::spawn(
-            bin,
-            &["--serial", &serial, "--mavlink", &endpoint],
-            dir.path(),
-            params_toml,
-        )?;
+        let args = ["--serial", serial.as_str(), "--mavlink", endpoint.as_str()];
+        let mut vehicle = match stderr {
+            Some(to) => Vehicle::spawn_to(bin, &args, dir.path(), params_toml, env, to)?,
+            None => Vehicle::spawn_env(bin, &args, dir.path(), params_toml, env)?,
+        };
         gcs.await_vehicle(&mut vehicle, Duration::from_secs(30))?;
         Ok(Self {
             vehicle,

@@ -211,33 +211,41 @@ export class Recording {
 
   // ---- the vehicle's logs -------------------------------------------------
 
-  /** Lists the logs, when this page may read them (the server lets only a
-   * page that may pilot: logged in, or an address `open_control` admits). */
-  async listLogs() {
-    const note = $('logs-note');
-    const list = $('logs-list');
+  /** Asks the vehicle for one of the pilot's lists (`url`) when this page
+   * may read it (the server lets only a page that may pilot: logged in, or
+   * an address `open_control` admits), saying what happens in `note`. The
+   * answer's JSON, or null when there is none to show (`list` is then
+   * emptied where the vehicle refused). */
+  async fetchPilotList(url, what, note, list) {
     if (!this.session.mayPilot()) {
       list.replaceChildren();
       note.textContent = this.session.state.welcome
-        ? 'The logs are for the pilot: log in with the pilot password to list and download them.'
+        ? `The ${what} are for the pilot: log in with the pilot password to list and download them.`
         : 'Not connected.';
-      return;
+      return null;
     }
     note.textContent = 'asking…';
-    let body;
     try {
-      const r = await fetch('/api/logs', { cache: 'no-store' });
+      const r = await fetch(url, { cache: 'no-store' });
       if (!r.ok) {
         const why = await r.json().then((j) => j.error).catch(() => null);
         note.textContent = why || `the vehicle refused: HTTP ${r.status}`;
         list.replaceChildren();
-        return;
+        return null;
       }
-      body = await r.json();
+      return await r.json();
     } catch {
       note.textContent = 'the vehicle did not answer: try again';
-      return;
+      return null;
     }
+  }
+
+  /** Lists the logs, when this page may read them. */
+  async listLogs() {
+    const note = $('logs-note');
+    const list = $('logs-list');
+    const body = await this.fetchPilotList('/api/logs', 'logs', note, list);
+    if (body === null) return;
     const logs = Array.isArray(body && body.logs) ? body.logs : [];
     const items = [];
     for (const [kind, title] of Object.entries(KINDS)) {
@@ -271,28 +279,8 @@ export class Recording {
   async listRecordings() {
     const note = $('recordings-note');
     const list = $('recordings-list');
-    if (!this.session.mayPilot()) {
-      list.replaceChildren();
-      note.textContent = this.session.state.welcome
-        ? 'The recordings are for the pilot: log in with the pilot password to list and download them.'
-        : 'Not connected.';
-      return;
-    }
-    note.textContent = 'asking…';
-    let body;
-    try {
-      const r = await fetch('/api/recordings', { cache: 'no-store' });
-      if (!r.ok) {
-        const why = await r.json().then((j) => j.error).catch(() => null);
-        note.textContent = why || `the vehicle refused: HTTP ${r.status}`;
-        list.replaceChildren();
-        return;
-      }
-      body = await r.json();
-    } catch {
-      note.textContent = 'the vehicle did not answer: try again';
-      return;
-    }
+    const body = await this.fetchPilotList('/api/recordings', 'recordings', note, list);
+    if (body === null) return;
     const files = (Array.isArray(body && body.recordings) ? body.recordings : [])
       .filter((f) => typeof f.url === 'string' && f.url.startsWith('/api/recordings/') && typeof f.recording === 'string');
     const byRecording = new Map();

@@ -108,12 +108,21 @@ impl Depay {
         self.stats
     }
 
-    /// One datagram from the encoder; a picture when this packet ended one.
-    pub fn push(&mut self, datagram: &[u8]) -> Option<AccessUnit> {
+    /// One datagram from the encoder; the pictures this packet ended,
+    /// oldest first: none, one, or two (a picture whose marker never came,
+    /// ended by this packet's new timestamp, and this packet's own when it
+    /// is a whole picture with its marker).
+    pub fn push(&mut self, datagram: &[u8]) -> Vec<AccessUnit> {
+        let mut out = Vec::new();
+        self.push_into(datagram, &mut out);
+        out
+    }
+
+    fn push_into(&mut self, datagram: &[u8], out: &mut Vec<AccessUnit>) {
         self.stats.packets += 1;
         let Some(rtp) = parse_rtp(datagram) else {
             self.stats.bad += 1;
-            return None;
+            return;
         };
         if self.ssrc != Some(rtp.ssrc) {
             // The encoder restarted: its sequence starts anywhere, with a
@@ -142,16 +151,15 @@ impl Depay {
                 self.spoiled = false;
                 self.stats.skipped += 1;
             }
-            return None;
+            return;
         }
-        let mut done = None;
         if self
             .partial
             .as_ref()
             .is_some_and(|p| p.timestamp != rtp.timestamp)
         {
             // A picture whose last packet (the marker) went missing.
-            done = self.finish();
+            out.extend(self.finish());
         }
         let partial = self.partial.get_or_insert_with(|| Partial {
             timestamp: rtp.timestamp,
@@ -167,12 +175,11 @@ impl Depay {
             self.restart();
             // The rest of this picture is spoiled (unless this was its end).
             self.spoiled = !rtp.marker;
-            return done;
+            return;
         }
         if rtp.marker {
-            return self.finish().or(done);
+            out.extend(self.finish());
         }
-        done
     }
 
     /// Drops the picture in progress and waits for a keyframe.

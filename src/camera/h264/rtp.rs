@@ -129,7 +129,7 @@ mod tests {
         let mut d = Depay::new();
         let mut out = None;
         for pk in &packets {
-            out = d.push(pk).or(out);
+            out = d.push(pk).pop().or(out);
         }
         let au = out.expect("a picture");
         assert!(au.keyframe);
@@ -137,7 +137,37 @@ mod tests {
         let p_frame = nal(1, &[0x9a, 1, 2]);
         let later = p.packets(&p_frame, 93_000);
         assert_eq!(later.len(), 1);
-        assert_eq!(d.push(&later[0]).expect("the next").data, p_frame);
+        assert_eq!(d.push(&later[0]).pop().expect("the next").data, p_frame);
+    }
+
+    #[test]
+    fn a_picture_whose_marker_never_came_is_not_lost_behind_a_one_packet_picture() {
+        let mut p = RtpPacketizer::new(0x1234_5678, 7);
+        let idr = [
+            nal(7, &[0x42, 0xc0, 0x1e]),
+            nal(8, &[0xce]),
+            nal(5, &vec![0x88; 3000]),
+        ]
+        .concat();
+        let mut packets = p.packets(&idr, 90_000);
+        assert!(packets.len() > 1);
+        // A sender that never sets the marker: the next picture's first
+        // packet, with its new timestamp, ends this one.
+        let last = packets.len() - 1;
+        packets[last][1] &= 0x7f;
+        let mut d = Depay::new();
+        for pk in &packets {
+            assert!(d.push(pk).is_empty());
+        }
+        let p_frame = nal(1, &[0x9a, 1, 2]);
+        let later = p.packets(&p_frame, 93_000);
+        assert_eq!(later.len(), 1);
+        let out = d.push(&later[0]);
+        assert_eq!(out.len(), 2, "both pictures, oldest first");
+        assert!(out[0].keyframe);
+        assert_eq!(out[0].data, idr);
+        assert_eq!(out[1].data, p_frame);
+        assert_eq!(d.stats().units, 2);
     }
 
     #[test]

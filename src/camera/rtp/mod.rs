@@ -330,12 +330,12 @@ impl Supervisor {
             if !from.ip().is_loopback() {
                 continue;
             }
-            let au = match self.depay.lock() {
+            let units = match self.depay.lock() {
                 Ok(mut d) => d.push(&buf[..n]),
-                Err(_) => None,
+                Err(_) => Vec::new(),
             };
-            if let Some(au) = au {
-                fanout.send(&au);
+            for au in &units {
+                fanout.send(au);
             }
         }
     }

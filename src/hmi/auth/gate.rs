@@ -84,21 +84,23 @@ pub fn parse_origin(s: &str) -> Result<String, String> {
 
 /// The host part of `host[:port]` (IPv6 literals keep their brackets off),
 /// or `None` when the port is not a number.
+/// A TCP port as a Host header writes it: 1–5 digits, at most 65535.
+fn port_ok(port: &str) -> bool {
+    (1..=5).contains(&port.len())
+        && port.bytes().all(|b| b.is_ascii_digit())
+        && port.parse::<u16>().is_ok()
+}
+
 fn split_host(hostport: &str) -> Option<&str> {
     if let Some(rest) = hostport.strip_prefix('[') {
         let (host, after) = rest.split_once(']')?;
         return match after {
             "" => Some(host),
-            p => p
-                .strip_prefix(':')
-                .filter(|p| !p.is_empty() && p.bytes().all(|b| b.is_ascii_digit()))
-                .map(|_| host),
+            p => p.strip_prefix(':').filter(|p| port_ok(p)).map(|_| host),
         };
     }
     match hostport.rsplit_once(':') {
-        Some((host, port)) if !port.is_empty() && port.bytes().all(|b| b.is_ascii_digit()) => {
-            Some(host)
-        }
+        Some((host, port)) if port_ok(port) => Some(host),
         Some(_) => None,
         None => Some(hostport),
     }
@@ -239,6 +241,10 @@ mod tests {
             "rov.evil.com",
             "127.0.0.1:x",
             "",
+            // A port no TCP port can be (found by the http_gate fuzz target).
+            "localhost:65536",
+            "localhost:000000080",
+            "[::1]:99999",
         ] {
             assert!(!g.host_ok(h), "{h}");
         }

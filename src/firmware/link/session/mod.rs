@@ -93,6 +93,10 @@ struct Connection {
     /// Frames written and not yet echoed by the board, oldest first: their
     /// bytes (to recognise the echo) and when they were written.
     in_flight: VecDeque<InFlight>,
+    /// The board's last `rawcmd:` echo took a frame out of `in_flight`:
+    /// the `cmd:` echo that follows it is of that same frame, not of the
+    /// next (an identical frame behind it, a re-send, is still on its way).
+    raw_echoed: bool,
     /// When the last `ping` was written.
     last_ping: Option<Instant>,
     /// When the board will have taken everything written so far (a virtual
@@ -231,6 +235,7 @@ impl Session {
             handshake_due: Some(now + self.cfg.boot_wait),
             handshaken: false,
             in_flight: VecDeque::new(),
+            raw_echoed: false,
             last_ping: None,
             line_free_at: now,
             next_ping: now,
@@ -286,18 +291,21 @@ impl Session {
                     reboot = conn.handshaken && conn.board_talked;
                 }
                 Event::RawCmd(hex) if self.cfg.framing == Framing::Crc8 => {
-                    if let Some(frame) = raw_frame(hex) {
+                    conn.raw_echoed = raw_frame(hex).is_some_and(|frame| {
                         acknowledge(
                             &mut conn.in_flight,
                             &mut self.stats,
                             &mut self.confirm,
                             |f| *f == frame,
-                        );
-                    }
+                        )
+                    });
                 }
-                // After `crc:pass`: the oldest frame's text, its `rawcmd:`
-                // echo damaged on the way back (an identical frame behind
-                // it taken for it holds the same command).
+                // After `crc:pass`: the text of the frame whose `rawcmd:`
+                // came just before. Already taken out when that echo was
+                // recognised; else the oldest frame's, its `rawcmd:` echo
+                // damaged on the way back (an identical frame behind it
+                // taken for it holds the same command).
+                Event::CmdEcho(_) if std::mem::take(&mut conn.raw_echoed) => {}
                 Event::CmdEcho(text) if self.cfg.framing == Framing::Crc8 => {
                     let front = conn.in_flight.front().map(|f| f.frame.clone());
                     if let Some(front) = front {
@@ -330,6 +338,7 @@ impl Session {
                     }
                 }
                 Event::CrcFail { calc, got } => {
+                    conn.raw_echoed = false;
                     self.stats.crc_failures_echoed += 1;
                     tracing::debug!(calc, got, "board dropped a frame: CRC mismatch");
                     // It reads frames in order: the one it rejected is the

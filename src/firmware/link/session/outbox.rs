@@ -47,15 +47,15 @@ pub(super) struct InFlight {
 /// (frames the board lost: it echoes in order), taken out: the echoed one
 /// is reported to `confirm`, the older ones as lost and counted. An echo
 /// of nothing in flight (another writer's frame, a garbled one) changes
-/// nothing.
+/// nothing. Whether a frame was recognised.
 pub(super) fn acknowledge(
     in_flight: &mut VecDeque<InFlight>,
     stats: &mut LinkStats,
     confirm: &mut Confirm,
     is_it: impl Fn(&[u8]) -> bool,
-) {
+) -> bool {
     let Some(i) = in_flight.iter().position(|f| is_it(&f.frame)) else {
-        return;
+        return false;
     };
     let newest_alike = in_flight
         .iter()
@@ -77,6 +77,7 @@ pub(super) fn acknowledge(
             confirm.echoed(f.serial, newest_alike);
         }
     }
+    true
 }
 
 /// Pending writes: control commands in order (a level replacing a pending

@@ -204,3 +204,31 @@ fn the_drop_rate_counts_rejected_frames_and_damaged_lines_over_ten_seconds() {
     assert_eq!(s.stats().drop_rate_cpct, 0);
     assert_eq!(s.stats().errors(), 2, "the count stays");
 }
+
+#[test]
+fn the_cmd_echo_after_a_recognised_rawcmd_leaves_an_identical_frame_behind_it_in_flight() {
+    let (mut s, t) = settled();
+    // The same push twice in flight (a re-send): the board has both in
+    // its buffer, and echoes the first with `rawcmd:`, `crc:pass`, `cmd:`.
+    s.command(go(1600));
+    assert_eq!(drain(&mut s, t, false), [go(1600)]);
+    s.command(go(1600));
+    assert_eq!(drain(&mut s, t + MS, false), [go(1600)]);
+    let mut echo = rawcmd(&crc8_frame(&go(1600)));
+    echo.extend_from_slice(b"crc:pass;cmd:go(1600,1500,1500);\r\n");
+    s.received(&echo, t + 5 * MS);
+    assert_eq!(s.stats().thrust_echoed, 1);
+    // The second still holds its 20 bytes of the board's 64: two more
+    // frames fit beside it, a third would overrun the board's buffer.
+    s.command(go(1601));
+    assert_eq!(drain(&mut s, t + 20 * MS, false), [go(1601)]);
+    s.command(go(1602));
+    assert_eq!(drain(&mut s, t + 30 * MS, false), [go(1602)]);
+    s.command(go(1603));
+    assert!(drain(&mut s, t + 40 * MS, false).is_empty());
+    // Its own echo frees its room.
+    s.received(&echo, t + 45 * MS);
+    assert_eq!(s.stats().thrust_echoed, 2);
+    assert_eq!(s.stats().echoes_missed, 0);
+    assert_eq!(drain(&mut s, t + 50 * MS, false), [go(1603)]);
+}
