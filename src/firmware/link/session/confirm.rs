@@ -47,10 +47,12 @@ use crate::vehicle::mixer::{BoardMotors, NEUTRAL_US};
 /// A thrust frame not heard of this long after it was written is taken as
 /// lost and written again. The genuine board's echo is ~100 bytes at
 /// 115,200 baud (9 ms) once its loop read the frame (~2 ms on the line),
-/// behind at most the line it was printing: this is several times that. It is what a
-/// stop whose frame was lost, or whose rejection was itself lost, costs on
-/// top of the board's 50-ms motor check: a release must reach neutral
-/// within 150 ms. Taken as lost too early costs only a frame written twice.
+/// behind at most the line it was printing; now and then its loop reads
+/// nothing for longer. It is what a stop whose frame was lost, or whose
+/// rejection was itself lost, costs on top of the board's 50-ms motor
+/// check: a release must reach neutral within 150 ms. Taken as lost too
+/// early costs only a frame written twice — when the board's buffer has
+/// room for it (the outbox's budget, whose overdue time is longer).
 pub(super) const CONFIRM_TIMEOUT: Duration = Duration::from_millis(60);
 
 /// The fewest milliseconds between two writes of a doubted thrust: a board
