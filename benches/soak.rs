@@ -8,7 +8,9 @@
 //! its WebSocket and telemetry at its own pace). Every minute it prints
 //! the vehicle process's resident memory, open descriptors and threads,
 //! the board link's drops so far (STATUSTEXT "Board link down"), whether
-//! it is still armed, and the simulator's pace. At the end: the growth of
+//! it is still armed, and the simulator's pace. The vehicle logs at info,
+//! as the packaged service does. At the end: the vehicle's warnings
+//! (STATUSTEXT; a disarm says why), the growth of
 //! each after the first five minutes (flat is the target), and the tlog
 //! read whole by pymavlink (`target/interop-venv`, or `$SOAK_PYTHON`)
 //! after a clean stop: every frame decoded, none bad.
@@ -127,11 +129,14 @@ fn main() -> anyhow::Result<()> {
     let (mut gcs, port) = Gcs::bind()?;
     let device = board.path().to_string_lossy().into_owned();
     let endpoint = format!("udpout:127.0.0.1:{port}");
-    let mut vehicle = Vehicle::spawn(
+    // Logging at info, as the packaged service does: the 5-s link line and
+    // every event go to stderr and neptunus.log for the whole hour.
+    let mut vehicle = Vehicle::spawn_env(
         &bin,
         &["--serial", &device, "--mavlink", &endpoint],
         dir.path(),
         "",
+        &[("RUST_LOG", "info")],
     )?;
     gcs.await_vehicle(&mut vehicle, Duration::from_secs(30))?;
     let addr = vehicle.http_addr(Duration::from_secs(10))?;
@@ -150,6 +155,8 @@ fn main() -> anyhow::Result<()> {
     let start = Instant::now();
     let (mut drops, mut armed, mut was_down) = (0usize, true, false);
     let mut lines = Vec::new();
+    // What the vehicle warned of, with its minute: a disarm says why here.
+    let mut warnings: Vec<(u64, String)> = Vec::new();
     for minute in 1..=minutes {
         let end = start + Duration::from_secs(60 * minute);
         while Instant::now() < end {
@@ -164,6 +171,13 @@ fn main() -> anyhow::Result<()> {
                     MavMessage::HEARTBEAT(h) => armed = common::armed(&h),
                     MavMessage::STATUSTEXT(s) => {
                         let text = common::statustext(&s);
+                        if s.severity as u8 <= MavSeverity::MAV_SEVERITY_WARNING as u8 {
+                            // A long text comes in chunks of one id.
+                            match warnings.last_mut() {
+                                Some((_, t)) if s.id != 0 && s.chunk_seq > 0 => t.push_str(&text),
+                                _ => warnings.push((minute, text.clone())),
+                            }
+                        }
                         let down = text.contains("link down");
                         if down && !was_down {
                             drops += 1;
@@ -222,6 +236,14 @@ fn main() -> anyhow::Result<()> {
         println!("\n(shorter than six minutes: no growth after minute 5 to report)");
     }
     println!("board link drops: {drops}");
+    if warnings.is_empty() {
+        println!("the vehicle's warnings (STATUSTEXT, warning or worse): none");
+    } else {
+        println!("the vehicle's warnings (STATUSTEXT, warning or worse):");
+        for (minute, text) in &warnings {
+            println!("- minute {minute}: {text}");
+        }
+    }
     let mut tlogs: Vec<PathBuf> = std::fs::read_dir(vehicle.data_dir().join("tlogs"))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "tlog"))
