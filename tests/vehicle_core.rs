@@ -285,6 +285,57 @@ fn a_board_dead_man_trip_disarms_only_what_was_armed_before_it() {
     );
 }
 
+/// The program stood still while armed: the board held its last command.
+/// A gap short of the board's dead-man (the link's doubt included) is what
+/// a late tether does too — told to the pilot, the dive goes on; one that
+/// may have let the dead-man act leaves the board's state unknown, and
+/// disarms.
+#[test]
+fn a_stall_short_of_the_board_dead_man_is_a_warning_and_a_longer_one_disarms() {
+    let mut r = rig();
+    link_up(&mut r);
+    r.cmd(QGC, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
+    r.run(Duration::from_millis(200));
+    assert!(r.v.armed());
+
+    r.t += Duration::from_millis(1200);
+    let out = r.input(Input::Tick);
+    assert!(
+        r.v.armed(),
+        "a 1.2-s stall disarmed: {:?}",
+        statustexts(&out)
+    );
+    assert!(
+        statustexts(&out)
+            .iter()
+            .any(|t| t.contains("Vehicle stood still 1.2 s")),
+        "{:?}",
+        statustexts(&out)
+    );
+    r.run(Duration::from_millis(200));
+
+    r.t += Duration::from_millis(1600);
+    let out = r.input(Input::Tick);
+    assert!(!r.v.armed(), "a 1.6-s stall left it armed");
+    assert!(
+        statustexts(&out)
+            .iter()
+            .any(|t| t.contains("Vehicle stalled 1.6 s")),
+        "{:?}",
+        statustexts(&out)
+    );
+
+    // Disarmed, a stall says nothing.
+    r.run(Duration::from_millis(200));
+    r.t += Duration::from_millis(3000);
+    let out = r.input(Input::Tick);
+    assert!(
+        !statustexts(&out).iter().any(|t| t.contains("Vehicle st")),
+        "{:?}",
+        statustexts(&out)
+    );
+}
+
 #[test]
 fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason() {
     let mut r = rig();

@@ -145,9 +145,9 @@ const URGENT_ROOM: usize = 32;
 /// or its echo was — the budget it holds is most likely free on the board.
 /// Longer than the confirm timeout, which only puts a thrust back in the
 /// queue: the genuine 30.0.2 board's loop now and then reads nothing for
-/// more than 60 ms (its sensors' conversions), and a stop or a ping
-/// written into the extra room then overran its 63-byte buffer (CRC
-/// rejections in the simulator report's runs, none at 120 ms).
+/// more than 60 ms, and a stop or a ping written into the extra room then
+/// overran its 63-byte buffer (CRC rejections in the simulator report's
+/// runs, none at 120 ms).
 pub(super) const ECHO_OVERDUE: Duration = Duration::from_millis(120);
 
 /// The board's receive buffer as the link sees it at one moment: the bytes
