@@ -11,6 +11,7 @@
 #   bash debian/build-armhf.sh
 #   -> target/armv7-unknown-linux-gnueabihf/debian/neptunus_<version>_armhf.deb
 #   bash debian/build-armhf.sh --toolchain-only   (installs, builds nothing)
+#   bash debian/build-armhf.sh --packages-only    (only Debian's packages)
 #
 # The profile `rov` (Cargo.toml) is the release profile without link-time
 # optimisation. No npm: the page's plotting library comes from
@@ -31,6 +32,9 @@ if [ -n "$missing" ]; then
     as_root apt-get update -q
     # shellcheck disable=SC2086 # one word per package
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $missing
+fi
+if [ "${1:-}" = --packages-only ]; then
+    exit 0
 fi
 CARGO_DEB_VERSION=3.8.0
 if ! cargo deb --version 2>/dev/null | grep -q "$CARGO_DEB_VERSION"; then

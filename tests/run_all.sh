@@ -60,8 +60,9 @@ if [ "${#apt_missing[@]}" -gt 0 ]; then
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${apt_missing[@]}"
 fi
 # The BeagleBone's toolchain (Debian's Rust with the standard library's
-# sources, the cross gcc) and cargo-deb, as the guide's build script installs them.
-bash debian/build-armhf.sh --toolchain-only
+# sources, the cross gcc) as the guide's build script installs it; its
+# cargo-deb is built in the background below.
+bash debian/build-armhf.sh --packages-only
 ffmpeg -hide_banner -version | sed -n 1p
 gst-launch-1.0 --version | sed -n 1p
 avr-gcc --version | sed -n 1p
@@ -74,49 +75,79 @@ if [ ! -f "$firmware_dir/30.0.2/OpenROV/OpenROV.ino" ] || [ ! -f "$firmware_dir/
 fi
 export OPENROV_FIRMWARE_DIR="$firmware_dir"
 
+# The page's plotting library, from web/package-lock.json, once: every
+# build below embeds it (build.rs), and two of them run side by side.
+if [ ! -f web/node_modules/uplot/dist/uPlot.esm.js ]; then
+    (cd web && npm ci --no-audit --no-fund --ignore-scripts)
+fi
+
+stage "builds that no test needs yet, started in the background at the lowest priority"
+# In order: the fuzz targets' instrumented build (fuzz/run.sh, its own
+# target/), the user guide's mdBook, the BeagleBone's armhf build
+# (tests/armhf.sh build: Debian's Rust, the standard library rebuilt, the
+# cross linker, cargo-deb) and this machine's package (cargo deb, the `rov`
+# profile: the release profile without link-time optimisation). At nice 19
+# they take what the lints, the tests' build and the real-time tests below
+# leave idle; the stages that need them wait for them, and their checks
+# run at the end on what they built. Each writes target/bg-NAME.log and
+# target/bg-NAME.rc (its exit status).
+mdbook_version=0.4.52
+rm -f target/bg-*.rc
+mkdir -p target
+bg() {
+    local name=$1 rc=0
+    shift
+    "$@" >"target/bg-$name.log" 2>&1 || rc=$?
+    echo "$rc" >"target/bg-$name.rc"
+}
+install_mdbook() {
+    # Debian has no mdbook package: cargo installs the pinned version once.
+    # Only the search feature: the guide is built, never served or watched.
+    if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$mdbook_version" ]; then
+        cargo install mdbook --locked --version "$mdbook_version" --no-default-features --features search
+    fi
+}
+# Its own process group (job control for this one job), so that a run
+# that stops early stops it too.
+set -m
+(
+    renice -n 19 -p "$BASHPID" >/dev/null
+    bg fuzz-build env FUZZ_BUILD_ONLY=1 bash fuzz/run.sh
+    bg mdbook install_mdbook
+    bg armhf bash tests/armhf.sh build
+    bg package bash -c 'bash debian/build-armhf.sh --toolchain-only && cargo deb --locked --profile rov'
+) &
+background=$!
+set +m
+trap 'kill -- -"$background" 2>/dev/null || true' EXIT
+# Waits until the background job NAME has ended; its exit status.
+bg_wait() {
+    while [ ! -f "target/bg-$1.rc" ] && kill -0 "$background" 2>/dev/null; do sleep 5; done
+    local rc
+    rc=$(cat "target/bg-$1.rc" 2>/dev/null || echo 1)
+    echo "-- background $1: exit $rc"
+    if [ "$rc" != 0 ]; then tail -n 40 "target/bg-$1.log" || true; fi
+    return "$rc"
+}
+
 stage "formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked --features hil -- -D warnings
-# The vehicle as packaged (without the simulator of the genuine firmware).
-cargo clippy --all-targets --locked -- -D warnings
+# The vehicle as packaged (without the simulator of the genuine firmware):
+# the library and the program; the tests are the same code as above.
+cargo clippy --lib --bins --locked -- -D warnings
 # The API docs build without a warning (broken links included).
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --features hil
-
-stage "the packages' builds, started in the background at the lowest priority"
-# The BeagleBone's armhf build (tests/armhf.sh build: Debian's Rust, the
-# standard library rebuilt, the cross linker) and this machine's release
-# build for its package (cargo deb) need no test to have run. At nice 19
-# they take the cores the real-time tests below leave idle; their checks
-# run at the end, on what they built. The page's plotting library they
-# embed is in web/node_modules since the lints above ran build.rs.
-rm -f target/armhf-build.rc target/release-build.rc
-(
-    nice -n 19 bash tests/armhf.sh build >target/armhf-build.log 2>&1
-    echo $? >target/armhf-build.rc
-    nice -n 19 cargo deb --locked >target/release-build.log 2>&1
-    echo $? >target/release-build.rc
-) &
-package_builds=$!
-
-stage "the user guide (mdBook: docs/guide -> target/guide)"
-# Debian has no mdbook package: cargo installs the pinned version once. Only
-# the search feature: the guide is built here, never served or watched.
-mdbook_version=0.4.52
-if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$mdbook_version" ]; then
-    cargo install mdbook --locked --version "$mdbook_version" --no-default-features --features search
-fi
-mdbook --version
-# --dest-dir is relative to the book's folder. Its links are checked by
-# tests/docs_links.rs; a chapter that fails to render fails the run here.
-mdbook build docs/guide --dest-dir ../../target/guide
 
 stage "tests"
 status=0
 cargo test --all-targets --locked --features hil --no-fail-fast 2>&1 | tee target/test-output.txt || status=1
 
 stage "fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
-# Its own build in fuzz/target; FUZZ_SECONDS per target, two at a time. A
+# Its own build in fuzz/target (made in the background: waited for here,
+# and made again if it failed); FUZZ_SECONDS per target, two at a time. A
 # crash fails the run with the input's path and how to run it again.
+bg_wait fuzz-build || true
 FUZZ_SECONDS="${FUZZ_SECONDS:-20}" bash fuzz/run.sh || status=1
 
 stage "interoperability tests (real ground-station clients against the binary)"
@@ -130,7 +161,10 @@ if ! cmp -s "$reqs" "$venv/requirements.installed"; then
     "$venv/bin/python" -m pip install -q --disable-pip-version-check -r "$reqs"
     cp "$reqs" "$venv/requirements.installed"
 fi
-cargo build --locked
+# The tests' build of the vehicle (with the genuine firmware's simulator,
+# feature hil, which changes nothing else it does); the package's build,
+# without it, is run by tests/package.sh and tests/armhf.sh.
+cargo build --locked --features hil
 test -x target/debug/neptunus
 rm -f target/interop-junit.xml
 NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest tests/interop -q \
@@ -171,29 +205,28 @@ else
     status=1
 fi
 
-stage "the packages' builds (waiting for the background)"
-wait "$package_builds" || true
-for b in armhf release; do
-    echo "-- $b build: exit $(cat "target/$b-build.rc" 2>/dev/null || echo '?'); its log's end:"
-    tail -n 5 "target/$b-build.log" 2>/dev/null || true
-done
+stage "the user guide (mdBook: docs/guide -> target/guide)"
+# --dest-dir is relative to the book's folder. Its links are checked by
+# tests/docs_links.rs; a chapter that fails to render fails the run here.
+if bg_wait mdbook; then
+    mdbook --version
+    mdbook build docs/guide --dest-dir ../../target/guide || status=1
+else
+    status=1
+fi
 
 stage "Debian package (built for this machine and checked: tests/package.sh)"
 pk_pass=0
 pk_fail=0
-if bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
+if bg_wait package && PACKAGE_PROFILE=rov bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
 
 stage "the BeagleBone's vehicle (armhf: built as the guide says, packaged, run under qemu-arm: tests/armhf.sh)"
 # Its build, its package's checks, --sim and the genuine firmware under
 # qemu-arm -cpu cortex-a8; it counts as one test here and prints its own.
 ah_pass=0
 ah_fail=0
-if [ "$(cat target/armhf-build.rc 2>/dev/null)" != 0 ]; then
-    echo "the armhf build failed: target/armhf-build.log" >&2
-    tail -n 40 target/armhf-build.log >&2 || true
-    ah_fail=1
-    status=1
-elif bash tests/armhf.sh check; then ah_pass=1; else ah_fail=1; status=1; fi
+if bg_wait armhf && bash tests/armhf.sh check; then ah_pass=1; else ah_fail=1; status=1; fi
+wait "$background" || true
 
 # Summarise as one plain line for CI: cargo prints one result line per test
 # binary; pytest's and node's counts come from their JUnit XML.
