@@ -161,10 +161,13 @@ if ! cmp -s "$reqs" "$venv/requirements.installed"; then
     "$venv/bin/python" -m pip install -q --disable-pip-version-check -r "$reqs"
     cp "$reqs" "$venv/requirements.installed"
 fi
-# The tests' build of the vehicle (with the genuine firmware's simulator,
-# feature hil, which changes nothing else it does); the package's build,
-# without it, is run by tests/package.sh and tests/armhf.sh.
-cargo build --locked --features hil
+# The vehicle the cargo tests ran (target/debug/neptunus, with the genuine
+# firmware's simulator, feature hil, which changes nothing else it does).
+# `cargo build` would build it again: without the dev-dependencies, their
+# features drop out of the shared crates, and every one of those is
+# compiled anew. The packages' builds, without hil, are run by
+# tests/package.sh and tests/armhf.sh.
+[ -x target/debug/neptunus ] || cargo build --locked --features hil
 test -x target/debug/neptunus
 rm -f target/interop-junit.xml
 NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest tests/interop -q \
@@ -187,7 +190,7 @@ stage "interoperability tests with the genuine firmware in the loop (neptunus --
 # tests (tests/browser/pilot.test.js: arming, driving, the HUD's telemetry,
 # depth hold, failsafes, a hung and a restarted vehicle) against it.
 rm -f target/interop-hil-junit.xml target/browser-hil-junit.xml
-if cargo build --locked --features hil \
+if [ -x target/debug/neptunus ] \
     && hil_elf=$(target/debug/neptunus genuine-board --build-only --data-dir target/hil-data "$firmware_dir/30.0.2" | cut -f1) \
     && [ -f "$hil_elf" ]; then
     hil_elf=$(realpath "$hil_elf")
