@@ -8,8 +8,8 @@
 # until it is ready, then stopping cleanly on SIGTERM.
 # Installs what it needs itself. Run from anywhere: bash tests/package.sh
 # PACKAGE_PROFILE names the Cargo profile to build with (default release,
-# what `cargo deb` ships; the test command checks the `rov` profile's build,
-# the same without link-time optimisation, to keep its time down).
+# what `cargo deb` ships; the test command checks the `package-check`
+# profile's build, made as the development build is, to keep its time down).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

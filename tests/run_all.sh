@@ -85,8 +85,8 @@ stage "builds that no test needs yet, started in the background at the lowest pr
 # In order: the fuzz targets' instrumented build (fuzz/run.sh, its own
 # target/), the user guide's mdBook, the BeagleBone's armhf build
 # (tests/armhf.sh build: Debian's Rust, the standard library rebuilt, the
-# cross linker, cargo-deb) and this machine's package (cargo deb, the `rov`
-# profile: the release profile without link-time optimisation). At nice 19
+# cross linker, cargo-deb) and this machine's package (cargo deb, the
+# `package-check` profile: built as the development build is). At nice 19
 # they take what the lints, the tests' build and the real-time tests below
 # leave idle; the stages that need them wait for them, and their checks
 # run at the end on what they built. Each writes target/bg-NAME.log and
@@ -115,7 +115,7 @@ set -m
     bg fuzz-build env FUZZ_BUILD_ONLY=1 bash fuzz/run.sh
     bg mdbook install_mdbook
     bg armhf bash tests/armhf.sh build
-    bg package bash -c 'bash debian/build-armhf.sh --toolchain-only && cargo deb --locked --profile rov'
+    bg package bash -c 'bash debian/build-armhf.sh --toolchain-only && cargo deb --locked --profile package-check'
 ) &
 background=$!
 set +m
@@ -221,7 +221,7 @@ fi
 stage "Debian package (built for this machine and checked: tests/package.sh)"
 pk_pass=0
 pk_fail=0
-if bg_wait package && PACKAGE_PROFILE=rov bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
+if bg_wait package && PACKAGE_PROFILE=package-check bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
 
 stage "the BeagleBone's vehicle (armhf: built as the guide says, packaged, run under qemu-arm: tests/armhf.sh)"
 # Its build, its package's checks, --sim and the genuine firmware under
