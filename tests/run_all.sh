@@ -211,10 +211,13 @@ fi
 stage "the user guide (mdBook: docs/guide -> target/guide)"
 # --dest-dir is relative to the book's folder. Its links are checked by
 # tests/docs_links.rs; a chapter that fails to render fails the run here.
-if bg_wait mdbook; then
-    mdbook --version
-    mdbook build docs/guide --dest-dir ../../target/guide || status=1
+# It counts as one test in the summary line.
+gd_pass=0
+gd_fail=0
+if bg_wait mdbook && mdbook --version && mdbook build docs/guide --dest-dir ../../target/guide; then
+    gd_pass=1
 else
+    gd_fail=1
     status=1
 fi
 
@@ -294,7 +297,7 @@ PY
 failure_details target/test-output.txt target/interop-junit.xml target/interop-hil-junit.xml \
     target/browser-junit.xml target/browser-hil-junit.xml target/armhf-junit.xml
 cat fuzz/target/fuzz-logs/failures.txt 2>/dev/null || true
-awk -v pp="$((py_pass + br_pass + pk_pass + ah_pass + ${fz_pass:-0}))" -v pf="$((py_fail + br_fail + pk_fail + ah_fail + ${fz_fail:-0}))" -v ps="$((py_skip + br_skip))" \
+awk -v pp="$((py_pass + br_pass + pk_pass + ah_pass + gd_pass + ${fz_pass:-0}))" -v pf="$((py_fail + br_fail + pk_fail + ah_fail + gd_fail + ${fz_fail:-0}))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
 exit "$status"
