@@ -1,6 +1,6 @@
 //! Generates the `neptunus` MAVLink dialect from `dialect/*.xml`, and
-//! installs the browser HMI's plotting library (`npm ci` in `web/`) when
-//! `web/node_modules/uplot` is missing.
+//! stages the browser HMI's plotting library (uPlot) for embedding: from
+//! `NEPTUNUS_UPLOT_DIR` without npm, else from `npm ci` in `web/`.
 //!
 //! The upstream definitions (development.xml, common.xml, standard.xml,
 //! minimal.xml, ardupilotmega.xml and its includes) are taken from the `mavlink` crate's own package, so the
@@ -17,10 +17,10 @@ const MAVLINK_VERSION: &str = "0.21.0";
 fn main() {
     let manifest_dir =
         PathBuf::from(env::var("CARGO_MANIFEST_DIR").expect("cargo sets CARGO_MANIFEST_DIR"));
-    web_dependencies(&manifest_dir.join("web"));
+    let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
+    web_dependencies(&manifest_dir.join("web"), &out_dir);
     build_date();
     packed_relocations();
-    let out_dir = PathBuf::from(env::var("OUT_DIR").expect("cargo sets OUT_DIR"));
     let dialect_dir = manifest_dir.join("dialect");
     println!("cargo:rerun-if-changed={}", dialect_dir.display());
     println!("cargo:rerun-if-env-changed=NEPTUNUS_MAVLINK_XML_DIR");
@@ -174,18 +174,73 @@ fn upstream_definitions_dir() -> Option<PathBuf> {
         .find_map(|p| p.filter(|p| p.join("development.xml").is_file()))
 }
 
-/// The HMI embeds uPlot's dist files from `web/node_modules` (rust-embed):
-/// install them from `web/package-lock.json` when they are not there.
-fn web_dependencies(web: &Path) {
-    let marker = web
-        .join("node_modules")
-        .join("uplot")
-        .join("dist")
-        .join("uPlot.esm.js");
+/// The files of the page's plotting library (uPlot) that the HMI embeds.
+const UPLOT_FILES: [&str; 2] = ["uPlot.esm.js", "uPlot.min.css"];
+
+/// Stages uPlot's two distributed files in `OUT_DIR/uplot/`, which the HMI
+/// embeds (rust-embed): from `NEPTUNUS_UPLOT_DIR` when set — a folder with
+/// the files, as a package build that has no npm and no network gives them
+/// (it never runs npm then) — else from `web/node_modules/uplot/dist`,
+/// installed from `web/package-lock.json` with `npm ci` when missing. Either
+/// way the file must be the version `web/package.json` pins.
+fn web_dependencies(web: &Path, out_dir: &Path) {
+    println!("cargo:rerun-if-env-changed=NEPTUNUS_UPLOT_DIR");
     println!(
         "cargo:rerun-if-changed={}",
         web.join("package-lock.json").display()
     );
+    let given = env::var_os("NEPTUNUS_UPLOT_DIR").filter(|v| !v.is_empty());
+    let source = match &given {
+        Some(dir) => PathBuf::from(dir),
+        None => {
+            let dist = web.join("node_modules").join("uplot").join("dist");
+            npm_ci_unless(web, &dist.join(UPLOT_FILES[0]));
+            dist
+        }
+    };
+    let pinned = uplot_pin(web);
+    let staged = out_dir.join("uplot");
+    fs::create_dir_all(&staged).expect("create OUT_DIR/uplot");
+    for name in UPLOT_FILES {
+        let from = source.join(name);
+        println!("cargo:rerun-if-changed={}", from.display());
+        let text = fs::read_to_string(&from).unwrap_or_else(|e| {
+            panic!(
+                "cannot read {} ({e}): the browser HMI needs uPlot {pinned}'s {name}{}",
+                from.display(),
+                if given.is_some() {
+                    " — NEPTUNUS_UPLOT_DIR must name a folder holding uPlot.esm.js and uPlot.min.css \
+                     (the `dist` folder of the npm package)"
+                } else {
+                    ""
+                }
+            )
+        });
+        if name.ends_with(".js") {
+            assert!(
+                text.contains(&format!("(v{pinned})")),
+                "{} is not uPlot {pinned}, the version web/package.json pins",
+                from.display()
+            );
+        }
+        fs::write(staged.join(name), text).expect("stage uPlot in OUT_DIR");
+    }
+}
+
+/// The uPlot version `web/package.json` pins (`"uplot": "1.6.32"`).
+fn uplot_pin(web: &Path) -> String {
+    let manifest = web.join("package.json");
+    println!("cargo:rerun-if-changed={}", manifest.display());
+    let text = fs::read_to_string(&manifest).expect("read web/package.json");
+    text.split("\"uplot\"")
+        .nth(1)
+        .and_then(|rest| rest.split('"').nth(1))
+        .map(str::to_owned)
+        .expect("web/package.json pins uplot")
+}
+
+/// `npm ci` in `web/` when `marker` (an installed file) is missing.
+fn npm_ci_unless(web: &Path, marker: &Path) {
     println!("cargo:rerun-if-changed={}", marker.display());
     if marker.is_file() {
         return;
@@ -199,12 +254,14 @@ fn web_dependencies(web: &Path) {
         Ok(s) if s.success() && marker.is_file() => {}
         Ok(s) => panic!(
             "`npm ci` in {} failed ({s}): the browser HMI needs its plotting library (uPlot) — \
-             check the network to the npm registry, or run `npm ci` in web/ yourself",
+             check the network to the npm registry, run `npm ci` in web/ yourself, or set \
+             NEPTUNUS_UPLOT_DIR to a folder with uPlot's dist files",
             web.display()
         ),
         Err(e) => panic!(
             "cannot run `{npm} ci` in {} ({e}): the browser HMI's plotting library (uPlot) is \
-             installed with npm — install Node.js and npm (Debian: apt-get install npm), or set NPM",
+             installed with npm — install Node.js and npm (Debian: apt-get install npm), set NPM, \
+             or set NEPTUNUS_UPLOT_DIR to a folder with uPlot's dist files",
             web.display()
         ),
     }

@@ -29,7 +29,8 @@
 //! The binary is `$NEPTUNUS_BIN`, else `target/release/neptunus`; the
 //! firmware `$OPENROV_FIRMWARE_DIR/30.0.2` (default
 //! `../shared/openrov-firmware`); the relay's dice are seeded with
-//! `NOISY_LINE_SEED` (default 37).
+//! `NOISY_LINE_SEED` (default 37). `NOISY_LINE_LINES` picks lines by
+//! number (`2,3`: the rarer damage and the clean line), all by default.
 //!
 //! [`NoisyRelay`]: neptunus::hil::NoisyRelay
 
@@ -138,11 +139,25 @@ fn main() -> anyhow::Result<()> {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
     let noisy = Damage::new(400, 2000);
-    for (name, damage) in [
+    let lines = [
         ("1/400 flipped, 1/2,000 lost", noisy),
         ("1/4,000 flipped, 1/20,000 lost", noisy.rarer(10)),
         ("clean (the baseline)", Damage::NONE),
-    ] {
+    ];
+    let picked: Vec<usize> = match std::env::var("NOISY_LINE_LINES") {
+        Ok(v) => v
+            .split(',')
+            .map(|n| match n.trim().parse::<usize>() {
+                Ok(i @ 1..=3) => Ok(i),
+                _ => anyhow::bail!("NOISY_LINE_LINES={v:?}: line numbers 1 to 3, e.g. 2,3"),
+            })
+            .collect::<anyhow::Result<_>>()?,
+        Err(_) => vec![1, 2, 3],
+    };
+    for (i, (name, damage)) in lines.into_iter().enumerate() {
+        if !picked.contains(&(i + 1)) {
+            continue;
+        }
         let mut rig = NoisyRig::start(&bin, &firmware, &cache, damage, seed)?;
         let run = rig.run(Duration::from_secs(60 * minutes), Duration::from_secs(1))?;
         row(name, &run);

@@ -172,7 +172,11 @@ fn main() -> anyhow::Result<()> {
                     MavMessage::STATUSTEXT(s) => {
                         let text = common::statustext(&s);
                         if s.severity as u8 <= MavSeverity::MAV_SEVERITY_WARNING as u8 {
-                            warnings.push((minute, text.clone()));
+                            // A long text comes in chunks of one id.
+                            match warnings.last_mut() {
+                                Some((_, t)) if s.id != 0 && s.chunk_seq > 0 => t.push_str(&text),
+                                _ => warnings.push((minute, text.clone())),
+                            }
                         }
                         let down = text.contains("link down");
                         if down && !was_down {

@@ -6,6 +6,8 @@
 #
 #   bash fuzz/run.sh                            # every target
 #   FUZZ_SECONDS=600 bash fuzz/run.sh rtp_depay # one target, ten minutes
+#   FUZZ_BUILD_ONLY=1 bash fuzz/run.sh          # only the build (the test
+#                                               # command makes it early)
 #
 # FUZZ_SECONDS: seconds per target (default 20). FUZZ_JOBS: targets at
 # once (default 2). Everything it makes stays in fuzz/target (the build,
@@ -54,6 +56,9 @@ if ! cargo build --release --locked --target "$triple" $(printf -- '--bin %s ' $
     exit 1
 fi
 echo "build: $(( $(date +%s) - build_start )) s"
+if [ -n "${FUZZ_BUILD_ONLY:-}" ]; then
+    exit 0
+fi
 
 run_one() {
     local t=$1 corpus="$CARGO_TARGET_DIR/corpus/$1" seeds="seeds/$1" rc=0

@@ -145,8 +145,23 @@ fn genuine_board(args: &config::GenuineArgs, run: &config::RunArgs) -> anyhow::R
     Ok(())
 }
 
+/// `sim-report` in a build without its plots (the package's): says how to
+/// get one, before running anything.
+#[cfg(not(feature = "report"))]
+fn sim_report(
+    _dir: &std::path::Path,
+    _hil: Option<&std::path::Path>,
+    _run: &config::RunArgs,
+) -> anyhow::Result<()> {
+    anyhow::bail!(
+        "this neptunus was built without the simulator report's plots (the package leaves them out): \
+         build it with the `report` feature (`cargo run --features report -- sim-report DIR`)"
+    )
+}
+
 /// `sim-report [--hil FIRMWARE] DIR`: the scenarios on the simulator, and
 /// with the genuine firmware in the loop beside them if asked.
+#[cfg(feature = "report")]
 fn sim_report(
     dir: &std::path::Path,
     hil: Option<&std::path::Path>,
@@ -210,7 +225,7 @@ fn sim_report_hil(
     Ok(outcomes)
 }
 
-#[cfg(not(feature = "hil"))]
+#[cfg(all(feature = "report", not(feature = "hil")))]
 fn sim_report_hil(
     _firmware: &std::path::Path,
     _run: &config::RunArgs,
@@ -540,7 +555,9 @@ impl Drop for LogWriters {
 fn raise_open_file_limit() {
     use nix::sys::resource::{Resource, getrlimit, setrlimit};
     // RLIM_INFINITY is not a valid soft limit for descriptors (fs.nr_open caps it).
-    const CEILING: u64 = 1 << 20;
+    // `rlim_t` is 64 bits on x86_64 and arm64 but 32 on armhf: the ceiling
+    // is written in the platform's own type.
+    const CEILING: nix::libc::rlim_t = 1 << 20;
     match getrlimit(Resource::RLIMIT_NOFILE) {
         Ok((soft, hard)) => {
             let target = hard.min(CEILING);

@@ -458,6 +458,7 @@ fn estimates_and_setpoints_are_published() {
     ));
 }
 
+#[cfg(feature = "report")]
 #[test]
 fn sim_report_writes_a_png_and_a_csv_per_scenario() {
     let dir = tempfile::tempdir().expect("temp dir");

@@ -50,6 +50,28 @@ fn sim_report_with_the_firmware_in_the_loop_says_how_to_get_a_build_with_it() {
     assert!(!report.exists(), "nothing written");
 }
 
+/// The package's build has no plotting stack: `sim-report` says how to get
+/// a build that has it, before running anything.
+#[cfg(not(feature = "report"))]
+#[test]
+fn sim_report_without_the_report_feature_says_how_to_get_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("report");
+    let out = Command::new(BIN)
+        .arg("sim-report")
+        .arg(&report)
+        .arg("--data-dir")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("`report` feature"), "{err}");
+    assert!(err.contains("--features report"), "{err}");
+    assert!(!report.exists(), "nothing written");
+}
+
 #[test]
 fn bad_config_file_names_line_and_key() {
     let dir = tempfile::tempdir().unwrap();

@@ -7,6 +7,8 @@
 //! - The owner ground station goes silent while Neptunus runs on: the GCS
 //!   failsafe disarms the vehicle, which commands neutral thrust.
 //!
+//! And one thing that must never stop it: a log nobody reads.
+//!
 //! Time is real (a child process, a real tty), so every wait polls a
 //! condition against a generous deadline; how fast the vehicle reacts is
 //! measured by `benches/failsafe.rs`, not asserted here.

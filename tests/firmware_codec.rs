@@ -647,6 +647,12 @@ fn a_pong_then_an_unterminated_log_on_one_line_are_both_kept() {
     );
     assert!(matches!(events[2], Event::Nav(_)), "{events:?}");
     assert_eq!(stats.rejected_total(), 0, "{stats:?}");
+    // The 2014 firmware's IMU set-up, retried every 30 s with no IMU, is
+    // free text after a pong the same way.
+    let (events, stats) = decode(b"pong:1,60001;mpu_init failed with code: -1\r\nboot:1;\r\n");
+    assert_eq!(events, vec![Event::Pong("1,60001".into()), Event::Boot]);
+    assert_eq!(stats.text_lines, 1, "{stats:?}");
+    assert_eq!(stats.rejected_total(), 0, "{stats:?}");
     // A torn pair before it is still torn: nothing of that line is kept.
     let (events, stats) = decode(b"hdgd:1.0;deap:2.\r\nboot:1;\r\n");
     assert_eq!(events, vec![Event::Boot]);

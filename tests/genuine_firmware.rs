@@ -102,6 +102,12 @@ impl GenuineRig {
     /// that every attitude field has a sign and `yaw` is past 180), then
     /// starts `neptunus --serial <its pty>`.
     fn start(version: &str, add_ons: bool) -> Self {
+        Self::start_on(bin(), version, add_ons)
+    }
+
+    /// As [`Self::start`], with `vehicle` as the program that runs
+    /// Neptunus (the armhf build's qemu-arm launcher).
+    fn start_on(vehicle: &Path, version: &str, add_ons: bool) -> Self {
         let cache = Path::new(env!("CARGO_TARGET_TMPDIR")).join("openrov-firmware");
         let firmware = prepare(&common::firmware_dir(version), &cache)
             .unwrap_or_else(|e| panic!("building the {version} firmware: {e}"));
@@ -131,7 +137,7 @@ impl GenuineRig {
         let device = board.path().to_string_lossy().into_owned();
         let endpoint = format!("udpout:127.0.0.1:{port}");
         let mut vehicle = Vehicle::spawn_env(
-            bin(),
+            vehicle,
             &[
                 "--serial",
                 &device,
@@ -707,4 +713,58 @@ fn the_genuine_2014_firmware_with_plain_framing() {
     steady_running_rejects_nothing(&mut rig);
     dead_man_stops_a_frozen_vehicle(&mut rig);
     board_reset_disarms(&mut rig);
+}
+
+/// The BeagleBone's build (armv7-unknown-linux-gnueabihf) as the vehicle,
+/// run by Debian 13's `qemu-arm -cpu cortex-a8`: the checks of the 2015
+/// firmware's test that a vehicle on the ROV's computer must pass — link
+/// up, the battery, a normal arm, the thrusters forward and back to
+/// neutral, the firmware's dead-man stop. `tests/armhf.sh` builds the
+/// binary and runs this with `NEPTUNUS_ARMHF_BIN` (the binary) and
+/// `NEPTUNUS_ARMHF_VEHICLE` (a launcher that execs qemu-arm on it); without
+/// them it fails.
+#[test]
+#[ignore = "needs the armhf build and qemu-arm: tests/armhf.sh runs it"]
+fn the_armhf_vehicle_under_qemu_drives_the_genuine_2015_firmware() {
+    let var = |name: &str| {
+        std::env::var_os(name)
+            .filter(|v| !v.is_empty())
+            .unwrap_or_else(|| panic!("{name} is not set: tests/armhf.sh runs this test"))
+    };
+    let arm_bin = var("NEPTUNUS_ARMHF_BIN");
+    let launcher = var("NEPTUNUS_ARMHF_VEHICLE");
+    // The ELF header: 32-bit, ARM (EM_ARM 40), EABI 5, hard-float.
+    let header = std::fs::read(&arm_bin).unwrap_or_else(|e| panic!("{arm_bin:?}: {e}"));
+    assert!(
+        header.len() > 52 && &header[..4] == b"\x7fELF",
+        "{arm_bin:?} is no ELF file"
+    );
+    let e_machine = u16::from_le_bytes([header[18], header[19]]);
+    let e_flags = u32::from_le_bytes([header[36], header[37], header[38], header[39]]);
+    assert_eq!(header[4], 1, "{arm_bin:?} is not a 32-bit ELF");
+    assert_eq!(e_machine, 40, "{arm_bin:?} is not an ARM program");
+    assert_eq!(
+        e_flags & 0xff00_0000,
+        0x0500_0000,
+        "not EABI 5: {e_flags:#x}"
+    );
+    assert_ne!(
+        e_flags & 0x400,
+        0,
+        "not hard-float (EF_ARM_ABI_FLOAT_HARD): {e_flags:#x}"
+    );
+
+    let _one = one_board();
+    let mut rig = GenuineRig::start_on(Path::new(&launcher), "30.0.2", true);
+    // What runs is the emulator with the ARM program, not a host build.
+    let exe = std::fs::read_link(format!("/proc/{}/exe", rig.vehicle.pid())).unwrap();
+    assert!(
+        exe.file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with("qemu-arm")),
+        "the vehicle runs as {exe:?}, not under qemu-arm"
+    );
+    drives_the_board(&mut rig, "30.0.2, the armhf vehicle under qemu-arm");
+    dead_man_stops_a_frozen_vehicle(&mut rig);
+    assert_eq!(rig.control.snapshot().error, None);
+    drop(rig.board);
 }

@@ -609,7 +609,7 @@ fn connector(cert_pem: &Path) -> tokio_rustls::TlsConnector {
     for c in CertificateDer::pem_file_iter(cert_pem).unwrap() {
         roots.add(c.unwrap()).unwrap();
     }
-    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    let provider = Arc::new(rustls::crypto::aws_lc_rs::default_provider());
     let cfg = rustls::ClientConfig::builder_with_provider(provider)
         .with_safe_default_protocol_versions()
         .unwrap()

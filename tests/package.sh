@@ -7,6 +7,9 @@
 # --sim with the packaged configuration against a temporary data directory
 # until it is ready, then stopping cleanly on SIGTERM.
 # Installs what it needs itself. Run from anywhere: bash tests/package.sh
+# PACKAGE_PROFILE names the Cargo profile to build with (default release,
+# what `cargo deb` ships; the test command checks the `package-check`
+# profile's build, made as the development build is, to keep its time down).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -22,11 +25,12 @@ if ! command -v dpkg-deb >/dev/null || ! command -v systemd-analyze >/dev/null; 
     as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q dpkg systemd
 fi
 
-echo "== package: cargo deb (release build)"
+profile="${PACKAGE_PROFILE:-release}"
+echo "== package: cargo deb (profile $profile)"
 rm -f target/debian/neptunus_*.deb
-cargo deb --locked
+cargo deb --locked --profile "$profile"
 deb=$(ls target/debian/neptunus_*.deb)
-echo "$deb: $(stat -c %s "$deb") bytes (the binary: $(stat -c %s target/release/neptunus) bytes)"
+echo "$deb: $(stat -c %s "$deb") bytes (the binary: $(stat -c %s "target/$profile/neptunus") bytes)"
 
 echo "== package: control data"
 info=$(dpkg-deb -I "$deb")

@@ -19,42 +19,52 @@ rustc --version
 
 as_root() { if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi; }
 
-stage "test tools"
-# The camera tests run a real ffmpeg (tests/camera.rs).
-if ! command -v ffmpeg >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q ffmpeg
-fi
-ffmpeg -hide_banner -version | sed -n 1p
-# The RTP video tests receive with QGroundControl's own GStreamer pipeline
-# (tests/video_rtp.rs): udpsrc, rtph264depay (good), h264parse (bad),
-# avdec_h264 (libav).
-if ! gst-inspect-1.0 avdec_h264 >/dev/null 2>&1 || ! gst-inspect-1.0 h264parse >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
-        gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav
-fi
-gst-launch-1.0 --version | sed -n 1p
-# The clock test runs the vehicle under libfaketime (tests/clock.rs).
-if ! command -v faketime >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q faketime
-fi
-
-# The genuine OpenROV firmware in the loop (feature hil, tests/genuine_*.rs):
-# avr-gcc and the Arduino AVR core build the firmware; simavr (built from
-# the simavr-ffi crate's sources) needs libclang for its bindings, libelf
-# and zstd to load ELF files.
-hil_packages="gcc-avr avr-libc arduino-core-avr libclang-dev libelf-dev libzstd-dev pkg-config"
-hil_missing=""
-for p in $hil_packages; do
-    dpkg -s "$p" >/dev/null 2>&1 || hil_missing="$hil_missing $p"
+stage "test tools (every package the stages below use, installed here once: two of them run side by side)"
+apt_packages=(
+    # The camera tests run a real ffmpeg (tests/camera.rs).
+    ffmpeg
+    # The RTP video tests receive with QGroundControl's own GStreamer
+    # pipeline (tests/video_rtp.rs): udpsrc, rtph264depay (good), h264parse
+    # (bad), avdec_h264 (libav).
+    gstreamer1.0-tools gstreamer1.0-plugins-good gstreamer1.0-plugins-bad gstreamer1.0-libav
+    # The clock test runs the vehicle under libfaketime (tests/clock.rs).
+    faketime
+    # The genuine OpenROV firmware in the loop (feature hil,
+    # tests/genuine_*.rs): avr-gcc and the Arduino AVR core build the
+    # firmware; simavr (built from the simavr-ffi crate's sources) needs
+    # libclang for its bindings, libelf and zstd to load ELF files.
+    gcc-avr avr-libc arduino-core-avr libclang-dev libelf-dev libzstd-dev pkg-config
+    # The step-response plots (neptunus sim-report) label axes with a system font.
+    fonts-dejavu-core
+    # libFuzzer (built by libfuzzer-sys) needs a C++ compiler.
+    g++
+    # The interoperability tests' venv; MAVProxy pulls in opencv-python,
+    # which needs libGL and glib at import time.
+    python3-venv libgl1 libglib2.0-0
+    # Debian's Chromium, never a browser a tool downloads; the many-viewers
+    # recipe (tests/browser/janus.test.js) runs Debian's Janus with a
+    # configuration of its own (the package's service is not used).
+    chromium janus
+    # The package checks (tests/package.sh, tests/armhf.sh).
+    dpkg systemd file
+)
+apt_missing=()
+for p in "${apt_packages[@]}"; do
+    dpkg -s "$p" >/dev/null 2>&1 || apt_missing+=("$p")
 done
-if [ -n "$hil_missing" ]; then
+# Node.js and npm (the browser tests' runner) by command: a machine may have
+# them from NodeSource's nodejs, whose npm is no package of its own.
+command -v npm >/dev/null 2>&1 || apt_missing+=(nodejs npm)
+if [ "${#apt_missing[@]}" -gt 0 ]; then
     as_root apt-get update -q
-    # shellcheck disable=SC2086 # one word per package
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q $hil_missing
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q "${apt_missing[@]}"
 fi
+# The BeagleBone's toolchain (Debian's Rust with the standard library's
+# sources, the cross gcc) as the guide's build script installs it; its
+# cargo-deb is built in the background below.
+bash debian/build-armhf.sh --packages-only
+ffmpeg -hide_banner -version | sed -n 1p
+gst-launch-1.0 --version | sed -n 1p
 avr-gcc --version | sed -n 1p
 # The firmware snapshots the HIL tests build: ../shared/openrov-firmware
 # beside the repository unless OPENROV_FIRMWARE_DIR says otherwise.
@@ -65,52 +75,85 @@ if [ ! -f "$firmware_dir/30.0.2/OpenROV/OpenROV.ino" ] || [ ! -f "$firmware_dir/
 fi
 export OPENROV_FIRMWARE_DIR="$firmware_dir"
 
+# The page's plotting library, from web/package-lock.json, once: every
+# build below embeds it (build.rs), and two of them run side by side.
+if [ ! -f web/node_modules/uplot/dist/uPlot.esm.js ]; then
+    (cd web && npm ci --no-audit --no-fund --ignore-scripts)
+fi
+
+stage "builds that no test needs yet, started in the background at the lowest priority"
+# In order: the fuzz targets' instrumented build (fuzz/run.sh, its own
+# target/), the user guide's mdBook, the BeagleBone's armhf build
+# (tests/armhf.sh build: Debian's Rust, the standard library rebuilt, the
+# cross linker, cargo-deb) and this machine's package (cargo deb, the
+# `package-check` profile: built as the development build is). At nice 19
+# they take what the lints, the tests' build and the real-time tests below
+# leave idle; the stages that need them wait for them, and their checks
+# run at the end on what they built. Each writes target/bg-NAME.log and
+# target/bg-NAME.rc (its exit status).
+mdbook_version=0.4.52
+rm -f target/bg-*.rc
+mkdir -p target
+bg() {
+    local name=$1 rc=0
+    shift
+    "$@" >"target/bg-$name.log" 2>&1 || rc=$?
+    echo "$rc" >"target/bg-$name.rc"
+}
+install_mdbook() {
+    # Debian has no mdbook package: cargo installs the pinned version once.
+    # Only the search feature: the guide is built, never served or watched.
+    if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$mdbook_version" ]; then
+        cargo install mdbook --locked --version "$mdbook_version" --no-default-features --features search
+    fi
+}
+# Its own process group (job control for this one job), so that a run
+# that stops early stops it too.
+set -m
+(
+    renice -n 19 -p "$BASHPID" >/dev/null
+    bg fuzz-build env FUZZ_BUILD_ONLY=1 bash fuzz/run.sh
+    bg mdbook install_mdbook
+    bg armhf bash tests/armhf.sh build
+    bg package bash -c 'bash debian/build-armhf.sh --toolchain-only && cargo deb --locked --profile package-check'
+) &
+background=$!
+set +m
+trap 'kill -- -"$background" 2>/dev/null || true' EXIT
+# Waits until the background job NAME has ended; its exit status.
+bg_wait() {
+    while [ ! -f "target/bg-$1.rc" ] && kill -0 "$background" 2>/dev/null; do sleep 5; done
+    local rc
+    rc=$(cat "target/bg-$1.rc" 2>/dev/null || echo 1)
+    echo "-- background $1: exit $rc"
+    if [ "$rc" != 0 ]; then tail -n 40 "target/bg-$1.log" || true; fi
+    return "$rc"
+}
+
 stage "formatting and lints"
 cargo fmt --all -- --check
 cargo clippy --all-targets --locked --features hil -- -D warnings
-# The vehicle as packaged (without the simulator of the genuine firmware).
-cargo clippy --all-targets --locked -- -D warnings
+# The vehicle as packaged (without the simulator of the genuine firmware):
+# the library and the program; the tests are the same code as above.
+cargo clippy --lib --bins --locked -- -D warnings
 # The API docs build without a warning (broken links included).
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps --locked --features hil
-
-stage "the user guide (mdBook: docs/guide -> target/guide)"
-# Debian has no mdbook package: cargo installs the pinned version once. Only
-# the search feature: the guide is built here, never served or watched.
-mdbook_version=0.4.52
-if [ "$(mdbook --version 2>/dev/null)" != "mdbook v$mdbook_version" ]; then
-    cargo install mdbook --locked --version "$mdbook_version" --no-default-features --features search
-fi
-mdbook --version
-# --dest-dir is relative to the book's folder. Its links are checked by
-# tests/docs_links.rs; a chapter that fails to render fails the run here.
-mdbook build docs/guide --dest-dir ../../target/guide
-
-# The step-response plots (neptunus sim-report, tested) label axes with a system font.
-if ! find /usr/share/fonts -name '*.ttf' -print -quit 2>/dev/null | grep -q .; then
-    as_root apt-get update -q && as_root apt-get install -y -q fonts-dejavu-core
-fi
 
 stage "tests"
 status=0
 cargo test --all-targets --locked --features hil --no-fail-fast 2>&1 | tee target/test-output.txt || status=1
 
 stage "fuzzing (every target of fuzz/Cargo.toml, from its seeds, for a bounded time)"
-# libFuzzer (built by libfuzzer-sys) needs a C++ compiler.
-if ! command -v c++ >/dev/null 2>&1; then
-    as_root apt-get update -q && as_root apt-get install -y -q g++
-fi
-# Its own build in fuzz/target; FUZZ_SECONDS per target, two at a time. A
+# Its own build in fuzz/target (made in the background: waited for here,
+# and made again if it failed); FUZZ_SECONDS per target, two at a time. A
 # crash fails the run with the input's path and how to run it again.
+bg_wait fuzz-build || true
 FUZZ_SECONDS="${FUZZ_SECONDS:-20}" bash fuzz/run.sh || status=1
 
 stage "interoperability tests (real ground-station clients against the binary)"
 # A venv in target/ with the pinned clients; reinstalled when the pins change.
 venv=target/interop-venv
 reqs=tests/interop/requirements.txt
-if ! python3 -c 'import ensurepip, venv' 2>/dev/null; then
-    # Debian/Ubuntu split venv/ensurepip out of the interpreter package.
-    as_root apt-get update -q && as_root apt-get install -y -q python3-venv
-fi
 if [ ! -x "$venv/bin/python" ]; then
     python3 -m venv "$venv"
 fi
@@ -118,30 +161,19 @@ if ! cmp -s "$reqs" "$venv/requirements.installed"; then
     "$venv/bin/python" -m pip install -q --disable-pip-version-check -r "$reqs"
     cp "$reqs" "$venv/requirements.installed"
 fi
-# MAVProxy pulls in opencv-python, which needs libGL and glib at import time.
-if ! "$venv/bin/python" -c 'import cv2' 2>/dev/null; then
-    as_root apt-get update -q && as_root apt-get install -y -q libgl1 libglib2.0-0
-fi
-cargo build --locked
+# The vehicle the cargo tests ran (target/debug/neptunus, with the genuine
+# firmware's simulator, feature hil, which changes nothing else it does).
+# `cargo build` would build it again: without the dev-dependencies, their
+# features drop out of the shared crates, and every one of those is
+# compiled anew. The packages' builds, without hil, are run by
+# tests/package.sh and tests/armhf.sh.
+[ -x target/debug/neptunus ] || cargo build --locked --features hil
 test -x target/debug/neptunus
 rm -f target/interop-junit.xml
 NEPTUNUS_BIN="$PWD/target/debug/neptunus" "$venv/bin/python" -m pytest tests/interop -q \
     -p no:cacheprovider --timeout 300 --junitxml target/interop-junit.xml || status=1
 
 stage "browser tests (Debian's Chromium, driven by playwright-core)"
-# Debian's Chromium, never a browser a tool downloads; npm ci from the lock.
-if [ ! -x /usr/bin/chromium ]; then
-    as_root apt-get update -q && as_root apt-get install -y -q chromium
-fi
-if ! command -v npm >/dev/null 2>&1; then
-    as_root apt-get update -q && as_root apt-get install -y -q nodejs npm
-fi
-# The many-viewers recipe (tests/browser/janus.test.js) runs Debian's Janus
-# with a configuration of its own; the package's service is not used.
-if ! dpkg -s janus >/dev/null 2>&1; then
-    as_root apt-get update -q
-    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q janus
-fi
 dpkg-query -W -f 'janus ${Version}\n' janus
 (cd tests/browser && npm ci --no-audit --no-fund --ignore-scripts) || status=1
 rm -f target/browser-junit.xml
@@ -158,7 +190,7 @@ stage "interoperability tests with the genuine firmware in the loop (neptunus --
 # tests (tests/browser/pilot.test.js: arming, driving, the HUD's telemetry,
 # depth hold, failsafes, a hung and a restarted vehicle) against it.
 rm -f target/interop-hil-junit.xml target/browser-hil-junit.xml
-if cargo build --locked --features hil \
+if [ -x target/debug/neptunus ] \
     && hil_elf=$(target/debug/neptunus genuine-board --build-only --data-dir target/hil-data "$firmware_dir/30.0.2" | cut -f1) \
     && [ -f "$hil_elf" ]; then
     hil_elf=$(realpath "$hil_elf")
@@ -176,10 +208,31 @@ else
     status=1
 fi
 
+stage "the user guide (mdBook: docs/guide -> target/guide)"
+# --dest-dir is relative to the book's folder. Its links are checked by
+# tests/docs_links.rs; a chapter that fails to render fails the run here.
+# It counts as one test in the summary line.
+gd_pass=0
+gd_fail=0
+if bg_wait mdbook && mdbook --version && mdbook build docs/guide --dest-dir ../../target/guide; then
+    gd_pass=1
+else
+    gd_fail=1
+    status=1
+fi
+
 stage "Debian package (built for this machine and checked: tests/package.sh)"
 pk_pass=0
 pk_fail=0
-if bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
+if bg_wait package && PACKAGE_PROFILE=package-check bash tests/package.sh; then pk_pass=1; else pk_fail=1; status=1; fi
+
+stage "the BeagleBone's vehicle (armhf: built as the guide says, packaged, run under qemu-arm: tests/armhf.sh)"
+# Its build, its package's checks, --sim and the genuine firmware under
+# qemu-arm -cpu cortex-a8; it counts as one test here and prints its own.
+ah_pass=0
+ah_fail=0
+if bg_wait armhf && bash tests/armhf.sh check; then ah_pass=1; else ah_fail=1; status=1; fi
+wait "$background" || true
 
 # Summarise as one plain line for CI: cargo prints one result line per test
 # binary; pytest's and node's counts come from their JUnit XML.
@@ -242,9 +295,9 @@ if shown:
 PY
 }
 failure_details target/test-output.txt target/interop-junit.xml target/interop-hil-junit.xml \
-    target/browser-junit.xml target/browser-hil-junit.xml
+    target/browser-junit.xml target/browser-hil-junit.xml target/armhf-junit.xml
 cat fuzz/target/fuzz-logs/failures.txt 2>/dev/null || true
-awk -v pp="$((py_pass + br_pass + pk_pass + ${fz_pass:-0}))" -v pf="$((py_fail + br_fail + pk_fail + ${fz_fail:-0}))" -v ps="$((py_skip + br_skip))" \
+awk -v pp="$((py_pass + br_pass + pk_pass + ah_pass + gd_pass + ${fz_pass:-0}))" -v pf="$((py_fail + br_fail + pk_fail + ah_fail + gd_fail + ${fz_fail:-0}))" -v ps="$((py_skip + br_skip))" \
     '/^test result:/ { p += $4; f += $6; i += $8 } END { printf "tests: %d passed, %d failed, %d skipped\n", p + pp, f + pf, i + ps }' \
     target/test-output.txt
 exit "$status"

@@ -285,6 +285,48 @@ fn a_board_dead_man_trip_disarms_only_what_was_armed_before_it() {
     );
 }
 
+/// The program stood still while armed: the board held its last command.
+/// A gap short of the board's dead-man (the link's doubt included) is what
+/// a late tether does too — told to the pilot, the dive goes on; one that
+/// may have let the dead-man act leaves the board's state unknown, and
+/// disarms.
+#[test]
+fn a_stall_short_of_the_board_dead_man_is_a_warning_and_a_longer_one_disarms() {
+    let mut r = rig();
+    link_up(&mut r);
+    r.cmd(QGC, MavCmd::MAV_CMD_COMPONENT_ARM_DISARM, &[1.0]);
+    r.run(Duration::from_millis(200));
+    assert!(r.v.armed());
+
+    // The core's clock jumps: nothing was handled for `ms`; its texts.
+    let stall = |r: &mut CoreRig, ms: u64| {
+        r.t += Duration::from_millis(ms);
+        statustexts(&r.input(Input::Tick))
+    };
+
+    let texts = stall(&mut r, 1200);
+    assert!(r.v.armed(), "a 1.2-s stall disarmed: {texts:?}");
+    assert!(
+        texts
+            .iter()
+            .any(|t| t.contains("Vehicle stood still 1.2 s")),
+        "{texts:?}"
+    );
+    r.run(Duration::from_millis(200));
+
+    let texts = stall(&mut r, 1600);
+    assert!(!r.v.armed(), "a 1.6-s stall left it armed");
+    assert!(
+        texts.iter().any(|t| t.contains("Vehicle stalled 1.6 s")),
+        "{texts:?}"
+    );
+
+    // Disarmed, a stall says nothing.
+    r.run(Duration::from_millis(200));
+    let texts = stall(&mut r, 3000);
+    assert!(!texts.iter().any(|t| t.contains("Vehicle st")), "{texts:?}");
+}
+
 #[test]
 fn modes_follow_ardusub_numbers_and_unavailable_ones_are_refused_with_a_reason() {
     let mut r = rig();

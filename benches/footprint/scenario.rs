@@ -137,6 +137,17 @@ impl Running {
 /// Starts `scenario`; with `mavproxy` (the venv's python), MAVProxy
 /// forwards between station 1 and the vehicle.
 pub fn start(scenario: Scenario, bin: &Path, mavproxy: Option<&Path>) -> anyhow::Result<Running> {
+    start_on(scenario, bin, bin, mavproxy)
+}
+
+/// As [`start`], the vehicle run by `bin` and the board by `board_bin` (the
+/// CPU budget runs the armhf vehicle under qemu-arm, the board natively).
+pub fn start_on(
+    scenario: Scenario,
+    bin: &Path,
+    board_bin: &Path,
+    mavproxy: Option<&Path>,
+) -> anyhow::Result<Running> {
     let dir = tempfile::tempdir()?;
     let tally = Arc::new(Tally::default());
     let stop = Arc::new(AtomicBool::new(false));
@@ -159,7 +170,7 @@ pub fn start(scenario: Scenario, bin: &Path, mavproxy: Option<&Path>) -> anyhow:
         args.push("--sim".into());
         None
     } else {
-        let (board, pty) = children::board(bin, dir.path())?;
+        let (board, pty) = children::board(board_bin, dir.path())?;
         args.extend(["--serial".into(), pty]);
         Some(board)
     };

@@ -2,9 +2,10 @@
 //! MIME types, their cache validators and their compression. Nothing is
 //! fetched from elsewhere at run time.
 //!
-//! `web/` holds our own files; the plotting library comes from
-//! `web/node_modules/uplot/dist/` (installed by `build.rs` with `npm ci`),
-//! of which only the two files the page loads are embedded, under `vendor/`.
+//! `web/` holds our own files; the plotting library (uPlot) is the two files
+//! the page loads, which `build.rs` stages in `OUT_DIR/uplot/` from
+//! `NEPTUNUS_UPLOT_DIR` or from npm's install in `web/node_modules`,
+//! embedded under `vendor/`.
 //!
 //! Caching: every file carries an ETag made from the SHA-256 rust-embed
 //! computed at build time, with `Cache-Control: no-cache`. A browser
@@ -33,7 +34,7 @@ use tower_http::compression::CompressionLayer;
 struct Web;
 
 #[derive(RustEmbed)]
-#[folder = "web/node_modules/uplot/dist/"]
+#[folder = "$OUT_DIR/uplot/"]
 #[include = "uPlot.esm.js"]
 #[include = "uPlot.min.css"]
 struct Uplot;

@@ -126,7 +126,7 @@ pub fn load(settings: &TlsSettings, data_dir: &Path) -> Result<Option<Loaded>, T
     let chain = read_certs(&cert, fix)?;
     let fingerprint = fingerprint(&chain[0]);
     let key_der = read_key(&key, fix)?;
-    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    let provider = Arc::new(rustls::crypto::aws_lc_rs::default_provider());
     let mut config = rustls::ServerConfig::builder_with_provider(provider)
         .with_safe_default_protocol_versions()
         .map_err(|e| TlsError::Generate(e.to_string()))?

@@ -11,7 +11,9 @@
 //! samples. Used by the acceptance tests and by `neptunus sim-report`
 //! ([`report`]). It must never read a clock or sleep.
 
+#[cfg(feature = "report")]
 mod plot;
+#[cfg(feature = "report")]
 pub use plot::PlotError;
 pub mod report;
 

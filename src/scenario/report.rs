@@ -10,9 +10,11 @@
 //! figures [`comparison`] sets beside the simulator's.
 
 use std::convert::Infallible;
+#[cfg(feature = "report")]
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+#[cfg(feature = "report")]
 use super::plot::{PlotError, fonts, plot};
 use super::{Rig, Sample, Scenario, Sticks};
 use crate::firmware::emulator::EmulatorOptions;
@@ -21,6 +23,7 @@ use crate::vehicle::mode::Mode;
 use crate::vehicle::params::ParamStore;
 
 /// Errors writing the report.
+#[cfg(feature = "report")]
 #[derive(Debug, thiserror::Error)]
 pub enum ReportError {
     #[error("cannot write {path}: {source}")]
@@ -391,6 +394,7 @@ fn set_wild_rate(opts: &mut EmulatorOptions, rate: f64) {
 pub const HIL_SUFFIX: &str = "-hil";
 
 /// Writes `DIR/<scenario>.csv`, `DIR/<scenario>.png` and `DIR/summary.md`.
+#[cfg(feature = "report")]
 pub fn write(dir: &Path, outcomes: &[Outcome]) -> Result<Vec<PathBuf>, ReportError> {
     let mut summary = String::from("| scenario | figure | value |\n|---|---|---|\n");
     for o in outcomes {
@@ -404,6 +408,7 @@ pub fn write(dir: &Path, outcomes: &[Outcome]) -> Result<Vec<PathBuf>, ReportErr
 /// Writes the simulator's files as [`write()`] does, the other run's beside
 /// them with [`HIL_SUFFIX`] (`DIR/<scenario>-hil.csv`, `.png`), and
 /// `DIR/summary.md` with the two side by side ([`comparison`]).
+#[cfg(feature = "report")]
 pub fn write_beside(
     dir: &Path,
     sim: &[Outcome],
@@ -424,6 +429,7 @@ pub fn write_beside(
     write_files(dir, &[(sim, ""), (hil, HIL_SUFFIX)], &summary)
 }
 
+#[cfg(feature = "report")]
 fn write_files(
     dir: &Path,
     runs: &[(&[Outcome], &str)],

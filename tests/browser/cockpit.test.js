@@ -127,12 +127,16 @@ async function shoot(page, name) {
   if (process.env.COCKPIT_SCREENSHOTS_TO_GUIDE === '1') copyFileSync(path, join(GUIDE_SHOTS, name));
 }
 
-/** Drags Cockpit's slide-to-confirm to its end (it expires after 5 s). */
+/** Drags Cockpit's slide-to-confirm to its end. It expires after 5 s: on a
+ * busy machine it may be gone before it is dragged — then nothing is done,
+ * and the caller asks again. */
 async function slideToConfirm(page) {
   const handle = page.locator('.slideunlock-handler');
-  await handle.waitFor({ timeout: 10000 });
+  const shown = await handle.waitFor({ timeout: 10000 }).then(() => true, () => false);
+  if (!shown) return;
   const h = await handle.boundingBox();
   const bar = await page.locator('#slideunlock').boundingBox();
+  if (!h || !bar) return;
   const y = h.y + h.height / 2;
   await page.mouse.move(h.x + h.width / 2, y);
   await page.mouse.down();

@@ -131,14 +131,16 @@ impl LineDecoder {
 
     /// A line that ended without `;` and was not continued by one.
     fn unterminated(&mut self, text: &[u8], out: &mut Vec<Event>) {
-        // Pairs, then a log message without its `;` (a `pong:…;` printed
-        // without a line end, then the depth sensor's failure): the pairs
-        // are a line of their own.
-        if let Some(start) = text.windows(5).rposition(|w| w == b";log:") {
-            let (pairs, log) = text.split_at(start + 1);
-            if !log[4..].contains(&b';') {
+        // Pairs, then a message without its `;`: a `pong:…;` is printed
+        // without a line end, and the board's next print shares its line —
+        // a `log:` message (the depth sensor's failure) or free text (the
+        // 2014 firmware's IMU set-up retried every 30 s, "mpu_init failed
+        // with code: -1"). The pairs are a line of their own.
+        if let Some(last) = text.iter().rposition(|&b| b == b';') {
+            let (pairs, rest) = text.split_at(last + 1);
+            if rest.starts_with(b"log:") || (!rest.contains(&b';') && rest.contains(&b' ')) {
                 self.decode(pairs, out);
-                self.unterminated(log, out);
+                self.unterminated(rest, out);
                 return;
             }
         }

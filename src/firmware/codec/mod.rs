@@ -36,8 +36,10 @@
 //!   line is a `log:` message printed without its `;` ([`Event::Log`]), the
 //!   board's free text if it holds no `;` and has words with spaces (a
 //!   sensor's set-up chatter, counted in [`DecodeStats::text_lines`] and
-//!   ignored), or else [`RejectReason::Torn`]. [`LineDecoder::flush`]
-//!   decides a held line without waiting.
+//!   ignored), or else [`RejectReason::Torn`]. Pairs with such a message
+//!   after their last `;` (a `pong:…;` printed without a line end, then the
+//!   board's next print) are decoded as a line, then the message as above.
+//!   [`LineDecoder::flush`] decides a held line without waiting.
 //! - The whole line is rejected as [`RejectReason::Torn`] if a non-empty
 //!   segment has no `:`, or if a key is empty.
 //! - Numeric keys must hold a number inside the key's physical range

@@ -76,8 +76,10 @@ pub fn parse_origin(s: &str) -> Result<String, String> {
     if rest.contains(|c: char| c.is_whitespace() || c.is_control()) {
         return Err(bad("a space or a control character"));
     }
-    if split_host(rest).is_none() {
-        return Err(bad("the port is not a number"));
+    match split_host(rest) {
+        None => return Err(bad("the port is not a number")),
+        Some("") => return Err(bad("no host")),
+        Some(_) => {}
     }
     Ok(lower)
 }
@@ -146,7 +148,11 @@ impl Gate {
             names.push(h);
         }
         for o in allowed_origins {
-            if let Some(host) = o.split_once("://").and_then(|(_, r)| split_host(r)) {
+            if let Some(host) = o
+                .split_once("://")
+                .and_then(|(_, r)| split_host(r))
+                .filter(|h| !h.is_empty())
+            {
                 names.push(host.to_owned());
             }
         }
@@ -166,6 +172,9 @@ impl Gate {
             return false;
         };
         let name = name.trim_end_matches('.');
+        if name.is_empty() {
+            return false;
+        }
         name.parse::<IpAddr>().is_ok()
             || name == "localhost"
             || self.names.iter().any(|n| n == name)
@@ -281,5 +290,12 @@ mod tests {
         assert!(parse_origin("http://x:port").is_err());
         assert!(parse_origin("http://top side").is_err());
         assert!(parse_origin("https://x\u{b}/").is_err());
+        // No host at all (found by the http_gate fuzz target): such an
+        // origin made the empty Host one of the vehicle's own names.
+        assert!(parse_origin("http://:2").is_err());
+        assert!(parse_origin("http://[]:8080").is_err());
+        let g = Gate::new(&["http://:2".to_owned()], Some("rov"));
+        assert!(!g.host_ok(""));
+        assert!(!g.host_ok(":2"));
     }
 }

@@ -233,12 +233,20 @@ struct Clock {
     last_input: Option<Duration>,
 }
 
-/// An armed vehicle handles something at least every tick (10 ms); this long
-/// without anything means the program itself stood still (stopped, swapped
-/// out, a hung disk): what it decided before is stale, and the board's
-/// dead-man (2 s) may already have stopped the thrusters, which it restarts
-/// at the next ping. Control is in doubt, so the vehicle disarms.
-pub const STALL: Duration = Duration::from_secs(1);
+/// An armed vehicle handles something at least every tick (10 ms); a gap
+/// this long means the program itself stood still (stopped, swapped out, a
+/// hung disk) while the board held its last command. Until the gap nears the
+/// board's dead-man (2 s) that is what a late tether does too: the pilot's
+/// input waits in the socket and the next decision is the newest. From here
+/// on the dead-man may have stopped the thrusters by itself (the board's
+/// clock is not ours: the link's own rule for a gap in its pings, 0.5 s of
+/// doubt), so the board's state is unknown and control is in doubt: the
+/// vehicle disarms. ArduSub's main-loop lockup limit is 2 s.
+pub const STALL: Duration = Duration::from_millis(1500);
+
+/// A gap this long while armed is told to the pilot as a warning: the
+/// thrusters held the last command for that long.
+pub const STALL_WARN: Duration = Duration::from_millis(500);
 
 /// Requests refused and only counted (the app reports them).
 #[derive(Debug, Default)]
@@ -365,19 +373,31 @@ impl Vehicle {
         }
         let gap = self.clock.last_input.map(|t| now.mono.saturating_sub(t));
         self.clock.last_input = Some(now.mono);
-        if let Some(gap) = gap.filter(|g| *g > STALL)
+        if let Some(gap) = gap.filter(|g| *g > STALL_WARN)
             && self.armed
         {
-            self.statustext(
-                texts::Topic::Stop,
-                MavSeverity::MAV_SEVERITY_CRITICAL,
-                &format!(
-                    "Vehicle stalled {:.1} s: thrusters stopped, arm again",
-                    gap.as_secs_f64()
-                ),
-                out,
-            );
-            self.disarm("the vehicle's program stalled", None, out);
+            if gap > STALL {
+                self.statustext(
+                    texts::Topic::Stop,
+                    MavSeverity::MAV_SEVERITY_CRITICAL,
+                    &format!(
+                        "Vehicle stalled {:.1} s: thrusters stopped, arm again",
+                        gap.as_secs_f64()
+                    ),
+                    out,
+                );
+                self.disarm("the vehicle's program stalled", None, out);
+            } else {
+                self.statustext(
+                    texts::Topic::General,
+                    MavSeverity::MAV_SEVERITY_WARNING,
+                    &format!(
+                        "Vehicle stood still {:.1} s: the thrusters held the last command",
+                        gap.as_secs_f64()
+                    ),
+                    out,
+                );
+            }
         }
         match input {
             Input::Tick => self.tick(now, out),

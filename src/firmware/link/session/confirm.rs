@@ -45,10 +45,15 @@ use crate::firmware::codec::Command;
 use crate::vehicle::mixer::{BoardMotors, NEUTRAL_US};
 
 /// A thrust frame not heard of this long after it was written is taken as
-/// lost: the genuine board echoes a frame within a few milliseconds (its
-/// loop reads the UART, the echo is ~100 bytes at 115,200 baud), so this
-/// is many times that, and short beside a pilot's release.
-pub(super) const CONFIRM_TIMEOUT: Duration = Duration::from_millis(120);
+/// lost and written again. The genuine board's echo is ~100 bytes at
+/// 115,200 baud (9 ms) once its loop read the frame (~2 ms on the line),
+/// behind at most the line it was printing; now and then its loop reads
+/// nothing for longer. It is what a stop whose frame was lost, or whose
+/// rejection was itself lost, costs on top of the board's 50-ms motor
+/// check: a release must reach neutral within 150 ms. Taken as lost too
+/// early costs only a frame written twice — when the board's buffer has
+/// room for it (the outbox's budget, whose overdue time is longer).
+pub(super) const CONFIRM_TIMEOUT: Duration = Duration::from_millis(60);
 
 /// The fewest milliseconds between two writes of a doubted thrust: a board
 /// that keeps saying otherwise (a mapping not ours, a line that damages

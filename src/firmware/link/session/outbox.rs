@@ -141,11 +141,14 @@ impl Outbox {
 /// and a little over) once the oldest frame in flight is overdue.
 const URGENT_ROOM: usize = 32;
 
-/// A frame in flight this long is overdue: the board echoes a frame
-/// within milliseconds of reading it (the confirm timeout's reasoning), so
-/// on a noisy line it was lost, or its echo was — the budget it holds is
-/// most likely free on the board.
-pub(super) const ECHO_OVERDUE: Duration = super::confirm::CONFIRM_TIMEOUT;
+/// A frame in flight this long is overdue: on a noisy line it was lost,
+/// or its echo was — the budget it holds is most likely free on the board.
+/// Longer than the confirm timeout, which only puts a thrust back in the
+/// queue: the genuine 30.0.2 board's loop now and then reads nothing for
+/// more than 60 ms, and a stop or a ping written into the extra room then
+/// overran its 63-byte buffer (CRC rejections in the simulator report's
+/// runs, none at 120 ms).
+pub(super) const ECHO_OVERDUE: Duration = Duration::from_millis(120);
 
 /// The board's receive buffer as the link sees it at one moment: the bytes
 /// written and not yet echoed, and whether the oldest of them is overdue.
