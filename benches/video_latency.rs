@@ -14,7 +14,8 @@
 //!    `/video.mjpg` (WebRTC hidden from it), read back from its canvas
 //!    right after each frame is drawn there;
 //! 2. **HMI WebRTC** — the operator page as it is (WebRTC on `/webrtc`),
-//!    the same canvas, drawn from `requestVideoFrameCallback`;
+//!    shown by its own `<video>` over the canvas, read back from that
+//!    `<video>` in `requestVideoFrameCallback`;
 //! 3. **MCM WebRTC** — `tests/browser/mcm-viewer.html`, a client of
 //!    mavlink-camera-manager's protocol (as Cockpit speaks it) on the
 //!    dedicated signalling port, its `<video>` read back in

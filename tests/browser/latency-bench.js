@@ -19,8 +19,9 @@
 // - hmi-mjpeg: the operator page itself with WebRTC hidden from it (its
 //   /api/video answer says no WebRTC), so it plays /video.mjpg as it does
 //   when WebRTC fails: fetch, createImageBitmap, drawn on its canvas;
-// - hmi-webrtc: the operator page as it is: WebRTC on /webrtc, each frame
-//   drawn on the same canvas from requestVideoFrameCallback;
+// - hmi-webrtc: the operator page as it is: WebRTC on /webrtc, shown by
+//   its own <video> over the canvas, read from that <video> in
+//   requestVideoFrameCallback;
 // - mcm-webrtc: tests/browser/mcm-viewer.html (mavlink-camera-manager's
 //   protocol, as Cockpit speaks it) on the dedicated signalling port, a
 //   <video> with requestVideoFrameCallback, served from an origin of its
@@ -32,7 +33,7 @@
 //   Skipped, with the reason, where Cockpit's build is missing or port 80
 //   cannot be had.
 // A frame's age is taken when the page has it in hand — drawn on the
-// operator page's canvas, or handed to requestVideoFrameCallback — as
+// operator page's canvas (MJPEG), or handed to requestVideoFrameCallback — as
 // Date.now() minus the code; for the WebRTC pages also at the
 // callback's expectedDisplayTime and receiveTime (when its last packet
 // arrived). For the WebRTC ways also the time from asking (the page's
@@ -151,7 +152,8 @@ function pageProbe() {
   };
 
   // The requestVideoFrameCallback metadata of the frame being handled, for
-  // the operator page (its callback draws the frame on its canvas).
+  // a WebRTC picture the operator page draws on its canvas (a snapshot or
+  // a recording).
   let meta = null;
   const rvfc = HTMLVideoElement.prototype.requestVideoFrameCallback;
   HTMLVideoElement.prototype.requestVideoFrameCallback = function (cb) {
@@ -331,7 +333,7 @@ try {
       });
     },
   });
-  out.paths['hmi-webrtc'] = await measure(browser, 'operator page, WebRTC', hmiUrl, 'webrtc');
+  out.paths['hmi-webrtc'] = await measure(browser, 'operator page, WebRTC', hmiUrl, 'webrtc', { watchVideos: true });
   const server = createServer((_req, res) => {
     res.writeHead(200, { 'content-type': 'text/html' });
     res.end(VIEWER);

@@ -269,6 +269,36 @@ test('the HMI page plays WebRTC; when the picture stops it shows VIDEO LOST, the
   });
   assert.equal(rx.target, 0, 'jitterBufferTarget');
   assert.match(rx.answer, /a=extmap:\d+ http:\/\/www\.webrtc\.org\/experiments\/rtp-hdrext\/playout-delay/);
+  // The picture is the session's own <video>, shown over the canvas as the
+  // browser composites it: the page draws no WebRTC frame on its canvas.
+  const shown = await page.evaluate(() => {
+    const live = document.getElementById('video-live');
+    const draw = CanvasRenderingContext2D.prototype.drawImage;
+    window.__draws = 0;
+    CanvasRenderingContext2D.prototype.drawImage = function (...a) {
+      if (this.canvas.id === 'video') window.__draws += 1;
+      return draw.apply(this, a);
+    };
+    return { mine: window.neptunus.video.webrtc.video === live, width: live.videoWidth };
+  });
+  assert.deepEqual(shown, { mine: true, width: 640 });
+  assert.ok(await page.isVisible('[data-testid=video-live]'), 'the WebRTC picture is shown');
+  const f0 = (await video()).frames;
+  await until(async () => (await video()).frames > f0 + 10, 10000, 'ten more WebRTC frames');
+  assert.equal(await page.evaluate(() => window.__draws), 0, 'WebRTC frames drawn on the canvas');
+  // A snapshot is the WebRTC picture, drawn on the canvas for it.
+  const [d] = await Promise.all([page.waitForEvent('download', { timeout: 15000 }), page.click('[data-testid=snapshot]')]);
+  const jpeg = readFileSync(await d.path());
+  assert.equal(jpeg.subarray(0, 3).toString('hex'), 'ffd8ff', 'a JPEG');
+  assert.ok(jpeg.length > 2000, `${jpeg.length} bytes`);
+  assert.deepEqual(await page.evaluate(() => [document.getElementById('video').width, window.__draws]), [640, 1]);
+  // A camera mounted a quarter turn: the turned picture fills the box as
+  // the canvas's would, not overflowing it.
+  const box = await page.locator('[data-testid=video-box]').boundingBox();
+  await page.evaluate(() => { window.neptunus.video.rotation = 90; });
+  const turned = await page.locator('[data-testid=video-live]').boundingBox();
+  for (const k of ['x', 'y', 'width', 'height']) assert.ok(Math.abs(turned[k] - box[k]) <= 1, `turned ${k}: ${turned[k]} in a box of ${box[k]}`);
+  await page.evaluate(() => { window.neptunus.video.rotation = 0; });
   // Nobody reads /video.mjpg any more: the page's picture is the WebRTC one.
   await until(async () => (await json(`${v.url}camera/status`)).viewers === 0, 5000, 'the MJPEG stream closed');
   // The encoder stops giving pictures: the page says so, then gives WebRTC
@@ -280,6 +310,7 @@ test('the HMI page plays WebRTC; when the picture stops it shows VIDEO LOST, the
     await until(async () => (await video()).lost, 10000, 'VIDEO LOST while the WebRTC picture is frozen');
     await until(async () => (await video()).transport === 'mjpeg', 15000, 'the page to fall back to MJPEG');
     await until(async () => !(await video()).lost, 10000, 'the picture back over MJPEG');
+    assert.ok(await page.isHidden('[data-testid=video-live]'), 'the WebRTC <video> gone with its session');
   } finally {
     // Gone already, once the WebRTC session ended and nobody else wanted it.
     try { process.kill(encoder, 'SIGCONT'); } catch { /* ended */ }

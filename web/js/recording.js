@@ -90,9 +90,9 @@ export class Recording {
     });
   }
 
-  /** A picture is on the canvas. */
+  /** A picture is on screen. */
   hasPicture() {
-    return this.video.available === true && this.video.frames > 0 && this.video.canvas.width > 0;
+    return this.video.available === true && this.video.frames > 0;
   }
 
   snapshot() {
@@ -103,7 +103,12 @@ export class Recording {
     // The depth the HUD shows (the estimate when valid), if it is live.
     const d = hudData(this.session.state.t, (k) => this.view.ageOf(k));
     const name = `neptunus-${fileStamp()}-${depthTag(d && d.depth, d && d.depthAge <= STALE_MS)}.jpg`;
-    this.video.canvas.toBlob((blob) => {
+    const still = this.video.still();
+    if (!still) {
+      this.view.message(4, 'Snapshot: there is no picture to save');
+      return;
+    }
+    still.toBlob((blob) => {
       if (!blob) {
         this.view.message(4, 'Snapshot: the browser could not make a JPEG of the picture');
         return;
@@ -120,6 +125,11 @@ export class Recording {
       return;
     }
     if (!this.hasPicture()) {
+      this.view.message(4, 'Record: there is no picture to record');
+      return;
+    }
+    // WebRTC's pictures are drawn on the canvas, too, while it records.
+    if (!this.video.still()) {
       this.view.message(4, 'Record: there is no picture to record');
       return;
     }
@@ -150,6 +160,7 @@ export class Recording {
       if (this.recorder === r) this.stop();
     };
     rec.start(RECORD_SLICE_MS);
+    this.video.mirror = true;
     this.recorder = r;
     r.timer = setInterval(() => this.showRecording(), 250);
     this.showRecording();
@@ -159,6 +170,7 @@ export class Recording {
     const r = this.recorder;
     if (!r) return;
     this.recorder = null;
+    this.video.mirror = false;
     clearInterval(r.timer);
     if (r.rec.state !== 'inactive') r.rec.stop();
     this.showRecording();

@@ -3,11 +3,15 @@
 // vehicle's MJPEG stream (/video.mjpg) read with fetch. MJPEG shows the
 // first picture while WebRTC connects and stops at WebRTC's first frame; it
 // takes over again by itself when WebRTC fails or stalls. Either way the page knows when each frame arrived,
-// draws every frame on a canvas (rotated as the camera is mounted) and
-// starts the stream again by itself when it stops or the vehicle comes
-// back. The canvas is also what a snapshot saves and a recording records.
-// No DOM outside the canvas it is given. docs/ARCHITECTURE.md is the map
-// of the whole program.
+// shows it rotated as the camera is mounted, and starts the stream again
+// by itself when it stops or the vehicle comes back. MJPEG pictures are
+// drawn on a canvas; WebRTC's are shown by their own <video>, over the
+// canvas, as the browser composites them: drawing each on the canvas would
+// cost the page's thread a colour conversion per frame and show only the
+// frames it found time for. The canvas is what a snapshot saves and a
+// recording records: a WebRTC picture is drawn on it for a snapshot, and
+// every one while a recording runs. No DOM outside the canvas and the
+// <video> it is given. docs/ARCHITECTURE.md is the map of the whole program.
 
 import { WebRtcVideo } from '/js/webrtc.js';
 
@@ -21,12 +25,17 @@ const RETRY_MS = 1000;
 const MAX_HEADER = 1024;
 
 export class Video {
-  /** `canvas`: where frames are drawn; `onState()`: called when the stream
-   * becomes available or unavailable (the view reads `available`). */
-  constructor(canvas, onState = () => {}) {
+  /** `canvas`: where MJPEG frames are drawn; `live`: the <video> that
+   * shows WebRTC (laid over the canvas, hidden until its first frame);
+   * `onState()`: called when the stream becomes available or unavailable
+   * (the view reads `available`). */
+  constructor(canvas, live, onState = () => {}) {
     this.canvas = canvas;
+    this.live = live;
     this.onState = onState;
-    this.rotation = 0;
+    this.turn = 0;
+    /** Every WebRTC frame is also drawn on the canvas (a recording runs). */
+    this.mirror = false;
     this.available = null; // null: not asked yet; false: the vehicle has no camera
     this.lastFrameAt = null; // performance.now() of the latest frame drawn
     this.frames = 0;
@@ -39,6 +48,30 @@ export class Video {
     this.webrtcFailed = null; // why WebRTC was given up (MJPEG until the vehicle comes back)
   }
 
+  /** The camera's mounting, in degrees clockwise (0, 90, 180, 270). */
+  get rotation() {
+    return this.turn;
+  }
+
+  set rotation(deg) {
+    this.turn = deg;
+    this.orient();
+  }
+
+  /** Turns the <video> as the camera is mounted. A quarter turn swaps its
+   * box's sides first, so the turned picture fits the box as the canvas's
+   * does. */
+  orient() {
+    const el = this.live;
+    const quarter = this.turn % 180 !== 0;
+    const box = el.parentElement;
+    const [w, h] = quarter && box ? [box.clientWidth, box.clientHeight] : [0, 0];
+    Object.assign(el.style, quarter
+      ? { width: `${h}px`, height: `${w}px`, left: `${(w - h) / 2}px`, top: `${(h - w) / 2}px` }
+      : { width: '', height: '', left: '', top: '' });
+    el.style.transform = this.turn ? `rotate(${this.turn}deg)` : '';
+  }
+
   /** Milliseconds since the latest frame (Infinity before the first). */
   frameAgeMs(now = performance.now()) {
     return this.lastFrameAt == null ? Infinity : now - this.lastFrameAt;
@@ -48,6 +81,10 @@ export class Video {
   start() {
     if (this.running) return;
     this.running = true;
+    // A quarter-turned <video> follows its box's size.
+    if (typeof ResizeObserver !== 'undefined' && this.live.parentElement) {
+      new ResizeObserver(() => { if (this.turn % 180 !== 0) this.orient(); }).observe(this.live.parentElement);
+    }
     this.loop();
     // A stream that stalls without closing (a network hiccup) is restarted;
     // WebRTC that gives no picture is given up for MJPEG.
@@ -117,9 +154,11 @@ export class Video {
     let ended;
     this.webrtcEnded = new Promise((resolve) => { ended = resolve; });
     const w = new WebRtcVideo({
+      video: this.live,
       iceServers: info.ice_servers || [],
       onFrame: (video, width, height) => {
-        this.paint(video, width, height, 'webrtc');
+        if (this.mirror) this.paint(video, width, height);
+        this.shown('webrtc', width, height);
         if (this.abort) this.abort.abort();
       },
       onEnd: (reason) => {
@@ -170,14 +209,32 @@ export class Video {
       return; // a damaged frame: the next one will do
     }
     // One more JPEG may come after WebRTC took over: it is older.
-    if (!(this.webrtc && this.transport === 'webrtc')) this.paint(bitmap, bitmap.width, bitmap.height, 'mjpeg');
+    if (!(this.webrtc && this.transport === 'webrtc')) {
+      this.paint(bitmap, bitmap.width, bitmap.height);
+      this.shown('mjpeg', bitmap.width, bitmap.height);
+    }
     bitmap.close();
   }
 
-  /** Draws one frame (`src` is `sw` × `sh`) that came over `transport`. */
-  paint(src, sw, sh, transport) {
+  /** WebRTC's <video> is what shows the picture (laid over the canvas). */
+  playsLive() {
+    return this.transport === 'webrtc' && this.webrtc !== null;
+  }
+
+  /** The picture now on the canvas, for a snapshot: a WebRTC picture is
+   * drawn there first. Null before the first picture. */
+  still() {
+    if (this.playsLive()) {
+      const v = this.live;
+      this.paint(v, v.videoWidth, v.videoHeight);
+    }
+    return this.frames > 0 && this.canvas.width > 0 ? this.canvas : null;
+  }
+
+  /** Draws one frame (`src` is `sw` × `sh`) on the canvas. */
+  paint(src, sw, sh) {
     if (!sw || !sh) return;
-    const quarter = this.rotation % 180 !== 0;
+    const quarter = this.turn % 180 !== 0;
     const w = quarter ? sh : sw;
     const h = quarter ? sw : sh;
     const c = this.canvas;
@@ -188,15 +245,20 @@ export class Video {
     const ctx = c.getContext('2d');
     ctx.save();
     ctx.translate(w / 2, h / 2);
-    ctx.rotate((this.rotation * Math.PI) / 180);
+    ctx.rotate((this.turn * Math.PI) / 180);
     ctx.drawImage(src, -sw / 2, -sh / 2, sw, sh);
     ctx.restore();
+  }
+
+  /** A frame (`sw` × `sh`) is on screen, come over `transport`. */
+  shown(transport, sw, sh) {
+    if (!sw || !sh) return;
     this.lastFrameAt = performance.now();
     this.frames += 1;
     if (this.transport !== transport) {
       this.transport = transport;
-      c.dataset.transport = transport;
-      c.title = transport === 'webrtc' ? 'Camera (WebRTC, H.264)' : 'Camera (MJPEG)';
+      this.canvas.dataset.transport = transport;
+      this.canvas.title = transport === 'webrtc' ? 'Camera (WebRTC, H.264)' : 'Camera (MJPEG)';
     }
     if (this.frames === 1) this.onState();
   }

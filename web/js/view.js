@@ -248,6 +248,7 @@ export class View {
     const v = this.video;
     const has = v.available === true && v.frames > 0;
     $('video').hidden = !has;
+    $('video-live').hidden = !(has && v.playsLive());
     $('no-video').hidden = has;
     if (!has) {
       $('no-video').textContent = v.available === false ? 'No video: this vehicle has no camera stream'
