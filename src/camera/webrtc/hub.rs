@@ -5,7 +5,19 @@
 //! The signalling connections talk to it with [`Command`]s and hear back
 //! through their own [`PeerEvent`] channel. While any viewer exists it says
 //! so on the `wanted` watch, which the RTP supervisor reads: the stream
-//! (and so the camera) runs, with this hub among its consumers.
+//! (and so the camera) runs, with this hub among its consumers. A new
+//! signalling connection says a viewer is coming: the stream is wanted from
+//! then for [`COMING_FOR`], so the encoder starts while the viewer asks
+//! for its session and connects, and its first keyframe is not another
+//! encoder start-up later (about 0.4 s here, ffmpeg's own).
+//!
+//! Nor does it wait for the encoder's next keyframe: the hub holds the
+//! pictures since the last keyframe (a group of at most [`HELD_PICTURES`]
+//! and [`HELD_BYTES`]) and hands a viewer that has just connected the whole
+//! group at once, then the live stream. The viewer shows the keyframe and
+//! what followed it a little late, for an instant, instead of nothing until
+//! the next keyframe — which, with the encoder started before the viewer
+//! connected, would be most of a keyframe interval away.
 //! Nothing here decides who may watch (the HMI's Host and Origin rules are
 //! in front of the signalling) or panics on what arrives.
 
@@ -24,9 +36,16 @@ use super::protocol::Bind;
 use super::signalling::PeerEvent;
 use super::stun::Reflexive;
 
+/// How long a new signalling connection keeps the stream wanted without
+/// a session: the encoder's start-up overlaps the viewer's asking.
+pub const COMING_FOR: Duration = Duration::from_secs(5);
+
 /// What a signalling connection asks of the hub.
 #[derive(Debug)]
 pub(super) enum Command {
+    /// A signalling connection opened: a viewer is likely to ask for a
+    /// session within [`COMING_FOR`].
+    Coming,
     Start {
         bind: Bind,
         events: mpsc::UnboundedSender<PeerEvent>,
@@ -46,6 +65,47 @@ pub(super) enum Command {
     End {
         session_id: String,
     },
+}
+
+/// The most pictures held for a viewer's fast start (two seconds at 30
+/// fps); a longer group is not held, and a new viewer waits for the next
+/// keyframe.
+pub const HELD_PICTURES: usize = 60;
+/// The most bytes held for a viewer's fast start.
+pub const HELD_BYTES: usize = 4 << 20;
+
+/// The pictures since the last keyframe (the keyframe first), each with
+/// its bytes as every viewer shares them; empty when the group grew too
+/// long or no keyframe came yet.
+#[derive(Default)]
+struct Held {
+    pictures: Vec<(AccessUnit, Arc<[u8]>)>,
+    bytes: usize,
+}
+
+impl Held {
+    fn push(&mut self, au: &AccessUnit, data: &Arc<[u8]>) {
+        if au.keyframe {
+            self.pictures.clear();
+            self.bytes = 0;
+        } else if self.pictures.is_empty() {
+            return;
+        }
+        if self.pictures.len() >= HELD_PICTURES || self.bytes + data.len() > HELD_BYTES {
+            // A truncated group would not decode up to the live picture.
+            self.pictures.clear();
+            self.bytes = 0;
+            return;
+        }
+        // The bytes are held once, in `data`; the unit keeps its time.
+        let head = AccessUnit {
+            data: Vec::new(),
+            time_90khz: au.time_90khz,
+            keyframe: au.keyframe,
+        };
+        self.pictures.push((head, Arc::clone(data)));
+        self.bytes += data.len();
+    }
 }
 
 struct Viewer {
@@ -70,22 +130,27 @@ impl Hub {
         let mut viewers: BTreeMap<String, Viewer> = BTreeMap::new();
         let mut logged = Instant::now();
         let mut pictures = 0u64;
+        let mut held = Held::default();
+        // Until when a viewer is expected (a signalling connection opened).
+        let mut coming: Option<Instant> = None;
         loop {
             let next = viewers
                 .values()
                 .map(|v| v.peer.next_timeout())
                 .chain(self.reflexive.next_timeout())
+                .chain(coming)
                 .min();
             let far = Instant::now() + Duration::from_secs(3600);
             let sleep = tokio::time::sleep_until(next.unwrap_or(far).into());
             tokio::select! {
                 c = self.commands.recv() => match c {
+                    Some(Command::Coming) => coming = Some(Instant::now() + COMING_FOR),
                     Some(c) => self.command(c, &mut viewers),
                     None => break,
                 },
                 Some(au) = self.units.recv() => {
                     pictures += 1;
-                    self.picture(&au, &mut viewers);
+                    self.picture(&au, &mut held, &mut viewers);
                 }
                 Some(d) = self.inbound.recv() => {
                     if let Some(new) = self.reflexive.take(&d) {
@@ -110,8 +175,9 @@ impl Hub {
                 }
             }
             reap(&mut viewers);
+            coming = coming.filter(|&until| Instant::now() < until);
             self.wanted.send_if_modified(|w| {
-                let now = !viewers.is_empty();
+                let now = !viewers.is_empty() || coming.is_some();
                 std::mem::replace(w, now) != now
             });
             if logged.elapsed() >= Duration::from_secs(60) && !viewers.is_empty() {
@@ -127,12 +193,21 @@ impl Hub {
         }
     }
 
-    /// One picture to every viewer.
-    fn picture(&self, au: &AccessUnit, viewers: &mut BTreeMap<String, Viewer>) {
+    /// One picture to every viewer; a viewer connected since the last
+    /// picture, still without a keyframe, gets the held group (which ends
+    /// with this picture) instead.
+    fn picture(&self, au: &AccessUnit, held: &mut Held, viewers: &mut BTreeMap<String, Viewer>) {
         let now = Instant::now();
         let data: Arc<[u8]> = Arc::from(au.data.as_slice());
+        held.push(au, &data);
         for v in viewers.values_mut() {
-            v.peer.send(now, au, &data);
+            if v.peer.is_connected() && !v.peer.has_keyframe() && !held.pictures.is_empty() {
+                for (unit, bytes) in &held.pictures {
+                    v.peer.send(now, unit, bytes);
+                }
+            } else {
+                v.peer.send(now, au, &data);
+            }
             flush(&self.sockets, &mut v.peer);
         }
     }
@@ -140,6 +215,8 @@ impl Hub {
     fn command(&mut self, c: Command, viewers: &mut BTreeMap<String, Viewer>) {
         let now = Instant::now();
         match c {
+            // Kept by `run`, which decides what is wanted.
+            Command::Coming => {}
             Command::Start {
                 bind,
                 events,
@@ -284,5 +361,66 @@ fn reap(viewers: &mut BTreeMap<String, Viewer>) {
             "WebRTC: viewer session ended: {reason}"
         );
         let _ = v.events.send(PeerEvent::Ended { session_id, reason });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit(n: u64, keyframe: bool, len: usize) -> (AccessUnit, Arc<[u8]>) {
+        let au = AccessUnit {
+            data: vec![0; len],
+            time_90khz: n * 3000,
+            keyframe,
+        };
+        let data = Arc::from(au.data.as_slice());
+        (au, data)
+    }
+
+    fn times(h: &Held) -> Vec<u64> {
+        h.pictures
+            .iter()
+            .map(|(u, _)| u.time_90khz / 3000)
+            .collect()
+    }
+
+    #[test]
+    fn the_group_since_the_last_keyframe_is_held_and_nothing_before_a_keyframe() {
+        let mut h = Held::default();
+        for (n, key) in [(0, false), (1, false), (2, true), (3, false), (4, false)] {
+            let (au, d) = unit(n, key, 10);
+            h.push(&au, &d);
+        }
+        assert_eq!(times(&h), [2, 3, 4]);
+        assert!(h.pictures[0].0.keyframe && h.pictures[0].0.data.is_empty());
+        assert_eq!(h.bytes, 30);
+        let (au, d) = unit(5, true, 10);
+        h.push(&au, &d);
+        assert_eq!(times(&h), [5]);
+    }
+
+    #[test]
+    fn a_group_too_long_or_too_large_is_dropped_until_the_next_keyframe() {
+        let mut h = Held::default();
+        for n in 0..=HELD_PICTURES as u64 {
+            let (au, d) = unit(n, n == 0, 10);
+            h.push(&au, &d);
+        }
+        assert!(
+            h.pictures.is_empty(),
+            "a truncated group would not decode to the live picture"
+        );
+        let (au, d) = unit(100, false, 10);
+        h.push(&au, &d);
+        assert!(h.pictures.is_empty());
+        let (au, d) = unit(101, true, HELD_BYTES / 2);
+        h.push(&au, &d);
+        let (au, d) = unit(102, false, HELD_BYTES / 2 + 1);
+        h.push(&au, &d);
+        assert!(h.pictures.is_empty() && h.bytes == 0);
+        let (au, d) = unit(103, true, 10);
+        h.push(&au, &d);
+        assert_eq!(times(&h), [103]);
     }
 }

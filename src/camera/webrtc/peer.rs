@@ -192,8 +192,9 @@ impl Peer {
         self.drain(now);
     }
 
-    /// One picture of the encoder, shared by every viewer (`data` is
-    /// `au.data`, allocated once).
+    /// One picture of the encoder, shared by every viewer: `data` holds
+    /// its bytes, allocated once for all (`au.data` is not read; the hub
+    /// leaves it empty in the pictures it holds).
     pub fn send(&mut self, now: Instant, au: &AccessUnit, data: &Arc<[u8]>) {
         let Some(pt) = self.pt.filter(|_| self.connected && self.ended.is_none()) else {
             return;
@@ -252,6 +253,11 @@ impl Peer {
 
     pub fn is_connected(&self) -> bool {
         self.connected
+    }
+
+    /// The viewer has been sent a keyframe: what follows decodes.
+    pub fn has_keyframe(&self) -> bool {
+        self.has_keyframe
     }
 
     /// Pictures handed to str0m so far.

@@ -190,6 +190,8 @@ async fn run(
     let mut sig = Signalling::new(ctx.stream.clone(), Box::new(uuid));
     let who = client.to_string();
     tracing::info!(client = %who, consumer = sig.consumer_id(), "WebRTC signalling connected");
+    // A viewer is coming: its stream starts while it asks for a session.
+    let _ = ctx.commands.send(Command::Coming).await;
     let (mut tx, mut rx) = socket.split();
     // Unbounded: a session makes a handful of events (an offer, its
     // candidates, its end), and the hub must never wait on one client.
