@@ -4,8 +4,8 @@
 // candidates both ways) and the browser's own H.264 decoder. It calls
 // `onFrame(video, width, height)` for every frame the <video> shows and
 // `onEnd(reason)` once when the session cannot go on; what to do then is
-// the caller's (video.js falls back to MJPEG). No DOM but the <video> it
-// plays in: the caller's, or one of its own.
+// the caller's (video.js falls back to MJPEG). No DOM but the caller's
+// <video> it plays in.
 
 const q = (type, content) => JSON.stringify(content === undefined
   ? { type: 'question', content: { type } }
@@ -29,9 +29,9 @@ export function showAtOnce(receiver) {
 }
 
 export class WebRtcVideo {
-  /** `iceServers`: as the vehicle lists them (/api/webrtc); `video`: the
-   * <video> to play in (one of its own when not given). */
-  constructor({ video = null, iceServers = [], onFrame = () => {}, onEnd = () => {} } = {}) {
+  /** `video`: the <video> to play in; `iceServers`: as the vehicle lists
+   * them (/api/webrtc). */
+  constructor({ video, iceServers = [], onFrame = () => {}, onEnd = () => {} }) {
     this.iceServers = iceServers;
     this.onFrame = onFrame;
     this.onEnd = onEnd;
@@ -39,7 +39,7 @@ export class WebRtcVideo {
     this.ws = null;
     this.pc = null;
     this.bind = null;
-    this.video = video || document.createElement('video');
+    this.video = video;
     this.video.muted = true;
     this.video.playsInline = true;
     this.video.autoplay = true;
