@@ -111,6 +111,23 @@ async function cockpitReady(page) {
   return { video: await video(page), indicators: n };
 }
 
+/** Waits until Cockpit has stored the ROV views it imported: its views
+ * group in the vehicle's bag, changed since its defaults. Cockpit imports
+ * the views when its first sync with the vehicle ends and keeps each setting
+ * some seconds after its last change (3 s, up to 30 s while it keeps
+ * changing), the flag that it imported them sooner than the views: closed
+ * in between, it opens again with "You currently have no widgets!" and
+ * never imports them again — with or without a vehicle restart (seen with
+ * Cockpit closed 3 s after its views showed). A pilot's session is longer;
+ * a test that closes Cockpit waits for this first. */
+async function cockpitStoredItsViews(ip) {
+  const views = `http://${ip}/bag/v1.0/get/cockpit/settings-v2/fallback-user/cockpit-views-group-v1`;
+  await until(async () => {
+    const r = await fetch(views);
+    return r.ok && (await r.json()).epochLastChangedLocally > 0;
+  }, 60000, 'Cockpit storing the views it imported');
+}
+
 /** No dialog over the picture for a while (Cockpit checks its video routes
  * every 5 s, and shows its dialogs from those checks). */
 async function noDialogFor(page, ms) {
@@ -145,14 +162,44 @@ async function slideToConfirm(page) {
   await page.mouse.up();
 }
 
+/** What a failed test leaves for whoever reads CI's log: what each of the
+ * context's pages showed (its dialogs, its notes, the last of its console and
+ * of its requests to the vehicle, a screenshot in target/cockpit-screenshots/)
+ * and the vehicle's log without its periodic telemetry lines. */
+async function explain(e, context, v, seen) {
+  const lines = [];
+  for (const [i, page] of context.pages().entries()) {
+    try {
+      const name = `failed-${Date.now()}-${i}.png`;
+      await page.screenshot({ path: join(SHOTS, name), timeout: 10000 });
+      lines.push(`--- page ${i}: ${page.url()} (screenshot ${name})`);
+      lines.push(`dialogs: ${JSON.stringify(await dialogs(page))}; notes: ${JSON.stringify(await snackbars(page))}`);
+    } catch (x) {
+      lines.push(`--- page ${i}: ${x.message.split('\n')[0]}`);
+    }
+  }
+  if (seen) {
+    // Its settings sync and vehicle lines, and its requests but the
+    // stream list it polls every second.
+    const sync = seen.console.filter((l) => /SettingsManager|vehicle|Vehicle/.test(l) && !/Comparing key|setting value:|setting with epoch|No local setting|No vehicle setting/.test(l));
+    lines.push(`--- Cockpit's last console lines on its settings and the vehicle:\n${sync.slice(-40).join('\n').slice(-6000)}`);
+    lines.push(`--- its requests to the vehicle (but GET /streams): ${seen.requests.filter((r) => r !== 'GET /streams').slice(-80).join(', ')}`);
+  }
+  const log = v.stderr().split('\n').filter((l) => !/ telemetry link=/.test(l)).join('\n');
+  lines.push(`--- neptunus stderr (tail, without the telemetry lines) ---\n${log.slice(-4000)}`);
+  e.message += `\n${lines.join('\n')}`;
+  return e;
+}
+
 test('Cockpit given only the vehicle address shows its ROV views, live video and the numbers with no dialog, and arms after the pilot logs in', async (t) => {
   const data = mkdtempSync(join(tmpdir(), 'neptunus-cockpit-'));
   const v = await rovAt(data);
   const context = await cockpitContext(v.ip, { width: 1366, height: 768 });
+  let seen;
   try {
     // A new user: Cockpit, with the ROV's address in its settings.
     const page = await context.newPage();
-    const seen = watch(page, v.ip);
+    seen = watch(page, v.ip);
     const t0 = Date.now();
     await page.goto(`${origin}/`);
     const ready = await cockpitReady(page);
@@ -178,7 +225,9 @@ test('Cockpit given only the vehicle address shows its ROV views, live video and
     // Not logged in, Cockpit only watches: its frames that act are refused.
     assert.ok(seen.console.some((l) => l.includes('log in with the pilot password')), 'the vehicle told Cockpit why it only watches');
 
-    // The pilot logs in on the vehicle's page and opens Cockpit from there.
+    // The pilot logs in on the vehicle's page and opens Cockpit from there
+    // (a second Cockpit, which reads what the first stored).
+    await cockpitStoredItsViews(v.ip);
     const hmi = await context.newPage();
     await hmi.goto(`http://${v.ip}/`);
     await hmi.fill('[data-testid=password]', PASSWORD);
@@ -217,8 +266,7 @@ test('Cockpit given only the vehicle address shows its ROV views, live video and
     await noDialogFor(pilot, 3000);
     await shoot(pilot, 'cockpit-tablet.png');
   } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
+    throw await explain(e, context, v, seen);
   } finally {
     await context.close();
     await v.stop();
@@ -235,14 +283,16 @@ test('the vehicle id Cockpit stores in the bag is the same after a vehicle resta
     const r = await fetch(`http://${ip}/bag/v1.0/get/${path}`);
     return r.ok ? r.json() : null;
   };
+  let seen;
   try {
     const page = await context.newPage();
-    let seen = watch(page, ip);
+    seen = watch(page, ip);
     await page.goto(`${origin}/`);
     await cockpitReady(page);
     const id = await until(() => bag('cockpit/cockpit-vehicle-id'), 30000, "Cockpit's vehicle id in the bag");
     assert.match(id, /^[0-9a-f-]{36}$/);
     assert.ok(readdirSync(data).includes('bag.json'), 'the bag is in the data directory');
+    await cockpitStoredItsViews(ip);
     t.diagnostic(`Cockpit's settings in the bag: ${statSync(join(data, 'bag.json')).size} bytes`);
     await page.close();
 
@@ -280,12 +330,16 @@ test('the vehicle id Cockpit stores in the bag is the same after a vehicle resta
     assert.match(refused.trick[1], /encoded slash/);
     assert.equal(await bag('cockpit/cockpit-vehicle-id'), id, 'nothing changed');
     assert.equal(await bag('cockpit/settings-v2/x'), null);
-    const log = v.stderr();
-    assert.match(log, /settings bag refused a write of "cockpit\/cockpit-vehicle-id" from 127\.0\.0\.1: the body is not JSON/);
-    assert.match(log, /settings bag refused a write of "cockpit\/settings-v2\/x\/big" from 127\.0\.0\.1: the value is/);
+    // (The log is written by a thread of its own: a line may come a moment
+    // after the answer.)
+    for (const line of [
+      /settings bag refused a write of "cockpit\/cockpit-vehicle-id" from 127\.0\.0\.1: the body is not JSON/,
+      /settings bag refused a write of "cockpit\/settings-v2\/x\/big" from 127\.0\.0\.1: the value is/,
+    ]) {
+      await until(() => line.test(v.stderr()), 10000, `the log line ${line}`);
+    }
   } catch (e) {
-    e.message += `\n--- neptunus stderr (tail) ---\n${v.stderr().slice(-3000)}`;
-    throw e;
+    throw await explain(e, context, v, seen);
   } finally {
     await context.close();
     await v.stop();
