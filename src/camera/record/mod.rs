@@ -18,9 +18,10 @@
 //! written and a power cut at most the last second; MPEG-TS needs no index
 //! at the end, so a cut file plays up to the cut.
 //!
-//! The storage budget (`budget`) is measured every second: at the
-//! free-space floor or the total cap a recording stops by itself, says why,
-//! and none starts. This module must never write outside the recordings
+//! The storage budget (`budget`) is measured every second while a
+//! recording runs, every ten seconds otherwise, and afresh at a start: at
+//! the free-space floor or the total cap a recording stops by itself, says
+//! why, and none starts. This module must never write outside the recordings
 //! directory, encode video, or stop anything but a recording.
 
 pub mod budget;
@@ -43,8 +44,14 @@ use crate::vehicle::machine::{RecordControl, RecordSample, RecorderEvent, Storag
 use crate::wallclock::WallClock;
 use files::Files;
 
-/// How often the budget is measured and the files synced.
+/// How often, while a recording runs, the budget is measured and the files
+/// synced.
 pub const SYNC_PERIOD: Duration = Duration::from_secs(1);
+/// How often the budget is measured while no recording runs: a `statvfs`
+/// and a `stat` of every log and recording (a season's hundreds of files
+/// cost a Cortex-A8 a share of its idle time once a second), for figures
+/// that move only as the logs grow. A start measures afresh.
+pub const IDLE_MEASURE_PERIOD: Duration = Duration::from_secs(10);
 /// A recording whose first picture has not come after this stops.
 pub const START_TIMEOUT: Duration = Duration::from_secs(15);
 /// A recording that got no picture for this long stops.
@@ -126,6 +133,7 @@ impl Recorder {
                     wanted: wanted_tx,
                     active: None,
                     last_report: None,
+                    last_measured: None,
                 };
                 rt.block_on(task.run(units, rx));
             })?;
@@ -244,6 +252,7 @@ struct Task {
     wanted: watch::Sender<bool>,
     active: Option<Active>,
     last_report: Option<StorageReport>,
+    last_measured: Option<Instant>,
 }
 
 impl Task {
@@ -273,6 +282,7 @@ impl Task {
 
     /// Measures the budget; tells the vehicle when it changed.
     fn measure(&mut self) -> StorageReport {
+        self.last_measured = Some(Instant::now());
         let report = match budget::measure(&self.cfg.data_dir) {
             Ok(m) => budget::judge(&self.cfg.storage, &m),
             Err(e) => StorageReport {
@@ -399,6 +409,15 @@ impl Task {
     }
 
     fn every_second(&mut self) {
+        if self.active.is_none() {
+            if self
+                .last_measured
+                .is_none_or(|t| t.elapsed() >= IDLE_MEASURE_PERIOD)
+            {
+                self.measure();
+            }
+            return;
+        }
         let report = self.measure();
         let Some(a) = self.active.as_mut() else {
             return;
