@@ -704,6 +704,21 @@ fn non_numeric_values_reject_the_whole_line() {
     }
 }
 
+/// A line that names a tube's current again (two lines run into one, a
+/// repeated pair) counts it once, the last, as every other key; the two
+/// tubes are summed.
+#[test]
+fn a_tubes_current_named_twice_on_a_line_counts_once() {
+    let status = |line: &str| match decode(line.as_bytes()).0.as_slice() {
+        [Event::Status(s)] => s.battery_current_a,
+        other => panic!("{line:?} gave {other:?}"),
+    };
+    assert_eq!(status("BT1I:5;BT1I:5.0;BT1I:5;BT1I:6;\r\n"), Some(6.0));
+    assert_eq!(status("BT1I:5;BT2I:7;BT2I:8;\r\n"), Some(13.0));
+    assert_eq!(status("BT2I:20;BT1I:20;\r\n"), Some(40.0), "two full tubes");
+    assert_eq!(status("BT2I:0.7;\r\n"), Some(0.7), "one tube alone");
+}
+
 #[test]
 fn wild_points_ten_and_hundred_times_are_out_of_range() {
     // True values of a plausible line, multiplied as seen in practice.

@@ -6,6 +6,7 @@
 use neptunus::camera::h264::depay::Depay;
 use neptunus::camera::{JpegFrame, JpegSplitter, SplitterStats};
 use neptunus::dialect::neptunus::MavMessage;
+use neptunus::firmware::codec::{Event, LineDecoder};
 use neptunus::hmi::auth::parse_origin;
 use neptunus::hmi::m2r::frame::{self, Reserved};
 
@@ -146,4 +147,42 @@ fn an_origin_with_a_control_character_is_refused() {
     let o = parse_origin(" HTTPS://Topside.local:8443/ ").unwrap();
     assert_eq!(o, "https://topside.local:8443");
     assert_eq!(parse_origin(&o), Ok(o.clone()));
+}
+
+/// `telemetry_lines`: a line that named a tube's current again and again
+/// (`BT1I:5` ten times among lines run together) summed every copy — 50 A,
+/// past the two tubes' 40 — where a key twice is otherwise the last.
+/// The first byte is the target's chunk size.
+#[test]
+fn a_tubes_current_repeated_on_a_line_stays_in_range() {
+    let input = hex(
+        "0100 ffff 3b76 6972 3a32 2e35 2e31 2d61 6263 3b42 5244 543a 3230 3b42 5431 493a 353b 4254
+         3231 3a30 2c31 3530 303b 7669 723a 322e 352e 312d 6162 6336 4252 4454 6674 6872 3a30 2e30
+         303b 0d0a 2e35 2e31 2d61 6263 3642 5244 543a 3235 2e30 3b42 5431 493a 353b 4254 3a32 352e
+         303b 4254 3149 3a35 2e30 3b42 5431 493a 353b 4254 3231 3a30 2c31 3530 303b 7669 723a 322e
+         352e 312d 6162 6336 4252 4454 3a32 352e 303b 5431 493a 353b 4254 3231 3a30 2c31 3530 303b
+         7669 723a 322e 352e 312d 6162 6336 4252 4454 3a32 352e 303b 4254 3149 3a35 3b42 5442 543a
+         3235 2e30 3b42 5431 493a 352e 303b 4254 3149 3a35 3b42 5431 493a 353b 4254 4254 3a32 352e
+         303b 4254 3149 3a35 2e30 3b42 5431 493a 353b 6254 3231 3a30 2c31 3530 303b 7669 723a 322e
+         352e 312d 6162 6336 4252 4454 3a32 353a 3235 2e30 3b42 5431 493a 353b 4254 3231 3a30 2e37
+         3b0d 0a",
+    );
+    let stream = &input[1..];
+    let mut d = LineDecoder::new();
+    let mut events = Vec::new();
+    d.push(stream, &mut events);
+    let currents: Vec<f64> = events
+        .iter()
+        .filter_map(|e| match e {
+            Event::Status(s) => s.battery_current_a,
+            _ => None,
+        })
+        .collect();
+    assert!(!currents.is_empty(), "{events:?}");
+    for a in currents {
+        assert!(
+            (0.0..=40.0).contains(&a),
+            "battery current {a} A from two tubes of 20 A"
+        );
+    }
 }

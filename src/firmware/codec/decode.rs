@@ -210,6 +210,7 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
     let mut unknown_keys = 0;
     let mut lights_at: Option<usize> = None;
     let mut lone_fraction: Option<f64> = None;
+    let mut tubes: [Option<f64>; 2] = [None; 2];
 
     for segment in body.split(|&b| b == b';') {
         if segment.is_empty() {
@@ -229,10 +230,10 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
             b"fthr" => nav.fthr_pct = Some(real(value, FTHR_PCT)?),
             b"vout" => status.vout_v = Some(real(value, VOUT_V)?),
             b"iout" => status.iout_a = Some(real(value, CURRENT_A)?),
-            b"BT1I" | b"BT2I" => {
-                let a = real(value, CURRENT_A)?;
-                status.battery_current_a = Some(status.battery_current_a.unwrap_or(0.0) + a);
-            }
+            // Each tube's reading once (a key twice: the last, as for every
+            // key), summed after the line.
+            b"BT1I" => tubes[0] = Some(real(value, CURRENT_A)?),
+            b"BT2I" => tubes[1] = Some(real(value, CURRENT_A)?),
             b"BRDT" => status.board_temp_c = Some(real(value, BOARD_TEMP_C)?),
             b"pres" => status.pres_mbar = Some(real(value, PRES_MBAR)?),
             b"temp" => status.temp_c = Some(real(value, TEMP_C)?),
@@ -287,6 +288,9 @@ fn decode_line(text: &[u8], events: &mut Vec<Event>) -> Result<DecodedLine, Reje
             b"claser" => events.push(Event::Laser(byte(value)?)),
             _ => unknown_keys += 1,
         }
+    }
+    if tubes.iter().any(Option::is_some) {
+        status.battery_current_a = Some(tubes.iter().flatten().sum());
     }
     // Every nav/status key that parsed set its field to `Some`, so "any key
     // present" is "not all `None`"; no per-key bookkeeping in the hot loop.

@@ -29,8 +29,9 @@ pub struct StatusSample {
     pub vout_v: Option<f64>,
     /// `iout` board current, 0..20.
     pub iout_a: Option<f64>,
-    /// Battery current, 0..20: `BT1I` + `BT2I`, the two battery tubes'
-    /// current sensors of controller board 2.5 (either alone if only one is on the line).
+    /// Battery current, 0..40: `BT1I` + `BT2I` (0..20 each), the two battery
+    /// tubes' current sensors of controller board 2.5 (either alone if only
+    /// one is on the line; a key twice on a line counts once, the last).
     pub battery_current_a: Option<f64>,
     /// `BRDT` controller-board temperature, -40..125.
     pub board_temp_c: Option<f64>,
