@@ -447,8 +447,53 @@ impl Task {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used)]
 mod tests {
     use super::*;
+
+    /// An idle recorder with a data directory of its own, and what it tells
+    /// the vehicle.
+    fn idle_task(dir: &std::path::Path) -> (Task, mpsc::UnboundedReceiver<RecorderEvent>) {
+        let (events, rx) = mpsc::unbounded_channel();
+        let task = Task {
+            cfg: RecordConfig {
+                data_dir: dir.to_path_buf(),
+                storage: budget::StorageConfig {
+                    min_free_mb: 0,
+                    total_mb: 1024,
+                },
+                clock: WallClock::system(),
+                vehicle_t0: Instant::now(),
+            },
+            dir: files::recordings_dir(dir),
+            events,
+            wanted: watch::channel(false).0,
+            active: None,
+            last_report: None,
+            last_measured: None,
+        };
+        (task, rx)
+    }
+
+    #[test]
+    fn idle_the_budget_is_measured_once_a_period_not_every_second() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut task, mut rx) = idle_task(dir.path());
+        task.every_second();
+        let first = task.last_measured.expect("the first tick measures");
+        assert!(matches!(rx.try_recv(), Ok(RecorderEvent::Storage(_))));
+        task.every_second();
+        assert_eq!(
+            task.last_measured,
+            Some(first),
+            "measured again within the period"
+        );
+        // A period later it measures again.
+        let earlier = Instant::now().checked_sub(IDLE_MEASURE_PERIOD).unwrap();
+        task.last_measured = Some(earlier);
+        task.every_second();
+        assert!(task.last_measured.unwrap() > earlier);
+    }
 
     fn au(time_90khz: u64) -> AccessUnit {
         AccessUnit {
